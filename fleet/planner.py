@@ -1,0 +1,262 @@
+"""Improved hybrid A* of seed 000 (Algorithm 2, Sections 4.1 to 4.4).
+
+Nodes are (cell, heading, t_zero); each keeps the FixMovingTime end instants per speed level.
+Children come from the eleven manners; Algorithm 3 decides their fate against the static map
+and the reservations of the other vehicles: gamma = 1 (the end pose collides) closes the child
+node, gamma = 2 (only the sweep between the poses collides) skips it. Collisions are checked
+over the whole window the maneuver may occupy, from the earliest instant it may start to the
+instant it ends at v_zero, so any speed profile later chosen along the path stays inside what
+was checked. Waiting is the stop manner. A goal is reached only where the vehicle can then park
+to infinity.
+
+The search is deterministic: ties in f break on insertion order.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+from fleet.geometry import Cell
+from fleet.gridmap import GridMap
+from fleet.maneuvers import Kind, Manner, Move, move_table
+from fleet.params import ManeuverTimes, SearchParams, VehicleDims
+from fleet.reservations import ReservationView
+from fleet.trajectory import (
+    FailureReason,
+    PlanFailure,
+    Pose,
+    Step,
+    Trajectory,
+    merge_intervals,
+)
+from fleet.velocity import INF, EndTimes, Speed, VelocityPlanner, fix_ending_levels, start_times
+
+Key = tuple[int, int, int, float]
+
+
+@dataclass
+class _Node:
+    key: Key
+    parent: _Node | None
+    manner: Manner | None
+    times: EndTimes
+    last_dir: int  # direction of the last moving maneuver (0: none yet)
+    turns: int
+    lanes: int
+    inversions: int
+    g: float
+    f: float
+
+
+def heuristic(cell: Cell, heading: int, goal: Pose) -> float:
+    """Equation (13): Manhattan distance in cells plus heading difference in quarter turns."""
+    dh = abs(heading - goal.heading) % 4
+    return abs(goal.cell[0] - cell[0]) + abs(goal.cell[1] - cell[1]) + min(dh, 4 - dh)
+
+
+class HybridAStar:
+    """One planner per map (and body); `plan` answers one query."""
+
+    def __init__(self, grid: GridMap, dims: VehicleDims = VehicleDims(),
+                 times: ManeuverTimes = ManeuverTimes(),
+                 params: SearchParams = SearchParams()) -> None:
+        self.grid = grid
+        self.params = params
+        self.velocity = VelocityPlanner(times)
+        self.move_of = move_table(dims, grid.cell_size)
+        self.moves: list[list[Move]] = [[self.move_of[m, h] for m in Manner] for h in range(4)]
+        self._static: dict[tuple[Cell, int, Manner], int] = {}
+        self._component: dict[tuple[Cell, int], int] | None = None
+
+    def component(self, pose: Pose) -> int | None:
+        """Connected component of the pose in the static pose graph (moves are reversible,
+        so reachability is symmetric); None for a pose on a blocked cell."""
+        if self._component is None:
+            self._component = self._components()
+        return self._component.get((pose.cell, pose.heading))
+
+    def _components(self) -> dict[tuple[Cell, int], int]:
+        comp: dict[tuple[Cell, int], int] = {}
+        for x in range(self.grid.cols):
+            for y in range(self.grid.rows):
+                for heading in range(4):
+                    seed = ((x, y), heading)
+                    if seed in comp or not self.grid.all_free(
+                            (x + a, y + b) for a, b in self.moves[heading][0].start_cells):
+                        continue
+                    label = len(set(comp.values()))
+                    comp[seed] = label
+                    todo = [seed]
+                    while todo:
+                        cell, h = todo.pop()
+                        for move in self.moves[h]:
+                            if move.manner is Manner.STOP or self.static_gamma(cell, move):
+                                continue
+                            nxt = ((cell[0] + move.end_delta[0], cell[1] + move.end_delta[1]),
+                                   move.end_heading)
+                            if nxt not in comp:
+                                comp[nxt] = label
+                                todo.append(nxt)
+        return comp
+
+    def static_gamma(self, cell: Cell, move: Move) -> int:
+        """Algorithm 3, lines 4-7 and 15-18: 1 if the end pose hits the static map, 2 if only
+        the sweep does, else 0. Cached per map."""
+        key = (cell, move.heading, move.manner)
+        gamma = self._static.get(key)
+        if gamma is None:
+            x, y = cell
+            if not self.grid.all_free((x + a, y + b) for a, b in move.end_cells):
+                gamma = 1
+            elif not self.grid.all_free((x + a, y + b) for a, b in move.middle_cells):
+                gamma = 2
+            else:
+                gamma = 0
+            self._static[key] = gamma
+        return gamma
+
+    def plan(self, vehicle: int, start: Pose, t_start: float, goals: list[Pose] | tuple[Pose, ...],
+             store: ReservationView) -> Trajectory | PlanFailure:
+        """Plan from `start` at rest at `t_start` to any of `goals` (arriving at rest)."""
+        table = self.moves
+        start_cells = [(start.cell[0] + a, start.cell[1] + b)
+                       for a, b in table[start.heading][0].start_cells]
+        if not self.grid.all_free(start_cells):
+            return PlanFailure(FailureReason.START_BLOCKED,
+                               f"start pose {start} lies on a blocked cell", 0)
+        t_probe = math.nextafter(t_start, INF)
+        for c in start_cells:
+            other = store.conflict(vehicle, c, t_start, t_probe)
+            if other is not None:
+                return PlanFailure(FailureReason.START_BLOCKED,
+                                   f"start cell {c} is held by vehicle {other} at t={t_start}", 0)
+
+        goals = list(dict.fromkeys(goals))
+        reachable_goals = [g for g in goals if self._goal_can_park(vehicle, g, store)]
+        if not reachable_goals:
+            return PlanFailure(FailureReason.GOAL_BLOCKED,
+                               "every goal pose is static-blocked or parked on by another "
+                               "vehicle: " + ", ".join(str(g) for g in goals), 0)
+        here = self.component(start)
+        reachable_goals = [g for g in reachable_goals if self.component(g) == here]
+        if not reachable_goals:
+            return PlanFailure(FailureReason.NO_PATH,
+                               f"no goal pose can be reached from {start} on the static map", 0)
+        goal_set = {(g.cell, g.heading) for g in reachable_goals}
+
+        def h(cell: Cell, heading: int) -> float:
+            return min(heuristic(cell, heading, g) for g in reachable_goals)
+
+        root = _Node((start.cell[0], start.cell[1], start.heading, t_start), None, None,
+                     start_times(t_start), 0, 0, 0, 0, 0.0, 0.0)
+        if (start.cell, start.heading) in goal_set:
+            return self._build(vehicle, start, root, 0)
+        root.f = self.params.C11 * h(start.cell, start.heading)
+
+        C11, p = self.params.C11, self.params
+        open_heap: list[tuple[float, int, _Node]] = [(root.f, 0, root)]
+        best_f: dict[Key, float] = {root.key: root.f}
+        closed: set[Key] = set()
+        counter = 1
+        expansions = 0
+        while open_heap:
+            f, _, node = heapq.heappop(open_heap)
+            if node.key in closed or best_f.get(node.key) != f:
+                continue  # stale heap entry
+            closed.add(node.key)
+            expansions += 1
+            if expansions > p.iter_search:
+                return PlanFailure(FailureReason.ITERATION_CAP,
+                                   f"no path within iter_search={p.iter_search} expansions",
+                                   expansions - 1)
+            x, y, heading, _ = node.key
+            for move in table[heading]:
+                gamma = self.static_gamma((x, y), move)
+                if gamma:
+                    continue  # static collisions fail at every time
+                manner = move.manner
+                d = manner.direction
+                reverses = d != 0 and node.last_dir != 0 and d != node.last_dir
+                times = self.velocity.child_times(node.times, manner.kind,
+                                                  manner is Manner.STOP or reverses)
+                tz = times.t_zero
+                ex, ey = x + move.end_delta[0], y + move.end_delta[1]
+                key = (ex, ey, move.end_heading, tz)
+                if key in closed:
+                    continue
+                t_from = min(node.times.at[v] for v in times.start_level if v is not None)
+                t_to = max(t for t in times.at if t < INF)
+                if self._collides(vehicle, x, y, move.end_cells, t_from, t_to, store):
+                    closed.add(key)  # gamma = 1
+                    continue
+                if self._collides(vehicle, x, y, move.start_cells | move.middle_cells,
+                                  t_from, t_to, store):
+                    continue  # gamma = 2
+                at_goal = ((ex, ey), move.end_heading) in goal_set
+                if at_goal and self._collides(vehicle, x, y, move.end_cells, tz, INF, store):
+                    closed.add(key)  # cannot park here at this time
+                    continue
+                turns = node.turns + (manner.kind is Kind.TURN)
+                lanes = node.lanes + (manner.kind is Kind.LANE)
+                inversions = node.inversions + reverses
+                g = (tz - t_start + p.p_turn * turns + p.p_lane * lanes
+                     + p.p_inv * inversions)
+                fc = g + C11 * h((ex, ey), move.end_heading)
+                previous = best_f.get(key)
+                if previous is not None and previous <= fc:
+                    continue
+                child = _Node(key, node, manner, times, d or node.last_dir, turns, lanes,
+                              inversions, g, fc)
+                if at_goal:
+                    return self._build(vehicle, start, child, expansions)
+                best_f[key] = fc
+                heapq.heappush(open_heap, (fc, counter, child))
+                counter += 1
+        return PlanFailure(FailureReason.NO_PATH,
+                           f"open list exhausted after {expansions} expansions", expansions)
+
+    def _goal_can_park(self, vehicle: int, goal: Pose, store: ReservationView) -> bool:
+        cells = [(goal.cell[0] + a, goal.cell[1] + b)
+                 for a, b in self.moves[goal.heading][0].start_cells]
+        if not self.grid.all_free(cells):
+            return False
+        # Someone parked there for good can never be waited out.
+        return all(store.conflict(vehicle, c, 1e300, INF) is None for c in cells)
+
+    @staticmethod
+    def _collides(vehicle: int, x: int, y: int, offsets: frozenset[Cell], t0: float, t1: float,
+                  store: ReservationView) -> bool:
+        return any(store.conflict(vehicle, (x + a, y + b), t0, t1) is not None
+                   for a, b in offsets)
+
+    def _build(self, vehicle: int, start: Pose, goal_node: _Node,
+               expansions: int) -> Trajectory:
+        chain = []
+        node: _Node | None = goal_node
+        while node is not None and node.parent is not None:
+            chain.append(node)
+            node = node.parent
+        chain.reverse()
+        levels = fix_ending_levels([n.times for n in chain])
+        steps = []
+        for node, level in zip(chain, levels, strict=True):
+            parent = node.parent
+            assert parent is not None and node.manner is not None
+            v0 = node.times.start_level[level]
+            assert v0 is not None
+            move = self.move_of[node.manner, parent.key[2]]
+            px, py = parent.key[0], parent.key[1]
+            cells = frozenset((px + a, py + b) for a, b in move.swept)
+            steps.append(Step(node.manner, Pose((px, py), parent.key[2]),
+                              Pose((node.key[0], node.key[1]), node.key[2]),
+                              parent.times.at[v0], node.times.at[level], v0, level, cells))
+        goal = Pose((goal_node.key[0], goal_node.key[1]), goal_node.key[2])
+        t_end = steps[-1].t1 if steps else goal_node.key[3]
+        goal_cells = [(goal.cell[0] + a, goal.cell[1] + b)
+                      for a, b in self.moves[goal.heading][0].start_cells]
+        pieces = [(c, s.t0, s.t1) for s in steps for c in s.cells]
+        pieces += [(c, t_end, INF) for c in goal_cells]
+        return Trajectory(vehicle, start, goal, steps[0].t0 if steps else t_end, tuple(steps),
+                          merge_intervals(pieces), expansions)

@@ -1,0 +1,1 @@
+"""recorder package (filled in by later issues)."""

@@ -1,0 +1,1 @@
+"""reservation package (filled in by later issues)."""

@@ -1,0 +1,140 @@
+"""Improved hybrid A* on synthetic grids: soundness (brute-force checker), determinism, and
+clean failures."""
+
+import random
+import sys
+from pathlib import Path
+
+import pytest
+
+from fleet.gridmap import GridMap
+from fleet.maneuvers import body_cells_at_rest
+from fleet.params import SearchParams
+from fleet.planner import HybridAStar
+from fleet.reservations import ReservationTable
+from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+
+sys.path.insert(0, str(Path(__file__).parent))
+from brute_force import check_trajectory  # noqa: E402
+
+
+def others_of(table, vehicle):
+    return [(r.vehicle, r.cell, r.t0, r.t1) for r in table.reservations() if r.vehicle != vehicle]
+
+
+def free_pose(rng, grid, taken):
+    while True:
+        pose = Pose((rng.randrange(grid.cols), rng.randrange(grid.rows)), rng.randrange(4))
+        cells = body_cells_at_rest(pose.cell, pose.heading)
+        if grid.all_free(cells) and not taken & set(cells):
+            return pose
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_fleets_never_overlap(seed):
+    rng = random.Random(seed)
+    blocked = frozenset((rng.randrange(14), rng.randrange(10)) for _ in range(18))
+    grid = GridMap(14, 10, blocked)
+    planner = HybridAStar(grid)
+    table = ReservationTable()
+    starts, taken = {}, set()
+    for v in range(1, 5):
+        starts[v] = free_pose(rng, grid, taken)
+        taken |= set(body_cells_at_rest(starts[v].cell, starts[v].heading))
+        assert table.park(v, body_cells_at_rest(starts[v].cell, starts[v].heading), 0.0) is None
+    found = 0
+    for v in range(1, 5):
+        goal = free_pose(rng, grid, taken)
+        result = planner.plan(v, starts[v], rng.choice([0.0, 3.0, 7.5]), [goal], table)
+        if isinstance(result, Trajectory):
+            found += 1
+            assert check_trajectory(result, others_of(table, v), grid) == []
+            assert result.goal == goal
+            assert table.commit(v, result.intervals, release_from=result.t_start) is None
+            taken |= set(body_cells_at_rest(goal.cell, goal.heading))
+        else:
+            assert result.reason in FailureReason
+    assert found >= 1
+
+
+def test_waits_for_a_crossing_vehicle():
+    grid = GridMap(12, 3, frozenset((c, r) for c in range(12) for r in (0, 2) if c != 6))
+    planner = HybridAStar(grid)
+    table = ReservationTable()
+    from fleet.reservations import Interval
+    # Vehicle 2 drives north through the corridor's crossing column 6 over t in [0, 30).
+    crossing = [((6, 0), 0, 30), ((6, 1), 0, 30), ((6, 2), 0, 30)]
+    assert table.commit(2, [Interval(c, a, b) for c, a, b in crossing]) is None
+    result = planner.plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
+    assert isinstance(result, Trajectory)
+    assert check_trajectory(result, others_of(table, 1), grid) == []
+    entering = [s for s in result.steps if (6, 1) in s.cells]
+    assert min(s.t0 for s in entering) >= 30
+    assert any(s.manner.label == "stop" for s in result.steps)
+
+
+def test_same_inputs_same_trajectory():
+    grid = GridMap(14, 10, frozenset({(5, y) for y in range(2, 10)}))
+    table = ReservationTable()
+    table.park(2, [(8, 3), (8, 4)], 0.0)
+    a = HybridAStar(grid).plan(1, Pose((1, 1), 1), 0.0, [Pose((11, 8), 3)], table)
+    b = HybridAStar(grid).plan(1, Pose((1, 1), 1), 0.0, [Pose((11, 8), 3)], table)
+    assert isinstance(a, Trajectory) and a == b
+
+
+def test_start_blocked_by_another_vehicle():
+    grid = GridMap(8, 8, frozenset())
+    table = ReservationTable()
+    table.park(2, [(3, 3)], 0.0)
+    result = HybridAStar(grid).plan(1, Pose((3, 2), 1), 5.0, [Pose((6, 6), 0)], table)
+    assert isinstance(result, PlanFailure) and result.reason is FailureReason.START_BLOCKED
+    assert "vehicle 2" in result.detail
+
+
+def test_goal_parked_on_forever_fails_at_once():
+    grid = GridMap(8, 8, frozenset())
+    table = ReservationTable()
+    table.park(2, [(6, 6)], 0.0)
+    result = HybridAStar(grid).plan(1, Pose((1, 1), 0), 0.0, [Pose((6, 5), 1)], table)
+    assert isinstance(result, PlanFailure) and result.reason is FailureReason.GOAL_BLOCKED
+    assert result.expansions == 0
+
+
+def test_walled_in_goal_has_no_path():
+    wall = {(c, 5) for c in range(10)}
+    grid = GridMap(10, 10, frozenset(wall))
+    result = HybridAStar(grid).plan(1, Pose((1, 1), 0), 0.0, [Pose((4, 7), 0)],
+                                    ReservationTable())
+    assert isinstance(result, PlanFailure) and result.reason is FailureReason.NO_PATH
+
+
+def test_iteration_cap_is_reported():
+    grid = GridMap(30, 30, frozenset({(15, y) for y in range(1, 30)}))
+    planner = HybridAStar(grid, params=SearchParams(iter_search=20))
+    result = planner.plan(1, Pose((1, 28), 0), 0.0, [Pose((28, 28), 0)], ReservationTable())
+    assert isinstance(result, PlanFailure) and result.reason is FailureReason.ITERATION_CAP
+    assert result.expansions == 20
+
+
+def test_start_equals_goal_parks_in_place():
+    grid = GridMap(6, 6, frozenset())
+    result = HybridAStar(grid).plan(1, Pose((2, 2), 1), 4.0, [Pose((2, 2), 1)],
+                                    ReservationTable())
+    assert isinstance(result, Trajectory) and result.steps == ()
+    assert {iv.cell for iv in result.intervals} == {(2, 2), (2, 3)}
+
+
+def test_brute_force_checker_catches_a_missing_sweep_cell():
+    grid = GridMap(10, 10, frozenset())
+    table = ReservationTable()
+    result = HybridAStar(grid).plan(1, Pose((2, 2), 1), 0.0, [Pose((6, 5), 0)], table)
+    assert isinstance(result, Trajectory)
+    assert check_trajectory(result, [], grid) == []
+    turn = next(s for s in result.steps if s.manner.kind.value == "turn")
+    sliver = sorted(turn.cells - {c for s in result.steps if s is not turn for c in s.cells})
+    assert sliver, "a turn sweeps a cell no other step does (the notch cell)"
+    broken = type(result)(result.vehicle, result.start, result.goal, result.t_start,
+                          result.steps, tuple(iv for iv in result.intervals
+                                              if iv.cell != sliver[0]), result.expansions)
+    problems = check_trajectory(broken, [], grid)
+    assert any("outside its reservation" in p for p in problems)

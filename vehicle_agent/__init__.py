@@ -1,0 +1,1 @@
+"""vehicle_agent package (filled in by later issues)."""
