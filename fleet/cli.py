@@ -8,10 +8,7 @@ from collections.abc import Sequence
 
 from fleet import __version__
 from fleet.commands import bench, layout, plan
-
-
-class UserError(Exception):
-    """A problem with the user's input, printed without a traceback."""
+from fleet.errors import UserError
 
 
 def build_parser() -> argparse.ArgumentParser:

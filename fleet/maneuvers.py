@@ -19,12 +19,12 @@ from dataclasses import dataclass
 from enum import Enum
 from functools import cache
 
-from fleet.geometry import Cell, cells_swept, cells_under, body_corners
+from fleet.geometry import Cell, body_corners, cells_swept, cells_under
 from fleet.params import VehicleDims
 
 HEADINGS = ("E", "N", "W", "S")  # heading index h means angle h * 90 degrees
 STEPS: tuple[Cell, ...] = ((1, 0), (0, 1), (-1, 0), (0, -1))
-SAMPLES = 720  # per maneuver; far finer than any sliver that could hide between samples
+SAMPLES = 360  # per maneuver: 0.25 degree of a turn, far finer than any sliver
 
 
 class Kind(Enum):
@@ -146,21 +146,26 @@ def pose_cells(cell: Cell, heading: int, dims: VehicleDims, cell_size: float) ->
 @cache
 def move_table(dims: VehicleDims = VehicleDims(), cell_size: float = 2.0) -> dict[
         tuple[Manner, int], Move]:
-    """Every (manner, heading) move, precomputed once per body and cell size."""
+    """Every (manner, heading) move, precomputed once per body and cell size. The sweep is
+    sampled for heading E and rotated to the others (the grid is symmetric under quarter
+    turns)."""
     table = {}
     for manner in Manner:
         (ahead, left), quarter_turns = end_offset(manner)
+        poses = [world_pose((0, 0), 0, manner, i / SAMPLES, cell_size)
+                 for i in range(SAMPLES + 1)]
+        swept_east = cells_swept(poses, dims, cell_size)
+        start_east = pose_cells((0, 0), 0, dims, cell_size)
+        end_east = frozenset((ahead + a, left + b) for a, b in
+                             (rotate(c, quarter_turns) for c in start_east))
         for heading in range(4):
-            poses = [world_pose((0, 0), heading, manner, i / SAMPLES, cell_size)
-                     for i in range(SAMPLES + 1)]
-            swept = cells_swept(poses, dims, cell_size)
-            end_delta = rotate((ahead, left), heading)
-            end_heading = (heading + quarter_turns) % 4
-            start = pose_cells((0, 0), heading, dims, cell_size)
-            end = frozenset((end_delta[0] + c[0], end_delta[1] + c[1])
-                            for c in pose_cells((0, 0), end_heading, dims, cell_size))
-            table[manner, heading] = Move(manner, heading, end_delta, end_heading, start,
-                                          frozenset(swept - start - end), end)
+            def turned(cells: frozenset[Cell], h: int = heading) -> frozenset[Cell]:
+                return frozenset(rotate(c, h) for c in cells)
+
+            start, end = turned(start_east), turned(end_east)
+            table[manner, heading] = Move(manner, heading, rotate((ahead, left), heading),
+                                          (heading + quarter_turns) % 4, start,
+                                          turned(frozenset(swept_east)) - start - end, end)
     return table
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from fleet.geometry import Cell
 from fleet.gridmap import GridMap
@@ -31,9 +32,20 @@ from fleet.trajectory import (
     Trajectory,
     merge_intervals,
 )
-from fleet.velocity import INF, EndTimes, Speed, VelocityPlanner, fix_ending_levels, start_times
+from fleet.velocity import INF, EndTimes, VelocityPlanner, fix_ending_levels, start_times
 
 Key = tuple[int, int, int, float]
+
+
+class _Edge(NamedTuple):
+    manner: Manner
+    kind: Kind
+    direction: int
+    x: int
+    y: int
+    heading: int
+    end_cells: tuple[Cell, ...]
+    body_cells: tuple[Cell, ...]  # start and intermediate cells
 
 
 @dataclass
@@ -68,6 +80,7 @@ class HybridAStar:
         self.move_of = move_table(dims, grid.cell_size)
         self.moves: list[list[Move]] = [[self.move_of[m, h] for m in Manner] for h in range(4)]
         self._static: dict[tuple[Cell, int, Manner], int] = {}
+        self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
         self._component: dict[tuple[Cell, int], int] | None = None
 
     def component(self, pose: Pose) -> int | None:
@@ -117,6 +130,23 @@ class HybridAStar:
             self._static[key] = gamma
         return gamma
 
+    def edges(self, x: int, y: int, heading: int) -> list[_Edge]:
+        """The statically valid moves from a pose, with absolute cells (cached per map)."""
+        found = self._edges.get((x, y, heading))
+        if found is None:
+            found = []
+            for move in self.moves[heading]:
+                if self.static_gamma((x, y), move):
+                    continue  # static collisions fail at every time
+                found.append(_Edge(
+                    move.manner, move.manner.kind, move.manner.direction,
+                    x + move.end_delta[0], y + move.end_delta[1], move.end_heading,
+                    tuple((x + a, y + b) for a, b in sorted(move.end_cells)),
+                    tuple((x + a, y + b) for a, b in sorted(move.start_cells
+                                                             | move.middle_cells))))
+            self._edges[x, y, heading] = found
+        return found
+
     def plan(self, vehicle: int, start: Pose, t_start: float, goals: list[Pose] | tuple[Pose, ...],
              store: ReservationView) -> Trajectory | PlanFailure:
         """Plan from `start` at rest at `t_start` to any of `goals` (arriving at rest)."""
@@ -161,6 +191,9 @@ class HybridAStar:
         closed: set[Key] = set()
         counter = 1
         expansions = 0
+        h_cache: dict[tuple[int, int, int], float] = {}
+        conflict = store.conflict
+        child_times = self.velocity.child_times
         while open_heap:
             f, _, node = heapq.heappop(open_heap)
             if node.key in closed or best_f.get(node.key) != f:
@@ -172,38 +205,38 @@ class HybridAStar:
                                    f"no path within iter_search={p.iter_search} expansions",
                                    expansions - 1)
             x, y, heading, _ = node.key
-            for move in table[heading]:
-                gamma = self.static_gamma((x, y), move)
-                if gamma:
-                    continue  # static collisions fail at every time
-                manner = move.manner
-                d = manner.direction
+            parent_at = node.times.at
+            for edge in self.edges(x, y, heading):
+                manner = edge.manner
+                d = edge.direction
                 reverses = d != 0 and node.last_dir != 0 and d != node.last_dir
-                times = self.velocity.child_times(node.times, manner.kind,
-                                                  manner is Manner.STOP or reverses)
-                tz = times.t_zero
-                ex, ey = x + move.end_delta[0], y + move.end_delta[1]
-                key = (ex, ey, move.end_heading, tz)
+                times = child_times(node.times, edge.kind, manner is Manner.STOP or reverses)
+                tz = times.at[0]
+                ex, ey, eh = edge.x, edge.y, edge.heading
+                key = (ex, ey, eh, tz)
                 if key in closed:
                     continue
-                t_from = min(node.times.at[v] for v in times.start_level if v is not None)
+                t_from = min(parent_at[v] for v in times.start_level if v is not None)
                 t_to = max(t for t in times.at if t < INF)
-                if self._collides(vehicle, x, y, move.end_cells, t_from, t_to, store):
+                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.end_cells):
                     closed.add(key)  # gamma = 1
                     continue
-                if self._collides(vehicle, x, y, move.start_cells | move.middle_cells,
-                                  t_from, t_to, store):
+                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.body_cells):
                     continue  # gamma = 2
-                at_goal = ((ex, ey), move.end_heading) in goal_set
-                if at_goal and self._collides(vehicle, x, y, move.end_cells, tz, INF, store):
+                at_goal = ((ex, ey), eh) in goal_set
+                if at_goal and any(conflict(vehicle, c, tz, INF) is not None
+                                   for c in edge.end_cells):
                     closed.add(key)  # cannot park here at this time
                     continue
-                turns = node.turns + (manner.kind is Kind.TURN)
-                lanes = node.lanes + (manner.kind is Kind.LANE)
+                turns = node.turns + (edge.kind is Kind.TURN)
+                lanes = node.lanes + (edge.kind is Kind.LANE)
                 inversions = node.inversions + reverses
                 g = (tz - t_start + p.p_turn * turns + p.p_lane * lanes
                      + p.p_inv * inversions)
-                fc = g + C11 * h((ex, ey), move.end_heading)
+                hc = h_cache.get((ex, ey, eh))
+                if hc is None:
+                    hc = h_cache[ex, ey, eh] = h((ex, ey), eh)
+                fc = g + C11 * hc
                 previous = best_f.get(key)
                 if previous is not None and previous <= fc:
                     continue

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -69,7 +70,7 @@ class Trajectory:
         turns = sum(s.manner.kind.value == "turn" for s in self.steps)
         lanes = sum(s.manner.kind.value == "lane" for s in self.steps)
         dirs = [s.manner.direction for s in self.steps if s.manner.direction]
-        reversals = sum(a != b for a, b in zip(dirs, dirs[1:], strict=False))
+        reversals = sum(a != b for a, b in itertools.pairwise(dirs))
         return {"turns": turns, "lane_changes": lanes, "reversals": reversals}
 
 

@@ -53,7 +53,7 @@ def point_cell(px, py):
 def path(start, end, kind, samples=120):
     """Poses (x, y, theta) along a step, from its start and end poses alone."""
     (sx, sy), sh = start.cell, start.heading
-    (ex, ey), eh = end.cell, end.heading
+    ex, ey = end.cell
     x0, y0, x1, y1 = sx * CELL, sy * CELL, ex * CELL, ey * CELL
     th0 = sh * math.pi / 2
     fx, fy = math.cos(th0), math.sin(th0)

@@ -15,7 +15,7 @@ from fleet.reservations import ReservationTable
 from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 
 sys.path.insert(0, str(Path(__file__).parent))
-from brute_force import check_trajectory  # noqa: E402
+from brute_force import check_trajectory
 
 
 def others_of(table, vehicle):

@@ -1,0 +1,39 @@
+"""`fleet bench ...`: benchmarks (speed goals live here, not in timed tests)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="run a benchmark")
+    which = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    planner = which.add_parser("planner", help="seeded station <-> stack planner queries")
+    planner.add_argument("--layout", default="paper")
+    planner.add_argument("--queries", type=int, default=240)
+    planner.add_argument("--seed", type=int, default=2026)
+    planner.add_argument("--json", action="store_true", help="print one JSON object")
+    planner.set_defaults(handler=run_planner)
+
+
+def run_planner(args: argparse.Namespace) -> int:
+    from bench import planner
+
+    if args.queries < 1:
+        raise ValueError("--queries must be at least 1")
+    result = planner.run(args.layout, args.queries, args.seed,
+                         None if args.json else planner.print_progress)
+    result["machine"] = f"{platform.machine()} {platform.python_implementation()} " \
+                        f"{platform.python_version()}"
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"planner on {result['layout']}: {result['queries']} queries (seed {result['seed']})")
+    print(f"  per query  p50 {result['p50_ms']} ms   p95 {result['p95_ms']} ms   "
+          f"max {result['max_ms']} ms   mean {result['mean_ms']} ms")
+    print(f"  success    {result['success_rate']:.1%}   outcomes {result['outcomes']}")
+    print(f"  expansions p50 {result['expansions_p50']}   max {result['expansions_max']}")
+    print(f"  setup per fill state (not in the query time) p50 {result['setup_p50_ms']} ms")
+    return 0

@@ -1,0 +1,148 @@
+"""`fleet plan`: one improved hybrid A* query on a layout, printed and optionally drawn."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fleet.errors import UserError
+from fleet.layout import Layout, load_layout
+from fleet.maneuvers import body_cells_at_rest
+from fleet.places import filled_counts, resolve
+from fleet.planner import HybridAStar
+from fleet.reservations import Interval, ReservationTable
+from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan", help="plan one trajectory with the improved hybrid A*",
+                       description="Plan one query. Places: a pose 'col,row,H' (H in E N W S),"
+                       " a station name (its docking pose) or a stack 's1#5' (forks at it).")
+    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
+    p.add_argument("--from", dest="start", required=True, help="start place")
+    p.add_argument("--to", dest="goal", required=True, help="goal place")
+    p.add_argument("--at", type=float, default=0.0, help="start time in seconds (default 0)")
+    p.add_argument("--vehicle", type=int, default=1, help="vehicle id (default 1)")
+    p.add_argument("--reserved", type=Path,
+                   help="TOML file of other vehicles' plans and reservations (docs/planning.md)")
+    p.add_argument("--png", type=Path, help="draw the plan into this PNG file")
+    p.set_defaults(handler=run)
+
+
+@dataclass
+class Scene:
+    """Everything in the table before the query: fill state and other vehicles."""
+
+    filled: set = field(default_factory=set)
+    others: list[Trajectory] = field(default_factory=list)
+
+
+def load_scene(path: Path | None, layout: Layout, planner_for, table: ReservationTable,
+               me: int) -> Scene:
+    scene = Scene()
+    if path is None:
+        return scene
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    scene.filled = filled_counts(layout, data.get("filled", {}))
+    planner = planner_for(scene.filled)
+    vehicles = data.get("vehicle", [])
+    starts = {}
+    for i, entry in enumerate(vehicles):
+        where = f"{path}: vehicle[{i}]"
+        try:
+            vid, start = int(entry["id"]), entry["from"]
+        except (KeyError, TypeError, ValueError):
+            raise UserError(f"{where}: needs an integer 'id' and a 'from' place") from None
+        if vid == me:
+            raise UserError(f"{where}: id {vid} is the planning vehicle itself")
+        starts[vid] = resolve(layout, start, scene.filled)[0]
+        conflict = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading),
+                              0.0)
+        if conflict is not None:
+            raise UserError(f"{where}: start {starts[vid]} overlaps vehicle {conflict.other}")
+    for i, entry in enumerate(vehicles):
+        if "to" not in entry:
+            continue
+        vid = int(entry["id"])
+        goals = resolve(layout, entry["to"], scene.filled)
+        result = planner.plan(vid, starts[vid], float(entry.get("at", 0.0)), goals, table)
+        if isinstance(result, PlanFailure):
+            raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be planned: "
+                            f"{result.reason.value}: {result.detail}")
+        table.commit(vid, result.intervals, release_from=result.t_start)
+        scene.others.append(result)
+    for i, entry in enumerate(data.get("reservation", [])):
+        try:
+            iv = Interval(tuple(entry["cell"]), float(entry["t0"]),
+                          float(entry.get("t1", math.inf)))
+            vid = int(entry["vehicle"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise UserError(f"{path}: reservation[{i}]: {exc}") from None
+        conflict = table.commit(vid, [iv])
+        if conflict is not None:
+            raise UserError(f"{path}: reservation[{i}] overlaps vehicle {conflict.other}")
+    return scene
+
+
+def format_trajectory(traj: Trajectory) -> str:
+    lines = [f"{'t0':>8} {'t1':>8}  {'maneuver':<20} {'from':<10} {'to':<10} speed"]
+    for s in traj.steps:
+        lines.append(f"{s.t0:8.2f} {s.t1:8.2f}  {s.manner.label:<20} {s.start!s:<10} "
+                     f"{s.end!s:<10} {s.v0.name.lower()}->{s.v1.name.lower()}")
+    counts = traj.counts()
+    lines.append(f"arrives at {traj.goal} at t={traj.t_end:.2f} s ({traj.t_end - traj.t_start:.2f}"
+                 f" s, {len(traj.steps)} maneuvers, {counts['turns']} turns, "
+                 f"{counts['lane_changes']} lane changes, {counts['reversals']} reversals); "
+                 f"parked there to infinity")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    layout = load_layout(args.layout)
+    planners: dict[frozenset, HybridAStar] = {}
+
+    def planner_for(filled) -> HybridAStar:
+        key = frozenset(filled)
+        if key not in planners:
+            planners[key] = HybridAStar(layout.grid_map(key), layout.vehicle.dims)
+        return planners[key]
+
+    table = ReservationTable()
+    scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle)
+    starts = resolve(layout, args.start, scene.filled)
+    goals = resolve(layout, args.goal, scene.filled)
+    start: Pose = starts[0]
+    conflict = table.park(args.vehicle, body_cells_at_rest(start.cell, start.heading), 0.0)
+    planner = planner_for(scene.filled)
+    t0 = time.perf_counter()
+    if conflict is None:
+        result = planner.plan(args.vehicle, start, args.at, goals, table)
+    else:
+        result = PlanFailure(FailureReason.START_BLOCKED, f"start cell {conflict.cell} is held "
+                             f"by vehicle {conflict.other}", 0)
+    wall_ms = (time.perf_counter() - t0) * 1000
+    goal_text = ", ".join(str(g) for g in goals)
+    print(f"vehicle {args.vehicle}: {start} -> {goal_text} on {layout.name}, t={args.at:g} s, "
+          f"{len(scene.others)} other vehicles planned")
+    if isinstance(result, Trajectory):
+        print(format_trajectory(result))
+    else:
+        print(f"no trajectory: {result.reason.value}: {result.detail}")
+    print(f"search: {result.expansions} expansions, {wall_ms:.1f} ms")
+    if args.png:
+        from fleet.plotting import save_plan_figure
+
+        traj = result if isinstance(result, Trajectory) else None
+        save_plan_figure(str(args.png), layout, traj, scene.others, table.reservations(),
+                         scene.filled, f"{layout.name}: vehicle {args.vehicle} {args.start} -> "
+                         f"{args.goal}" + ("" if traj else f" ({result.reason.value})"))
+        print(f"wrote {args.png}")
+    return 0 if isinstance(result, Trajectory) else 1
+
