@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from fleet.layout import Layout, load_layout
-
 from fleet.maneuvers import body_cells_at_rest
 from fleet.planner import HybridAStar
 from fleet.reservations import ReservationTable
@@ -75,7 +74,7 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         progress: Callable[[int, int], None] | None = None) -> dict:
     layout = load_layout(layout_name)
     rng = random.Random(seed)
-    times_ms, setup_ms, expansions = [], [], []
+    times_ms, setup_ms, expansions, found_ms = [], [], [], []
     outcomes: Counter[str] = Counter()
     done = 0
     while done < queries:
@@ -100,6 +99,8 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         times_ms.append((time.perf_counter() - t0) * 1000)
         expansions.append(result.expansions)
         outcomes["found" if isinstance(result, Trajectory) else result.reason.value] += 1
+        if isinstance(result, Trajectory):
+            found_ms.append(times_ms[-1])
         done += 1
         if progress:
             progress(done, queries)
@@ -112,6 +113,9 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         "max_ms": round(max(times_ms), 3),
         "mean_ms": round(statistics.fmean(times_ms), 3),
         "success_rate": round(outcomes["found"] / queries, 4),
+        "found_p50_ms": round(statistics.median(found_ms), 3) if found_ms else None,
+        "found_p95_ms": round(_percentile(found_ms, 0.95), 3) if found_ms else None,
+        "over_100ms": sum(t > 100 for t in times_ms),
         "outcomes": dict(sorted(outcomes.items())),
         "expansions_p50": statistics.median(expansions),
         "expansions_max": max(expansions),

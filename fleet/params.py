@@ -52,6 +52,9 @@ class SearchParams:
     p_turn: float = 4.0
     p_lane: float = 6.0
     p_inv: float = 6.0
+    # Not from the seed: after this many expansions the search checks once whether vehicles
+    # parked for good cut every way to the goal, and fails at once if they do (see planner).
+    deadline_check_at: int = 300
 
 
 @dataclass(frozen=True)

@@ -82,6 +82,9 @@ class HybridAStar:
         self._static: dict[tuple[Cell, int, Manner], int] = {}
         self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
         self._component: dict[tuple[Cell, int], int] | None = None
+        self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
+        for (kind, _, _), dt in self.velocity.links.items():
+            self._shortest[kind] = min(dt, self._shortest.get(kind, INF))
 
     def component(self, pose: Pose) -> int | None:
         """Connected component of the pose in the static pose graph (moves are reversible,
@@ -92,6 +95,7 @@ class HybridAStar:
 
     def _components(self) -> dict[tuple[Cell, int], int]:
         comp: dict[tuple[Cell, int], int] = {}
+        label = -1
         for x in range(self.grid.cols):
             for y in range(self.grid.rows):
                 for heading in range(4):
@@ -99,7 +103,7 @@ class HybridAStar:
                     if seed in comp or not self.grid.all_free(
                             (x + a, y + b) for a, b in self.moves[heading][0].start_cells):
                         continue
-                    label = len(set(comp.values()))
+                    label += 1
                     comp[seed] = label
                     todo = [seed]
                     while todo:
@@ -200,6 +204,11 @@ class HybridAStar:
                 continue  # stale heap entry
             closed.add(node.key)
             expansions += 1
+            if expansions == p.deadline_check_at and not self._deadline_reachable(
+                    vehicle, start, t_start, goal_set, store):
+                return PlanFailure(FailureReason.NO_PATH,
+                                   "vehicles parked for good cut every way to the goal "
+                                   f"(checked after {expansions} expansions)", expansions)
             if expansions > p.iter_search:
                 return PlanFailure(FailureReason.ITERATION_CAP,
                                    f"no path within iter_search={p.iter_search} expansions",
@@ -249,6 +258,42 @@ class HybridAStar:
                 counter += 1
         return PlanFailure(FailureReason.NO_PATH,
                            f"open list exhausted after {expansions} expansions", expansions)
+
+    def _deadline_reachable(self, vehicle: int, start: Pose, t_start: float,
+                            goal_set: set[tuple[Cell, int]], store: ReservationView) -> bool:
+        """A relaxation that can only say too much: earliest arrivals over the static pose
+        graph with every maneuver at its shortest duration, where a cell may be used only if
+        the maneuver ends before another vehicle parks on it for good. Other reservations are
+        ignored (waiting can outlast them). False proves that no trajectory exists, since a real
+        one departs no earlier and moves no faster."""
+        shortest = self._shortest
+        deadline: dict[Cell, float] = {}
+
+        def usable_until(cell: Cell) -> float:
+            t = deadline.get(cell)
+            if t is None:
+                t = deadline[cell] = store.parked_from(vehicle, cell)
+            return t
+
+        best = {(start.cell[0], start.cell[1], start.heading): t_start}
+        heap = [(t_start, start.cell[0], start.cell[1], start.heading)]
+        while heap:
+            t, x, y, heading = heapq.heappop(heap)
+            if best[x, y, heading] < t:
+                continue
+            if ((x, y), heading) in goal_set:
+                return True
+            for edge in self.edges(x, y, heading):
+                if edge.kind is Kind.STOP:
+                    continue
+                t_end = t + shortest[edge.kind]
+                if any(usable_until(c) < t_end for c in edge.end_cells + edge.body_cells):
+                    continue
+                key = (edge.x, edge.y, edge.heading)
+                if t_end < best.get(key, INF):
+                    best[key] = t_end
+                    heapq.heappush(heap, (t_end, *key))
+        return False
 
     def _goal_can_park(self, vehicle: int, goal: Pose, store: ReservationView) -> bool:
         cells = [(goal.cell[0] + a, goal.cell[1] + b)

@@ -76,6 +76,10 @@ class ReservationView(Protocol):
 
     def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None: ...
 
+    def parked_from(self, vehicle: int, cell: Cell) -> float:
+        """When another vehicle takes `cell` for good (infinity if none does)."""
+        ...
+
 
 @dataclass
 class _CellLine:
@@ -105,6 +109,14 @@ class ReservationTable:
                 return line.owners[i]
             i -= 1
         return None
+
+    def parked_from(self, vehicle: int, cell: Cell) -> float:
+        """When another vehicle takes `cell` for good (infinity if none does). Intervals do not
+        overlap, so only a cell's last interval can run to infinity."""
+        line = self._cells.get(cell)
+        if line is None or line.ends[-1] != INF or line.owners[-1] == vehicle:
+            return INF
+        return line.starts[-1]
 
     def first_conflict(self, vehicle: int, intervals: Iterable[Interval]) -> Conflict | None:
         for iv in intervals:

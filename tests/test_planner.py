@@ -138,3 +138,29 @@ def test_brute_force_checker_catches_a_missing_sweep_cell():
                                               if iv.cell != sliver[0]), result.expansions)
     problems = check_trajectory(broken, [], grid)
     assert any("outside its reservation" in p for p in problems)
+
+
+def corridor():
+    """A 12 x 3 map whose middle row is the only way through."""
+    return GridMap(12, 3, frozenset((c, r) for c in range(12) for r in (0, 2)))
+
+
+def test_vehicle_parked_across_the_only_way_fails_fast():
+    table = ReservationTable()
+    table.park(2, [(6, 1)], 0.0)
+    result = HybridAStar(corridor()).plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
+    assert isinstance(result, PlanFailure) and result.reason is FailureReason.NO_PATH
+    assert result.expansions == SearchParams().deadline_check_at
+    assert "parked for good" in result.detail
+
+
+def test_deadline_check_lets_through_a_vehicle_that_parks_later():
+    table = ReservationTable()
+    table.park(2, [(6, 1)], 40.0)  # parks across the corridor only from t = 40 s
+    planner = HybridAStar(corridor(), params=SearchParams(deadline_check_at=1))
+    result = planner.plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
+    assert isinstance(result, Trajectory)
+    assert check_trajectory(result, others_of(table, 1), corridor()) == []
+    late = planner.plan(1, Pose((1, 1), 0), 39.0, [Pose((9, 1), 0)], table)
+    assert isinstance(late, PlanFailure) and late.reason is FailureReason.NO_PATH
+    assert late.expansions == 1

@@ -15,7 +15,7 @@ from fleet.maneuvers import body_cells_at_rest
 from fleet.places import filled_counts, resolve
 from fleet.planner import HybridAStar
 from fleet.reservations import Interval, ReservationTable
-from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.trajectory import PlanFailure, Pose, Trajectory
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,19 +38,24 @@ class Scene:
     """Everything in the table before the query: fill state and other vehicles."""
 
     filled: set = field(default_factory=set)
+    start: Pose | None = None  # the planning vehicle's start
     others: list[Trajectory] = field(default_factory=list)
 
 
 def load_scene(path: Path | None, layout: Layout, planner_for, table: ReservationTable,
-               me: int) -> Scene:
+               me: int, my_start: str) -> Scene:
+    """Fill state and the other vehicles' plans; the planning vehicle is parked at its start
+    first, so the others plan around it as they would in a fleet."""
+    data: dict = {}
+    if path is not None:
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise UserError(f"{path}: not valid TOML: {exc}") from None
     scene = Scene()
-    if path is None:
-        return scene
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML: {exc}") from None
     scene.filled = filled_counts(layout, data.get("filled", {}))
+    scene.start = resolve(layout, my_start, scene.filled)[0]
+    table.park(me, body_cells_at_rest(scene.start.cell, scene.start.heading), 0.0)
     planner = planner_for(scene.filled)
     vehicles = data.get("vehicle", [])
     starts = {}
@@ -66,7 +71,8 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         conflict = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading),
                               0.0)
         if conflict is not None:
-            raise UserError(f"{where}: start {starts[vid]} overlaps vehicle {conflict.other}")
+            who = "the planning vehicle" if conflict.other == me else f"vehicle {conflict.other}"
+            raise UserError(f"{where}: start {starts[vid]} overlaps {who}")
     for i, entry in enumerate(vehicles):
         if "to" not in entry:
             continue
@@ -115,18 +121,12 @@ def run(args: argparse.Namespace) -> int:
         return planners[key]
 
     table = ReservationTable()
-    scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle)
-    starts = resolve(layout, args.start, scene.filled)
+    scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle, args.start)
     goals = resolve(layout, args.goal, scene.filled)
-    start: Pose = starts[0]
-    conflict = table.park(args.vehicle, body_cells_at_rest(start.cell, start.heading), 0.0)
+    start = scene.start
     planner = planner_for(scene.filled)
     t0 = time.perf_counter()
-    if conflict is None:
-        result = planner.plan(args.vehicle, start, args.at, goals, table)
-    else:
-        result = PlanFailure(FailureReason.START_BLOCKED, f"start cell {conflict.cell} is held "
-                             f"by vehicle {conflict.other}", 0)
+    result = planner.plan(args.vehicle, start, args.at, goals, table)
     wall_ms = (time.perf_counter() - t0) * 1000
     goal_text = ", ".join(str(g) for g in goals)
     print(f"vehicle {args.vehicle}: {start} -> {goal_text} on {layout.name}, t={args.at:g} s, "

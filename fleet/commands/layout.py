@@ -1,0 +1,87 @@
+"""`fleet layout list|show|check|generate`: look at, validate and make warehouse layouts."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fleet.errors import UserError
+from fleet.layout import builtin_names, load_layout
+from fleet.layout_check import reachability_problems
+from fleet.layout_generator import Shape, generate_toml
+from fleet.progress import ProgressBar
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("layout", help="list, show, check or generate warehouse layouts")
+    which = p.add_subparsers(dest="layout_command", required=True, metavar="ACTION")
+    which.add_parser("list", help="the built-in layouts").set_defaults(handler=run_list)
+    show = which.add_parser("show", help="print a layout's drawing and summary")
+    show.add_argument("name", help="built-in layout name or TOML file")
+    show.set_defaults(handler=run_show)
+    check = which.add_parser("check", help="validate a layout file: structure, drawing, and "
+                             "that every stack can be served in fill order")
+    check.add_argument("file", help="TOML file (or built-in layout name)")
+    check.set_defaults(handler=run_check)
+    gen = which.add_parser("generate", help="write a large parametric warehouse layout")
+    defaults = Shape()
+    gen.add_argument("--aisles", type=int, default=defaults.aisles,
+                     help=f"horizontal aisles (default {defaults.aisles})")
+    gen.add_argument("--depth", type=int, default=defaults.depth,
+                     help=f"lanes per side of the main passage (default {defaults.depth})")
+    gen.add_argument("--lane-depth", type=int, default=defaults.lane_depth,
+                     help=f"stacks per lane (default {defaults.lane_depth})")
+    gen.add_argument("--vehicles", type=int, default=defaults.vehicles,
+                     help=f"forklifts and their parking starts (default {defaults.vehicles})")
+    gen.add_argument("--name", help="layout name (default generated-AxD)")
+    gen.add_argument("--out", type=Path, help="write here (default: print to stdout)")
+    gen.set_defaults(handler=run_generate)
+
+
+def run_list(args: argparse.Namespace) -> int:
+    for name in builtin_names():
+        layout = load_layout(name)
+        print(f"{name:10} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
+              f"vehicles  {layout.description}")
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    layout = load_layout(args.name)
+    print(layout.render_drawing())
+    print()
+    print(layout.summary())
+    return 0
+
+
+def run_check(args: argparse.Namespace) -> int:
+    layout = load_layout(args.file)  # structural errors raise LayoutError naming the element
+    bar = ProgressBar(len(layout.stacks), "reachability")
+    problems = reachability_problems(layout, lambda done, total: bar.update(done))
+    bar.close()
+    if problems:
+        for problem in problems:
+            print(f"{args.file}: {problem}", file=sys.stderr)
+        print(f"{args.file}: {len(problems)} problem(s)", file=sys.stderr)
+        return 1
+    print(f"{args.file}: ok: {len(layout.stacks)} stacks in {len(layout.clusters)} clusters, "
+          f"{len(layout.stations)} stations, {len(layout.vehicle_starts)} vehicles; every "
+          f"stack can be served from every station in fill order")
+    return 0
+
+
+def run_generate(args: argparse.Namespace) -> int:
+    shape = Shape(aisles=args.aisles, depth=args.depth, lane_depth=args.lane_depth,
+                  vehicles=args.vehicles)
+    text = generate_toml(shape, args.name)
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    if args.out.exists() and args.out.is_dir():
+        raise UserError(f"--out {args.out} is a directory; give a file name")
+    args.out.write_text(text)
+    print(f"wrote {args.out}: {shape.cols} x {shape.rows} cells, "
+          f"{4 * shape.aisles * shape.depth * shape.lane_depth} stacks, "
+          f"{shape.vehicles} vehicles; check it with: fleet layout check {args.out}")
+    return 0

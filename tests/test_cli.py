@@ -1,0 +1,88 @@
+"""The command line as a user meets it, run in-process through fleet.cli.main."""
+
+import json
+from pathlib import Path
+
+from fleet.cli import main
+from fleet.layout import parse_layout
+
+EXAMPLES = Path(__file__).parent.parent / "examples"
+
+
+def test_layout_list_and_show(capsys):
+    assert main(["layout", "list"]) == 0
+    out = capsys.readouterr().out
+    assert "paper" in out and "136 stacks" in out and "small" in out
+    assert main(["layout", "show", "paper"]) == 0
+    out = capsys.readouterr().out
+    assert "111#3333PPn555555o" in out
+    assert "stacks   136 in 6 clusters: s1 15, s2 15, s3 20, s4 20, s5 33, s6 33" in out
+
+
+def test_layout_generate_then_check(tmp_path, capsys):
+    out_file = tmp_path / "wide.toml"
+    assert main(["layout", "generate", "--aisles", "1", "--depth", "4", "--lane-depth", "2",
+                 "--vehicles", "2", "--out", str(out_file)]) == 0
+    layout = parse_layout(out_file.read_text(), str(out_file))
+    assert len(layout.stacks) == 32 and len(layout.vehicle_starts) == 2
+    capsys.readouterr()
+    assert main(["layout", "check", str(out_file)]) == 0
+    assert "ok: 32 stacks" in capsys.readouterr().out
+
+
+def test_layout_check_reports_every_problem(tmp_path, capsys):
+    text = parse_source("small").replace('"0,7..0,5", "1,7..1,5", "2,7..2,5", "3,7..3,5"',
+                                         '"0,5..3,5", "3,6..0,6", "0,7..3,7"')
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.split('drawing = """')[0] + text.split('"""', 2)[2])
+    assert main(["layout", "check", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert "cluster a stack" in err and "problem(s)" in err
+
+
+def test_layout_check_structural_error_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\n[bounds]\nx = [0, 10]\ny = [0, 9]\n')
+    assert main(["layout", "check", str(bad)]) == 2
+    assert "bounds: y span 9 m is not a whole number of 2 m cells" in capsys.readouterr().err
+
+
+def test_plan_with_other_forklifts_and_png(tmp_path, capsys):
+    png = tmp_path / "plan.png"
+    code = main(["plan", "--from", "p1", "--to", "s1#1", "--reserved",
+                 str(EXAMPLES / "three_forklifts.toml"), "--png", str(png)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "3 other vehicles planned" in out and "parked there to infinity" in out
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_plan_without_a_path_exits_1(tmp_path, capsys):
+    assert main(["plan", "--layout", "small", "--from", "p1", "--to", "1,6,W"]) == 0
+    capsys.readouterr()
+    full = tmp_path / "full.toml"
+    full.write_text("[filled]\na = 12\n")  # now the pose stands on filled stacks
+    code = main(["plan", "--layout", "small", "--from", "p1", "--to", "1,6,W",
+                 "--reserved", str(full)])
+    assert code == 1
+    assert "no trajectory: goal blocked" in capsys.readouterr().out
+
+
+def test_bad_place_is_named(capsys):
+    assert main(["plan", "--from", "p9", "--to", "s1#1"]) == 2
+    assert "place 'p9' is not a pose 'col,row,H', a station (p1, p2, p3, p4)" in \
+        capsys.readouterr().err
+
+
+def test_bench_planner_json(capsys):
+    assert main(["bench", "planner", "--queries", "5", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["queries"] == 5
+    assert {"p50_ms", "p95_ms", "max_ms", "success_rate"} <= result.keys()
+    assert 0.0 <= result["success_rate"] <= 1.0
+
+
+def parse_source(name: str) -> str:
+    from importlib import resources
+
+    return resources.files("fleet.layouts").joinpath(f"{name}.toml").read_text()
