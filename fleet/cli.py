@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from fleet import __version__
-from fleet.commands import bench, layout, plan
+from fleet.commands import bench, layout, plan, plot, run, services, train
 from fleet.errors import UserError
 
 
@@ -16,7 +16,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts.")
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (layout, plan, bench):
+    for module in (run, plan, plot, layout, train, bench, services):
         module.register(sub)
     return parser
 
@@ -29,6 +29,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UserError, ValueError, FileNotFoundError) as exc:
         print(f"fleet {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"\nfleet {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

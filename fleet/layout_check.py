@@ -3,8 +3,9 @@
 A stack is served from one of its unload poses (forks pointing at it) and the forklift must
 get there from a station dock and back. Blocking more cells never creates a path, so each
 stack is checked in the hardest state it can meet: the stacks before it in its cluster filled,
-every other cluster full. Emptying meets the same states in reverse, so one check covers both
-missions. Start poses must reach a dock on the empty floor (a fill mission starts there).
+every other cluster full, and the stack itself filled (the forklift must get out again).
+Emptying meets the same states in reverse, so one check covers both missions. Start poses
+must reach a dock on the empty floor (a fill mission starts there).
 """
 
 from __future__ import annotations
@@ -47,14 +48,16 @@ def reachability_problems(layout: Layout,
                 problems.append(Problem(element, "no free pose can point its forks at it "
                                         "once the stacks before it are filled"))
             else:
-                planner = HybridAStar(layout.grid_map(filled), dims)
+                # Connected with the stack already filled: the forklift must also get out.
+                planner = HybridAStar(layout.grid_map(filled | {stack.cell}), dims)
                 reached = {planner.component(p) for p in poses}
                 cut_off = [name for name, station in zip(
                     docks, layout.stations, strict=True)
                     if planner.component(station.dock) not in reached]
                 if len(cut_off) == len(layout.stations):
-                    problems.append(Problem(element, "no station dock can reach an unload "
-                                            "pose once the stacks before it are filled"))
+                    problems.append(Problem(element, "no unload pose connects to a station "
+                                            "dock (there and back, with the stack filled) "
+                                            "once the stacks before it are filled"))
                 elif cut_off:
                     problems.append(Problem(element, "unreachable from the dock of "
                                             + ", ".join(cut_off)))

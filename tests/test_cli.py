@@ -3,6 +3,8 @@
 import json
 from pathlib import Path
 
+import pytest
+
 from fleet.cli import main
 from fleet.layout import parse_layout
 
@@ -86,3 +88,53 @@ def parse_source(name: str) -> str:
     from importlib import resources
 
     return resources.files("fleet.layouts").joinpath(f"{name}.toml").read_text()
+
+
+def test_run_then_plot(tmp_path, capsys):
+    assert main(["run", "--layout", "small", "--strategy", "comprehensive",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "mission fill on small with 2 forklifts, strategy comprehensive" in out
+    assert "stacks             24" in out
+    record = json.loads((tmp_path / "mission.json").read_text())
+    assert len(record["stacks_done"]) == 24
+    assert main(["plot", str(tmp_path), "--at", "100"]) == 0
+    out = capsys.readouterr().out
+    for name in ("filling.png", "gantt.png", "snapshot_00100.00.png"):
+        assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG", name
+    assert "stacks per quarter of the end time" in out
+
+
+def test_run_with_bad_weights_is_refused(tmp_path, capsys):
+    bad = tmp_path / "w.json"
+    bad.write_text("{not json")
+    assert main(["run", "--layout", "small", "--weights", str(bad)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+def test_plot_of_something_else_is_refused(tmp_path, capsys):
+    other = tmp_path / "x.json"
+    other.write_text('{"a": 1}')
+    assert main(["plot", str(other)]) == 2
+    assert "not a mission record (missing" in capsys.readouterr().err
+
+
+def test_train_writes_weights_the_run_can_use(tmp_path, capsys):
+    weights = tmp_path / "small.json"
+    assert main(["train", "--layout", "small", "--cycles", "1", "--lm-steps", "5",
+                 "--out", str(weights)]) == 0
+    assert "comprehensive" in capsys.readouterr().out
+    assert main(["run", "--layout", "small", "--weights", str(weights)]) == 0
+    assert "strategy ann" in capsys.readouterr().out
+
+
+def test_bench_strategies_json(capsys):
+    assert main(["bench", "strategies", "--layout", "small", "--mission", "fill",
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result["fill"]) == {"ann", "comprehensive", "greedy", "traffic", "balance"}
+    bound = result["lower_bound_s"]["fill"]
+    for row in result["fill"].values():
+        assert {"end_time_s", "failures", "wait_s", "wall_s"} <= row.keys()
+        assert row["end_time_s"] >= bound > 0
+        assert row["ratio_to_bound"] == pytest.approx(row["end_time_s"] / bound, abs=1e-3)

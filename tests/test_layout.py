@@ -110,8 +110,8 @@ def test_stack_walled_in_by_the_fill_order_is_named():
     layout = parse_layout(text, "t")
     problems = reachability_problems(layout)
     assert [str(p) for p in problems[:2]] == [
-        "cluster a stack 6 at (2, 6): no station dock can reach an unload pose once the "
-        "stacks before it are filled",
+        "cluster a stack 6 at (2, 6): no unload pose connects to a station dock (there and "
+        "back, with the stack filled) once the stacks before it are filled",
         "cluster a stack 7 at (1, 6): no free pose can point its forks at it once the "
         "stacks before it are filled"]
     with pytest.raises(LayoutError, match=r"cluster a stack 6 at \(2, 6\).*\(and \d+ more\)"):

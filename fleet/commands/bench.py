@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,6 +17,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     planner.add_argument("--seed", type=int, default=2026)
     planner.add_argument("--json", action="store_true", help="print one JSON object")
     planner.set_defaults(handler=run_planner)
+    strategies = which.add_parser("strategies", help="the five strategies on fill and empty "
+                                  "(Table 4 of seed 000) with a lower bound")
+    strategies.add_argument("--layout", default="paper")
+    strategies.add_argument("--mission", choices=["fill", "empty", "both"], default="both")
+    strategies.add_argument("--weights", type=Path,
+                            help="MLP weights for the ANN strategy (default: shipped)")
+    strategies.add_argument("--json", action="store_true", help="print one JSON object")
+    strategies.set_defaults(handler=run_strategies)
 
 
 def run_planner(args: argparse.Namespace) -> int:
@@ -38,4 +47,28 @@ def run_planner(args: argparse.Namespace) -> int:
     print(f"  success    {result['success_rate']:.1%}   outcomes {result['outcomes']}")
     print(f"  expansions p50 {result['expansions_p50']}   max {result['expansions_max']}")
     print(f"  setup per fill state (not in the query time) p50 {result['setup_p50_ms']} ms")
+    return 0
+
+
+def run_strategies(args: argparse.Namespace) -> int:
+    from bench import strategies
+    from fleet.mission import MissionKind
+    from fleet.progress import ProgressBar
+
+    kinds = tuple(MissionKind) if args.mission == "both" else (MissionKind(args.mission),)
+    bars: dict[str, ProgressBar] = {}
+
+    def progress(label: str, done: int, total: int) -> None:
+        if label not in bars:
+            for bar in bars.values():
+                bar.close()
+            bars[label] = ProgressBar(total, f"{label:<20}")
+        bars[label].update(done, "stacks")
+
+    result = strategies.run(args.layout, kinds, args.weights, progress)
+    for bar in bars.values():
+        bar.close()
+    result["machine"] = f"{platform.machine()} {platform.python_implementation()} " \
+                        f"{platform.python_version()}"
+    print(json.dumps(result) if args.json else strategies.table(result))
     return 0

@@ -1,0 +1,58 @@
+"""`fleet train`: warehouse-filling cycles that train the MLP correction, then save it."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from fleet.layout import load_layout
+from fleet.progress import ProgressBar
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("train", help="train the ANN strategy's MLP over filling cycles",
+                       description="Cycle 1 fills with the comprehensive strategy, later "
+                       "cycles with the ANN strategy; after each, the per-cluster networks are "
+                       "refitted by Levenberg-Marquardt on every sample so far.")
+    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
+    p.add_argument("--cycles", type=int, default=3, help="filling cycles (default 3)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial weights")
+    p.add_argument("--lm-steps", type=int, default=50,
+                   help="Levenberg-Marquardt steps per fit (default 50)")
+    p.add_argument("--out", type=Path, help="weights file to write "
+                   "(default LAYOUT.weights.json in the current directory)")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fleet.training import train
+
+    layout = load_layout(args.layout)
+    out = args.out or Path(f"{layout.name}.weights.json")
+    bars: dict[int, ProgressBar] = {}
+
+    def progress(cycle: int, cycles: int, done: int, total: int) -> None:
+        bar = bars.get(cycle)
+        if bar is None:
+            for old in bars.values():
+                old.close()
+            bar = bars[cycle] = ProgressBar(total, f"cycle {cycle}/{cycles}")
+        bar.update(done, "stacks")
+
+    mlps, reports = train(layout, args.cycles, args.seed, args.lm_steps, progress)
+    for bar in bars.values():
+        bar.close()
+    print(f"{'cycle':>5} {'strategy':<14} {'end time s':>10} {'failures':>8} {'samples':>7} "
+          f"{'loss before':>11} {'after':>8}")
+    for r in reports:
+        print(f"{r.cycle:>5} {r.strategy:<14} {r.end_time:>10.2f} {r.decision_failures:>8} "
+              f"{r.samples:>7} {r.loss_before:>11.4f} {r.loss_after:>8.4f}")
+    ann = [r for r in reports if r.strategy == "ann"]
+    if ann:
+        best = min(ann, key=lambda r: r.end_time)
+        print(f"keeping the networks that filled in cycle {best.cycle} "
+              f"(end time {best.end_time:.2f} s)")
+    mlps.save(out)
+    print(f"wrote {out}; use it with: fleet run --layout {args.layout} --strategy ann "
+          f"--weights {out}")
+    return 0

@@ -1,0 +1,380 @@
+"""In-process reference engine: a deterministic discrete-event run of a whole mission.
+
+Algorithm 4 of seed 000: while work is left, the dispatcher (Algorithm 1) picks a vehicle, an
+instant t_i and a goal; the vehicle's improved hybrid A* plans against the reservation table;
+a found trajectory is committed (the vehicle's old parking is released from t_i on) and the
+fill state advances; a failed one sets `fail` and the dispatcher re-selects. Subtasks are
+decided in order of the vehicles' free times, so this is the discrete-event order of the
+mission. No wall clock and no randomness enter the record: the same mission gives the same
+record, bit for bit. The distributed runtime must reproduce it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from fleet.dispatch import Decision, Dispatcher, Target, TaskKind, VehicleView
+from fleet.errors import UserError
+from fleet.geometry import Cell
+from fleet.layout import Layout, load_layout
+from fleet.maneuvers import Manner, body_cells_at_rest
+from fleet.mission import Mission, MissionKind
+from fleet.params import DispatchParams
+from fleet.planner import HybridAStar
+from fleet.reservations import Interval, ReservationTable
+from fleet.trajectory import PlanFailure, Pose, Trajectory
+
+GOODS = 0  # owner id of stacks waiting to be picked up, in the reservation table
+
+
+class MissionStuck(UserError):
+    """No subtask could be planned for a long run of attempts (the layout or fleet leaves
+    no way forward); the message says when and what failed last."""
+
+
+@dataclass
+class VehicleState:
+    vehicle: int
+    pose: Pose
+    t_free: float
+    next_task: TaskKind
+    linked_cluster: str | None = None
+    linked_kind: TaskKind | None = None
+    busy_s: float = 0.0  # driving (maneuvers other than stop)
+    wait_s: float = 0.0  # stop maneuvers and postponements
+
+    def view(self) -> VehicleView:
+        return VehicleView(self.vehicle, self.pose, self.t_free, self.next_task,
+                           self.linked_cluster, self.linked_kind)
+
+
+@dataclass(frozen=True)
+class Subtask:
+    vehicle: int
+    kind: TaskKind
+    target: str  # cluster or station
+    stack_index: int | None
+    stack_cell: Cell | None
+    t_i: float
+    t_end: float
+    t_done: float  # after claiming / unloading
+    trajectory: Trajectory
+    postponed: bool
+
+
+@dataclass(frozen=True)
+class FailureEvent:
+    t: float
+    vehicle: int | None
+    stage: str  # "dispatch" or "plan"
+    reason: str
+
+
+@dataclass
+class MissionRecord:
+    mission: Mission
+    layout: str
+    vehicles: tuple[int, ...]
+    starts: tuple[Pose, ...]
+    subtasks: list[Subtask] = field(default_factory=list)
+    failures: list[FailureEvent] = field(default_factory=list)
+    decision_failures: int = 0
+    end_time: float = 0.0  # the last stack done
+    all_parked_time: float = 0.0  # every vehicle at rest for good
+    stacks_done: list[tuple[str, int, float]] = field(default_factory=list)
+    busy_s: dict[int, float] = field(default_factory=dict)
+    wait_s: dict[int, float] = field(default_factory=dict)
+    training_samples: list[tuple[tuple[float, ...], int, float]] = field(default_factory=list)
+
+    @property
+    def total_wait_s(self) -> float:
+        return sum(self.wait_s.values())
+
+
+@dataclass
+class EngineOptions:
+    params: DispatchParams = field(default_factory=DispatchParams)
+    mlp: Callable[[list[float]], list[float]] | None = None
+    collect_training: bool = False
+    max_consecutive_failures: int = 400
+    progress: Callable[[int, int, float, int], None] | None = None  # done, total, t, failures
+
+
+def _far_clusters(layout: Layout) -> set[str]:
+    """Clusters whose route to the stations is longest (s1 and s2 on the paper layout): the
+    third with the largest mean distance from their stacks to the nearest station dock."""
+    dist = {}
+    for cluster in layout.clusters:
+        cells = [s.cell for s in layout.stacks if s.cluster == cluster.name]
+        dist[cluster.name] = sum(min(abs(c[0] - st.dock.cell[0]) + abs(c[1] - st.dock.cell[1])
+                                     for st in layout.stations) for c in cells) / len(cells)
+    ranked = sorted(dist, key=lambda n: (-dist[n], n))
+    return set(ranked[: max(1, len(ranked) // 3)])
+
+
+class Engine:
+    """Runs one mission in one process."""
+
+    def __init__(self, mission: Mission, options: EngineOptions | None = None,
+                 layout: Layout | None = None) -> None:
+        self.mission = mission
+        self.options = options or EngineOptions()
+        self.layout = layout or load_layout(mission.layout)
+        starts = list(mission.starts or self.layout.vehicle_starts)
+        n = mission.vehicles if mission.vehicles is not None else len(starts)
+        if not 1 <= n <= len(starts):
+            raise ValueError(f"{n} vehicles requested but layout {self.layout.name} has "
+                             f"{len(starts)} start poses")
+        self.starts = starts[:n]
+        self.table = ReservationTable()
+        fill = mission.kind is MissionKind.FILL
+        first = TaskKind.DELIVER
+        handling = self.options.params.t_claim if fill else 0.0
+        self.vehicles = {i + 1: VehicleState(i + 1, pose, handling, first)
+                         for i, pose in enumerate(self.starts)}
+        for v in self.vehicles.values():
+            conflict = self.table.park(v.vehicle, body_cells_at_rest(v.pose.cell, v.pose.heading),
+                                       0.0)
+            if conflict is not None:
+                raise ValueError(f"start pose {v.pose} of vehicle {v.vehicle} overlaps vehicle "
+                                 f"{conflict.other}")
+        by_cluster: dict[str, list] = {}
+        for s in self.layout.stacks:
+            by_cluster.setdefault(s.cluster, []).append(s)
+        for stacks in by_cluster.values():
+            stacks.sort(key=lambda s: s.index if fill else -s.index)
+        self.queue = by_cluster  # stacks not yet assigned, in the order they are done
+        self.present: set[Cell] = set() if fill else {s.cell for s in self.layout.stacks}
+        self.total = len(self.layout.stacks)
+        self.far = _far_clusters(self.layout)
+        self._planners: dict[frozenset[Cell], HybridAStar] = {}
+        self._exit_planners: dict[frozenset[Cell], HybridAStar] = {}
+        self.record = MissionRecord(mission, self.layout.name, tuple(self.vehicles),
+                                    tuple(self.starts))
+        self.trip_times: list[float] = []
+        self.dispatcher = Dispatcher(
+            grid_for=lambda: self.layout.grid_map(self.present),
+            store=self.table, strategy=mission.strategy, params=self.options.params,
+            cluster_names=tuple(c.name for c in self.layout.clusters), mlp=self.options.mlp)
+        self.planning_wall_s = 0.0
+
+    # -- helpers -------------------------------------------------------------------------------
+    def planner(self) -> HybridAStar:
+        key = frozenset(self.present)
+        planner = self._planners.get(key) or self._exit_planners.get(key)
+        if planner is None:
+            self._planners.clear()  # fill states only move forward
+            planner = self._planners[key] = HybridAStar(self.layout.grid_map(key),
+                                                        self.layout.vehicle.dims)
+        return planner
+
+    def poses_with_a_way_out(self, poses: list[Pose], after: set[Cell],
+                             others: list[Pose]) -> list[Pose]:
+        """Unload poses from which a station dock is still reachable once the stack is filled
+        (a pose beside the stack may be reachable only by sweeping the stack's own cell); none
+        if filling the stack would wall in another forklift where it stands."""
+        key = frozenset(after)
+        planner = self._exit_planners.get(key)
+        if planner is None:
+            if len(self._exit_planners) > 16:
+                self._exit_planners.clear()
+            planner = self._exit_planners[key] = HybridAStar(self.layout.grid_map(key),
+                                                             self.layout.vehicle.dims)
+        docks = {planner.component(st.dock) for st in self.layout.stations}
+        now = self.planner()
+        docks_now = {now.component(st.dock) for st in self.layout.stations}
+        if any(planner.component(p) not in docks and now.component(p) in docks_now
+               for p in others):
+            return []
+        return [p for p in poses if planner.component(p) in docks]
+
+    def remaining(self) -> dict[str, int]:
+        return {name: len(q) for name, q in self.queue.items()}
+
+    def targets_for(self, view: VehicleView) -> list[Target]:
+        if view.next_task is TaskKind.RETURN:
+            return [Target(st.name, (st.dock,)) for st in self.layout.stations]
+        targets = []
+        for cluster in self.layout.clusters:
+            queue = self.queue.get(cluster.name, [])
+            if not queue:
+                continue
+            stack = queue[0]
+            if self.mission.kind is MissionKind.FILL and self.table.conflict(
+                    view.vehicle, stack.cell, view.t_free, math.inf) is not None:
+                continue  # another forklift stands on or will cross the stack's cell
+            poses = self.layout.unload_poses(stack.cell, self.present - {stack.cell})
+            if self.mission.kind is MissionKind.FILL:
+                others = [v.pose for v in self.vehicles.values() if v.vehicle != view.vehicle]
+                poses = self.poses_with_a_way_out(poses, self.present | {stack.cell}, others)
+            if poses:
+                targets.append(Target(cluster.name, tuple(poses), stack.cell, stack.index,
+                                      len(queue), cluster.name in self.far))
+        return targets
+
+    def active(self) -> list[VehicleState]:
+        """Vehicles with something left to do: any return, or a delivery while stacks wait."""
+        work_left = any(self.queue.values())
+        return [v for v in self.vehicles.values()
+                if v.next_task is TaskKind.RETURN or work_left]
+
+    # -- the run -------------------------------------------------------------------------------
+    def run(self) -> MissionRecord:
+        failed: list[int] = []  # vehicles whose plan failed since the last success, in order
+        streak = 0
+        fill = self.mission.kind is MissionKind.FILL
+        p = self.options.params
+        while True:
+            active = self.active()
+            if not active:
+                break
+            views = [v.view() for v in active]
+            remaining = self.remaining()
+            outcome = self.dispatcher.decide(views, failed, self.targets_for, remaining)
+            self.record.decision_failures += outcome.failures
+            for vid, t_free in outcome.postponements.items():
+                v = self.vehicles[vid]
+                v.wait_s += t_free - v.t_free
+                v.t_free = t_free
+            failed = [v for v in failed if v not in outcome.postponements]  # a new instant
+            decision = outcome.decision
+            if decision is None:
+                self.record.failures.append(FailureEvent(
+                    min(v.t_free for v in active), None, "dispatch",
+                    f"no solid decision within iter_dispatch={p.iter_dispatch}"))
+                streak += 1
+            else:
+                result = self._plan(decision)
+                if isinstance(result, Trajectory):
+                    self._apply(decision, result, fill, remaining)
+                    failed, streak = [], 0
+                else:
+                    self.record.decision_failures += 1
+                    self.record.failures.append(FailureEvent(decision.t_i, decision.vehicle,
+                                                             "plan", result.reason.value))
+                    if self.options.collect_training and decision.kind is TaskKind.DELIVER:
+                        self._collect(decision, None, remaining)
+                    failed = [v for v in failed if v != decision.vehicle] + [decision.vehicle]
+                    streak += 1
+            if streak > self.options.max_consecutive_failures:
+                raise MissionStuck(f"{streak} decisions in a row failed at t="
+                                   f"{min(v.t_free for v in active):.2f} s; last: "
+                                   f"{self.record.failures[-1]}")
+        rec = self.record
+        rec.all_parked_time = max((s.t_end for s in rec.subtasks), default=0.0)
+        rec.busy_s = {v.vehicle: v.busy_s for v in self.vehicles.values()}
+        rec.wait_s = {v.vehicle: v.wait_s for v in self.vehicles.values()}
+        return rec
+
+    def _plan(self, decision: Decision) -> Trajectory | PlanFailure:
+        v = self.vehicles[decision.vehicle]
+        t0 = time.perf_counter()
+        result = self.planner().plan(v.vehicle, v.pose, decision.t_i, decision.target.goals,
+                                     self.table)
+        self.planning_wall_s += time.perf_counter() - t0
+        return result
+
+    def _apply(self, decision: Decision, traj: Trajectory, fill: bool,
+               remaining: dict[str, int]) -> None:
+        p = self.options.params
+        v = self.vehicles[decision.vehicle]
+        conflict = self.table.commit(v.vehicle, traj.intervals, release_from=traj.t_start)
+        if conflict is not None:  # the planner checked against this very table
+            raise AssertionError(f"planned trajectory conflicts: {conflict}")
+        target = decision.target
+        deliver = decision.kind is TaskKind.DELIVER
+        handling = (p.t_unload if deliver else p.t_claim) if fill else \
+            (p.t_claim if deliver else p.t_unload)
+        t_done = traj.t_end + handling
+        if deliver:
+            stack = self.queue[target.name].pop(0)
+            if fill:
+                self.present.add(stack.cell)
+                self.table.commit(GOODS, [Interval(stack.cell, traj.t_end, math.inf)])
+            else:
+                self.present.discard(stack.cell)
+                self.table.commit(GOODS, [Interval(stack.cell, 0.0, t_done)])
+            self.record.stacks_done.append((target.name, stack.index, t_done))
+            self.record.end_time = max(self.record.end_time, t_done)
+            if self.options.collect_training:
+                self._collect(decision, traj, remaining)
+        stops = sum(s.t1 - s.t0 for s in traj.steps if s.manner is Manner.STOP)
+        v.busy_s += traj.t_end - traj.t_start - stops
+        v.wait_s += stops
+        v.pose = traj.goal
+        v.t_free = t_done
+        v.next_task = TaskKind.RETURN if deliver else TaskKind.DELIVER
+        if deliver:
+            v.linked_cluster, v.linked_kind = target.name, TaskKind.DELIVER
+        else:
+            v.linked_kind = TaskKind.RETURN if v.linked_cluster else None
+        self.trip_times.append(traj.t_end - decision.t_i)
+        self.record.subtasks.append(Subtask(
+            v.vehicle, decision.kind, target.name, target.stack_index, target.stack_cell,
+            decision.t_i, traj.t_end, t_done, traj, decision.postponed))
+        if self.options.progress:
+            self.options.progress(len(self.record.stacks_done), self.total, traj.t_end,
+                                  self.record.decision_failures)
+
+    def _collect(self, decision: Decision, traj: Trajectory | None,
+                 remaining: dict[str, int]) -> None:
+        """Training targets of Equations (6)/(10) for every scored cluster."""
+        p = self.options.params
+        names = self.dispatcher.cluster_names
+        u = tuple(self.dispatcher.mlp_inputs([v.view() for v in self.vehicles.values()],
+                                             remaining))
+        mean_trip = sum(self.trip_times) / len(self.trip_times) if self.trip_times else 0.0
+        for score in decision.scores:
+            base = score.value - p.C1 * score.target.remaining if \
+                self.mission.strategy.value == "ann" else score.J0
+            if score.target.name == decision.target.name:
+                if traj is None:
+                    target = p.C5
+                else:
+                    norm = p.C7 if score.target.far else p.C8
+                    target = base - p.C6 * (traj.t_end - decision.t_i - mean_trip + norm)
+            else:
+                target = base
+            self.record.training_samples.append((u, names.index(score.target.name), target))
+
+
+def run_mission(mission: Mission, options: EngineOptions | None = None,
+                layout: Layout | None = None) -> MissionRecord:
+    return Engine(mission, options, layout).run()
+
+
+def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
+                params: DispatchParams | None = None) -> float:
+    """A lower bound on the mission end time: every subtask at its unobstructed shortest time
+    (an empty reservation table, the best station for each stack), shared ideally among the
+    vehicles: sum over stacks of (trip from the station + handling + trip back + handling),
+    divided by the number of vehicles."""
+    p = params or DispatchParams()
+    fill = kind is MissionKind.FILL
+    total = 0.0
+    present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
+    order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
+    empty = ReservationTable()
+    planners: dict[frozenset[Cell], HybridAStar] = {}
+    for stack in order:
+        key = frozenset(present - {stack.cell})
+        planner = planners.setdefault(key, HybridAStar(layout.grid_map(key), layout.vehicle.dims))
+        goals = layout.unload_poses(stack.cell, key)
+        best = math.inf
+        for st in layout.stations:
+            out = planner.plan(1, st.dock, 0.0, goals, empty)
+            if isinstance(out, Trajectory):
+                back = planner.plan(1, out.goal, 0.0, [st.dock], empty)
+                if isinstance(back, Trajectory):
+                    best = min(best, out.t_end + back.t_end)
+        if best == math.inf:
+            raise ValueError(f"stack {stack.cluster}#{stack.index} unreachable on an empty map")
+        total += best + p.t_claim + p.t_unload
+        if fill:
+            present.add(stack.cell)
+        else:
+            present.discard(stack.cell)
+    return total / vehicles

@@ -1,0 +1,224 @@
+"""Every message on the wire, in one place: dataclasses encoded with msgpack (docs/protocol.md).
+
+Each message travels in an envelope carrying the schema version, its type, the sender, the
+sender's sequence number and the simulation time. `decode` validates everything it returns:
+a malformed, truncated, unknown-type or wrong-version payload raises ProtocolError naming
+what was wrong, so a process can log it and carry on.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+import typing
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar
+
+import msgpack
+
+SCHEMA_VERSION = 1
+MAX_PAYLOAD = 16 * 1024 * 1024  # no legitimate message comes near this
+
+
+class ProtocolError(ValueError):
+    """A payload that is not a valid message; the message says why."""
+
+
+# (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
+WireInterval = tuple[int, int, float, float]
+
+
+@dataclass(frozen=True)
+class Message:
+    TYPE: ClassVar[str] = ""
+
+
+@dataclass(frozen=True)
+class VehicleState(Message):
+    TYPE: ClassVar[str] = "vehicle.state"
+    vehicle: int
+    pose: str  # "col,row,H"
+    speed: int  # 0 v_zero, 1 v_mid, 2 v_high
+    maneuver: str  # label of the maneuver being driven ("" at rest)
+    loaded: bool
+    x: float = 0.0  # world position of the rear axle point (metres) and heading (radians)
+    y: float = 0.0
+    theta: float = 0.0
+
+
+@dataclass(frozen=True)
+class CommitRequest(Message):
+    TYPE: ClassVar[str] = "reservation.commit"
+    request_id: str
+    vehicle: int
+    intervals: list[WireInterval]
+    release_from: float | None = None  # release the vehicle's reservations from here first
+
+
+@dataclass(frozen=True)
+class ReleaseRequest(Message):
+    TYPE: ClassVar[str] = "reservation.release"
+    request_id: str
+    vehicle: int
+    from_t: float
+
+
+@dataclass(frozen=True)
+class Reply(Message):
+    """The reservation service's answer to a commit or release."""
+
+    TYPE: ClassVar[str] = "reservation.reply"
+    request_id: str
+    ok: bool
+    revision: int
+    conflict_vehicle: int | None = None
+    conflict_cell: list[int] = field(default_factory=list)
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class SnapshotRequest(Message):
+    TYPE: ClassVar[str] = "reservation.snapshot_request"
+    since_revision: int = -1  # -1: the whole table; otherwise the changes after it
+
+
+@dataclass(frozen=True)
+class Change(Message):
+    """One accepted change of the table, published and journaled."""
+
+    TYPE: ClassVar[str] = "reservation.change"
+    revision: int
+    op: str  # "commit" or "release"
+    vehicle: int
+    intervals: list[WireInterval] = field(default_factory=list)
+    release_from: float | None = None
+    request_id: str = ""
+
+
+@dataclass(frozen=True)
+class Snapshot(Message):
+    TYPE: ClassVar[str] = "reservation.snapshot"
+    revision: int
+    reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
+    changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
+
+
+@dataclass(frozen=True)
+class Envelope:
+    message: Message
+    sender: str
+    seq: int
+    sim_time: float
+
+
+TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
+                              SnapshotRequest, Change, Snapshot)
+}
+
+
+def body_of(message: Message) -> dict:
+    return {f.name: getattr(message, f.name) for f in fields(message)}
+
+
+def encode(message: Message, sender: str, seq: int, sim_time: float) -> bytes:
+    body = body_of(message)
+    return msgpack.packb({"v": SCHEMA_VERSION, "type": message.TYPE, "sender": sender,
+                          "seq": seq, "t": sim_time, "body": body}, use_bin_type=True)
+
+
+def decode(payload: bytes) -> Envelope:
+    if not isinstance(payload, bytes | bytearray | memoryview):
+        raise ProtocolError(f"payload must be bytes, not {type(payload).__name__}")
+    if len(payload) > MAX_PAYLOAD:
+        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+    try:
+        raw = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=True,
+                              use_list=True)
+    except Exception as exc:  # msgpack raises several unrelated types for bad input
+        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {exc}") from None
+    if not isinstance(raw, dict):
+        raise ProtocolError(f"envelope must be a map, not {type(raw).__name__}")
+    version = raw.get("v")
+    if version != SCHEMA_VERSION:
+        raise ProtocolError(f"schema version {version!r} is not {SCHEMA_VERSION}")
+    kind = raw.get("type")
+    cls = TYPES.get(kind) if isinstance(kind, str) else None
+    if cls is None:
+        raise ProtocolError(f"unknown message type {kind!r}")
+    sender = _check(raw.get("sender"), str, "sender")
+    seq = _check(raw.get("seq"), int, "seq")
+    sim_time = _check(raw.get("t"), float, "t")
+    body = raw.get("body")
+    if not isinstance(body, dict):
+        raise ProtocolError(f"{kind}: body must be a map")
+    return Envelope(build_message(cls, body), sender, seq, sim_time)
+
+
+def build_message(cls: type[Message], body: dict) -> Message:
+    """A message of type `cls` from its body map, validated (ProtocolError otherwise)."""
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(body) - known, key=str)
+    if unknown:
+        raise ProtocolError(f"{cls.TYPE}: unknown field {unknown[0]!r}")
+    values = {}
+    for f in fields(cls):
+        if f.name not in body:
+            if f.default is MISSING and f.default_factory is MISSING:
+                raise ProtocolError(f"{cls.TYPE}: missing field {f.name!r}")
+            continue
+        values[f.name] = _check(body[f.name], hints[f.name], f"{cls.TYPE}.{f.name}")
+    return cls(**values)
+
+
+def _check(value: Any, hint: Any, where: str) -> Any:
+    """`value` converted to the type `hint` describes, or ProtocolError."""
+    origin = typing.get_origin(hint)
+    if origin in (types.UnionType, typing.Union):
+        errors = []
+        for option in typing.get_args(hint):
+            if option is type(None):
+                if value is None:
+                    return None
+                continue
+            try:
+                return _check(value, option, where)
+            except ProtocolError as exc:
+                errors.append(str(exc))
+        raise ProtocolError(errors[0] if errors else f"{where}: must be null")
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ProtocolError(f"{where}: must be true or false, not {value!r}")
+        return value
+    if hint is int:
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ProtocolError(f"{where}: must be an integer, not {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ProtocolError(f"{where}: must be a number, not {value!r}")
+        value = float(value)
+        if math.isnan(value):
+            raise ProtocolError(f"{where}: must not be NaN")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ProtocolError(f"{where}: must be a string, not {value!r}")
+        return value
+    if hint is dict:
+        if not isinstance(value, dict):
+            raise ProtocolError(f"{where}: must be a map")
+        return value
+    if origin is list:
+        if not isinstance(value, list | tuple):
+            raise ProtocolError(f"{where}: must be a list")
+        (item,) = typing.get_args(hint)
+        return [_check(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+    if origin is tuple:
+        items = typing.get_args(hint)
+        if not isinstance(value, list | tuple) or len(value) != len(items):
+            raise ProtocolError(f"{where}: must be a list of {len(items)} items")
+        return tuple(_check(v, h, f"{where}[{i}]") for i, (v, h) in
+                     enumerate(zip(value, items, strict=True)))
+    raise ProtocolError(f"{where}: unsupported type {hint!r}")  # pragma: no cover

@@ -1,0 +1,66 @@
+"""Mission records as plain JSON-able data (the interim record format until the MCAP
+recorder lands), and a digest that proves two runs identical."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from typing import Any
+
+from fleet.engine import MissionRecord
+
+
+def _time(t: float) -> float | str:
+    return "inf" if t == math.inf else t
+
+
+def record_to_dict(rec: MissionRecord) -> dict[str, Any]:
+    return {
+        "mission": {"layout": rec.mission.layout, "kind": rec.mission.kind.value,
+                    "strategy": rec.mission.strategy.value, "vehicles": len(rec.vehicles),
+                    "seed": rec.mission.seed},
+        "starts": [str(p) for p in rec.starts],
+        "end_time_s": rec.end_time,
+        "all_parked_s": rec.all_parked_time,
+        "decision_failures": rec.decision_failures,
+        "wait_s": {str(k): v for k, v in rec.wait_s.items()},
+        "busy_s": {str(k): v for k, v in rec.busy_s.items()},
+        "stacks_done": [list(s) for s in rec.stacks_done],
+        "failures": [{"t": f.t, "vehicle": f.vehicle, "stage": f.stage, "reason": f.reason}
+                     for f in rec.failures],
+        "subtasks": [{
+            "vehicle": s.vehicle, "kind": s.kind.value, "target": s.target,
+            "stack": s.stack_index, "t_i": s.t_i, "t_end": s.t_end, "t_done": s.t_done,
+            "postponed": s.postponed,
+            "steps": [[st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0),
+                       int(st.v1)] for st in s.trajectory.steps],
+            "intervals": [[iv.cell[0], iv.cell[1], iv.t0, _time(iv.t1)]
+                          for iv in s.trajectory.intervals],
+        } for s in rec.subtasks],
+    }
+
+
+def digest(rec: MissionRecord) -> str:
+    text = json.dumps(record_to_dict(rec), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def held_intervals(record: dict) -> list[tuple[int, tuple[int, int], float, float]]:
+    """(vehicle, cell, t0, t1) as the table held them: a trajectory's parking to infinity
+    ends where the same vehicle's next trajectory starts (it is released from there)."""
+    held = []
+    by_vehicle: dict[int, list[dict]] = {}
+    for s in record["subtasks"]:
+        by_vehicle.setdefault(s["vehicle"], []).append(s)
+    for vehicle, subtasks in by_vehicle.items():
+        for k, s in enumerate(subtasks):
+            nxt = subtasks[k + 1] if k + 1 < len(subtasks) else None
+            release = math.inf
+            if nxt is not None:
+                release = nxt["steps"][0][3] if nxt["steps"] else nxt["t_end"]
+            for c, r, t0, t1 in s["intervals"]:
+                t1 = math.inf if t1 == "inf" else t1
+                if t0 < release:
+                    held.append((vehicle, (c, r), t0, min(t1, release)))
+    return held

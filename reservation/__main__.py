@@ -1,0 +1,5 @@
+import sys
+
+from reservation.service import main
+
+sys.exit(main())

@@ -1,0 +1,78 @@
+"""Append-only journal of accepted reservation changes: one msgpack map per change.
+
+msgpack is self-delimiting, so the file is a plain stream of records. A process killed in the
+middle of a write leaves a torn last record; `replay` keeps every complete record before it,
+reports the torn tail, and cuts it off so new records follow good ones. Bytes that are not
+msgpack at all are an error naming the record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+
+from fleet.protocol import Change, ProtocolError, body_of, build_message
+
+
+class JournalError(ValueError):
+    """A journal that cannot be replayed; the message names the record and why."""
+
+
+@dataclass(frozen=True)
+class Replayed:
+    changes: list[Change]
+    torn_bytes: int  # bytes of a torn last record that were cut off (0: none)
+
+
+class Journal:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file = None
+
+    def replay(self) -> Replayed:
+        """Every complete record, in order; a torn tail is cut off the file."""
+        if not self.path.exists():
+            return Replayed([], 0)
+        data = self.path.read_bytes()
+        unpacker = msgpack.Unpacker(raw=False, strict_map_key=True)
+        unpacker.feed(data)
+        changes: list[Change] = []
+        good = 0
+        try:
+            for raw in unpacker:
+                if not isinstance(raw, dict):
+                    raise JournalError(f"{self.path}: record {len(changes) + 1} at byte "
+                                       f"{good} is not a map")
+                try:
+                    change = build_message(Change, raw)
+                except ProtocolError as exc:
+                    raise JournalError(f"{self.path}: record {len(changes) + 1} at byte "
+                                       f"{good}: {exc}") from None
+                assert isinstance(change, Change)
+                changes.append(change)
+                good = unpacker.tell()
+        except JournalError:
+            raise
+        except (ValueError, msgpack.exceptions.UnpackException) as exc:
+            raise JournalError(f"{self.path}: record {len(changes) + 1} at byte {good} is "
+                               f"not msgpack: {exc}") from None
+        torn = len(data) - good
+        if torn:
+            with open(self.path, "r+b") as f:
+                f.truncate(good)
+        return Replayed(changes, torn)
+
+    def append(self, change: Change) -> None:
+        """Write the record and hand it to the OS before the change is answered (a killed
+        process loses nothing; a power cut may lose the last records: no fsync, for speed)."""
+        if self._file is None:
+            self._file = open(self.path, "ab")  # noqa: SIM115 - kept open for the service's life
+        self._file.write(msgpack.packb(body_of(change), use_bin_type=True))
+        self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None

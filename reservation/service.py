@@ -1,0 +1,111 @@
+"""The reservation service process: the authoritative space-time reservation table on zenoh.
+
+A queryable on fleet/<run>/reservation/request answers commits, releases and snapshot
+requests; every accepted change is journaled, then answered, then published on
+fleet/<run>/reservation/change. Queries are handed from zenoh's callback thread to one worker
+through a queue (no blocking zenoh call inside a callback), so requests are served one at a
+time in arrival order: the table needs no locks and a commit is atomic.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import signal
+import sys
+from pathlib import Path
+
+import zenoh
+
+from fleet.bus import BusConfig, Keys, open_session
+from fleet.protocol import ProtocolError, Reply, decode, encode
+from reservation.store import ReservationStore
+
+log = logging.getLogger("fleet.reservation")
+SENDER = "reservation"
+
+
+class ReservationService:
+    def __init__(self, store: ReservationStore, session: zenoh.Session, keys: Keys) -> None:
+        self.store = store
+        self.session = session
+        self.keys = keys
+        self.inbox: queue.Queue[zenoh.Query | None] = queue.Queue()
+        self.seq = 0
+        self.rejected = 0
+
+    def run(self) -> None:
+        publisher = self.session.declare_publisher(self.keys.reservation_change)
+        queryable = self.session.declare_queryable(self.keys.reservation_request,
+                                                   self.inbox.put)
+        token = self.session.liveliness().declare_token(self.keys.reservation_alive)
+        log.info("serving %s at revision %d", self.keys.reservation_request,
+                 self.store.revision)
+        try:
+            while (query := self.inbox.get()) is not None:
+                for change_payload in self.answer(query):
+                    publisher.put(change_payload)
+        finally:
+            token.undeclare()
+            queryable.undeclare()
+            publisher.undeclare()
+
+    def answer(self, query: zenoh.Query) -> list[bytes]:
+        """Reply to one query; the payloads of the changes to publish."""
+        try:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                envelope = decode(payload)
+            except ProtocolError as exc:
+                self.rejected += 1
+                log.warning("rejected a request: %s", exc)
+                query.reply(query.key_expr, self._encode(
+                    Reply("", False, self.store.revision, reason=f"malformed request: {exc}")))
+                return []
+            outcome = self.store.handle(envelope.message)
+            query.reply(query.key_expr, self._encode(outcome.reply))
+            return [self._encode(change) for change in outcome.published]
+        finally:
+            query.drop()
+
+    def _encode(self, message) -> bytes:
+        self.seq += 1
+        return encode(message, SENDER, self.seq, 0.0)
+
+    def stop(self) -> None:
+        self.inbox.put(None)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run", default="default", help="run name: keys live under fleet/RUN/")
+    p.add_argument("--journal", type=Path, default=Path("reservation.journal"),
+                   help="append-only journal (replayed on start)")
+    p.add_argument("--mode", choices=["client", "peer"], default="client")
+    p.add_argument("--connect", action="append", default=[],
+                   help="zenoh endpoint to connect to (default tcp/127.0.0.1:7447)")
+    p.add_argument("--listen", action="append", default=[], help="zenoh endpoint to listen on")
+
+
+def serve(args: argparse.Namespace) -> int:
+    store = ReservationStore(args.journal)
+    if store.torn_bytes:
+        log.warning("cut a torn last record (%d bytes) off %s", store.torn_bytes, args.journal)
+    connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
+    session = open_session(BusConfig(args.mode, connect, tuple(args.listen)))
+    service = ReservationService(store, session, Keys(args.run))
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: service.stop())
+    try:
+        service.run()
+    finally:
+        store.close()
+        session.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
+    p = argparse.ArgumentParser(prog="fleet reservation", description=__doc__)
+    add_arguments(p)
+    return serve(p.parse_args(argv))

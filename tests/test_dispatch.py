@@ -1,0 +1,92 @@
+"""Dispatcher core: rank, Algorithm 1's altered and backup states with constructed blockages,
+and what each strategy maximises."""
+
+from fleet.dispatch import Dispatcher, Target, TaskKind, VehicleView, rank
+from fleet.gridmap import GridMap
+from fleet.mission import Strategy
+from fleet.reservations import ReservationTable
+from fleet.trajectory import Pose
+
+# A 12 x 5 floor split by a wall at column 6 except for a one-cell gap at row 2.
+WALL = frozenset((6, r) for r in range(5) if r != 2)
+GRID = GridMap(12, 5, WALL)
+
+
+def view(vehicle, cell, t_free=0.0, task=TaskKind.DELIVER):
+    return VehicleView(vehicle, Pose(cell, 0), t_free, task, None, None)
+
+
+def dispatcher(store, strategy=Strategy.COMPREHENSIVE, names=("east",)):
+    return Dispatcher(grid_for=lambda: GRID, store=store, strategy=strategy,
+                      cluster_names=names)
+
+
+def east_target(view):
+    return [Target("east", (Pose((10, 2), 0),), (11, 2), 1, remaining=5)]
+
+
+def test_rank_orders_by_free_time_and_puts_failed_vehicles_last():
+    views = [view(1, (0, 0), 30.0), view(2, (0, 1), 10.0), view(3, (0, 2), 20.0)]
+    assert rank(views) == [2, 3, 1]
+    assert rank(views, failed=[2]) == [3, 1, 2]
+    assert rank(views, failed=[3, 2]) == [1, 3, 2]
+
+
+def test_altered_state_when_the_first_vehicle_is_blocked():
+    store = ReservationTable()
+    store.park(3, [(6, 2)], 0.0)  # a broken-down forklift in the gap, for good
+    views = [view(1, (1, 2), t_free=0.0), view(2, (8, 2), t_free=5.0)]
+    outcome = dispatcher(store).decide(views, [], east_target, {"east": 5})
+    assert outcome.decision is not None
+    assert outcome.decision.vehicle == 2 and outcome.decision.t_i == 5.0
+    assert outcome.failures == 1  # vehicle 1 was selected first and could not be dispatched
+    assert not outcome.decision.postponed
+
+
+def test_backup_state_postpones_by_dt_when_every_vehicle_is_blocked():
+    store = ReservationTable()
+    store.park(3, [(6, 2)], 0.0)
+    views = [view(1, (1, 2), t_free=0.0), view(2, (2, 3), t_free=5.0)]
+    outcome = dispatcher(store).decide(views, [], east_target, {"east": 5})
+    assert outcome.decision is None
+    assert outcome.failures == 10  # iter_dispatch
+    # two fresh selections, then eight postponements of 10 s, the longest-waiting first
+    assert outcome.postponements == {1: 40.0, 2: 45.0}
+
+
+def test_postponement_lets_a_temporary_blockage_clear():
+    store = ReservationTable()
+    from fleet.reservations import Interval
+
+    # The gap is held until t = 35 s: waiting inside the preliminary search cannot bridge that
+    # within iter_pre, but postponing the decision can.
+    store.commit(3, [Interval((6, 2), 0.0, 35.0)])
+    views = [view(1, (1, 2), t_free=0.0)]
+    outcome = dispatcher(store).decide(views, [1], east_target, {"east": 5})
+    assert outcome.decision is not None and outcome.decision.postponed
+    assert outcome.decision.t_i >= 10.0
+    assert outcome.failures >= 1
+
+
+def test_strategies_maximise_their_own_term():
+    store = ReservationTable()
+    near = Target("near", (Pose((3, 2), 0),), (4, 2), 1, remaining=2)
+    far = Target("far", (Pose((10, 2), 0),), (11, 2), 1, remaining=9)
+    v = view(1, (1, 2))
+    picks = {}
+    for strategy in (Strategy.GREEDY, Strategy.BALANCE, Strategy.TRAFFIC,
+                     Strategy.COMPREHENSIVE):
+        d = dispatcher(store, strategy, ("near", "far"))
+        picks[strategy] = d.decide([v], [], lambda _: [near, far], {}).decision.target.name
+    assert picks[Strategy.GREEDY] == "near"  # shortest preliminary travel time
+    assert picks[Strategy.TRAFFIC] == "near"
+    assert picks[Strategy.BALANCE] == "far"  # most stacks left
+    assert picks[Strategy.COMPREHENSIVE] == "far"  # C1 * G_d outweighs the travel time
+
+
+def test_mlp_inputs_follow_equation_7():
+    d = dispatcher(ReservationTable(), names=("a", "b", "c"))
+    views = [VehicleView(1, Pose((0, 0), 0), 0, TaskKind.RETURN, "a", TaskKind.DELIVER),
+             VehicleView(2, Pose((0, 1), 0), 0, TaskKind.DELIVER, "b", TaskKind.RETURN),
+             VehicleView(3, Pose((0, 2), 0), 0, TaskKind.DELIVER, None, None)]
+    assert d.mlp_inputs(views, {"a": 4, "b": 7, "c": 9}) == [4.0, -7.0, 0.0]

@@ -1,0 +1,28 @@
+"""All five strategies fill and empty the paper warehouse, checked apart from the engine:
+no two forklifts ever hold one cell at once, every trajectory covers its swept cells, every
+stack is done exactly once, every forklift ends parked."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from fleet.ann import load_scorer
+from fleet.engine import EngineOptions, lower_bound, run_mission
+from fleet.layout import load_layout
+from fleet.mission import Mission, MissionKind, Strategy
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mission_check import mission_problems
+
+PAPER = load_layout("paper")
+
+
+@pytest.mark.parametrize("kind", list(MissionKind))
+@pytest.mark.parametrize("strategy", list(Strategy))
+def test_strategy_completes_on_paper(kind, strategy):
+    mlp = load_scorer(PAPER) if strategy is Strategy.ANN else None
+    rec = run_mission(Mission(kind=kind, strategy=strategy), EngineOptions(mlp=mlp), PAPER)
+    assert mission_problems(rec, PAPER) == []
+    assert len(rec.stacks_done) == 136
+    assert rec.end_time >= lower_bound(PAPER, kind, 4)

@@ -1,0 +1,179 @@
+"""The reservation service as a real process on real zenoh sessions over loopback."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from fleet.bus import BusConfig, Keys, Requester, open_session
+from fleet.protocol import (
+    CommitRequest,
+    Reply,
+    Snapshot,
+    SnapshotRequest,
+    VehicleState,
+    decode,
+    encode,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Service:
+    """The service process, listening on its own loopback port; the test's session connects
+    to it and waits for its liveliness token (no sleeping)."""
+
+    def __init__(self, tmp: Path, run: str) -> None:
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.journal = tmp / "journal.msgpack"
+        self.keys = Keys(run)
+        self.log = tmp / "service.log"
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> None:
+        with open(self.log, "ab") as log:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "reservation", "--run", self.keys.run, "--mode", "peer",
+                 "--listen", self.endpoint, "--journal", str(self.journal)],
+                cwd=ROOT, stderr=log, env={**os.environ, "PYTHONPATH": str(ROOT)})
+
+    def kill(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+    def stop(self) -> int:
+        self.proc.send_signal(signal.SIGTERM)
+        return self.proc.wait(timeout=30)
+
+
+def wait_alive(session: zenoh.Session, key: str, timeout: float = 30.0) -> None:
+    seen = threading.Event()
+    sub = session.liveliness().declare_subscriber(
+        key, lambda sample: seen.set() if sample.kind == zenoh.SampleKind.PUT else None,
+        history=True)
+    try:
+        assert seen.wait(timeout), f"{key} did not come alive within {timeout} s"
+    finally:
+        sub.undeclare()
+
+
+@pytest.fixture
+def service(tmp_path):
+    svc = Service(tmp_path, f"t{os.getpid()}")
+    svc.start()
+    yield svc
+    if svc.proc.poll() is None:
+        svc.kill()
+
+
+def client(svc: Service) -> zenoh.Session:
+    session = open_session(BusConfig("peer", (svc.endpoint,), ()))
+    wait_alive(session, svc.keys.reservation_alive)
+    return session
+
+
+def commit(rid, vehicle, cells, t0=0.0, t1=10.0):
+    return CommitRequest(rid, vehicle, [(c, r, t0, t1) for c, r in cells])
+
+
+def test_commit_conflict_and_published_changes(service):
+    session = client(service)
+    try:
+        changes = []
+        got = threading.Event()
+        sub = session.declare_subscriber(service.keys.reservation_change,
+                                         lambda s: (changes.append(decode(
+                                             s.payload.to_bytes()).message), got.set()))
+        req = Requester(session, "test")
+        ok = req.request(service.keys.reservation_request, commit("a", 1, [(0, 0)])).message
+        assert ok == Reply("a", True, 1)
+        no = req.request(service.keys.reservation_request,
+                         commit("b", 2, [(0, 0)], 5.0, 6.0)).message
+        assert no.ok is False and no.conflict_vehicle == 1 and no.conflict_cell == [0, 0]
+        assert got.wait(10)
+        assert [c.revision for c in changes] == [1]
+        sub.undeclare()
+    finally:
+        session.close()
+
+
+def test_two_agents_commit_the_same_cells_at_once_one_wins(service):
+    sessions = [client(service) for _ in range(2)]
+    try:
+        barrier = threading.Barrier(2)
+
+        def agent(k):
+            req = Requester(sessions[k], f"vehicle/{k + 1}")
+            barrier.wait()
+            return req.request(service.keys.reservation_request,
+                               commit(f"v{k}", k + 1, [(3, 3), (3, 4)])).message
+
+        with ThreadPoolExecutor(2) as pool:
+            replies = list(pool.map(agent, range(2)))
+        assert sorted(r.ok for r in replies) == [False, True]
+        loser = next(r for r in replies if not r.ok)
+        winner = next(k + 1 for k, r in enumerate(replies) if r.ok)
+        assert loser.conflict_vehicle == winner and "held by vehicle" in loser.reason
+    finally:
+        for s in sessions:
+            s.close()
+
+
+def test_restart_after_a_kill_serves_the_same_table(service):
+    session = client(service)
+    try:
+        req = Requester(session, "test")
+        key = service.keys.reservation_request
+        for k in range(20):
+            assert req.request(key, commit(f"r{k}", k % 4 + 1, [(k, 1)], t1=float("inf"))
+                               ).message.ok
+        before = req.request(key, SnapshotRequest()).message
+        gone, back = threading.Event(), threading.Event()
+
+        def watch(sample):
+            (gone if sample.kind == zenoh.SampleKind.DELETE else back).set()
+
+        sub = session.liveliness().declare_subscriber(service.keys.reservation_alive, watch)
+        service.kill()
+        assert gone.wait(30), "the killed service's liveliness token did not go"
+        service.start()
+        assert back.wait(60), "the restarted service did not come back"
+        sub.undeclare()
+        after = req.request(key, SnapshotRequest()).message
+        assert isinstance(after, Snapshot) and after == before
+        retry = req.request(key, commit("r3", 4, [(3, 1)], t1=float("inf"))).message
+        assert retry == Reply("r3", True, 4)  # applied once, answered the same
+    finally:
+        session.close()
+
+
+def test_garbage_is_rejected_and_the_service_lives_on(service):
+    session = client(service)
+    try:
+        key = service.keys.reservation_request
+        for payload in [b"", b"\xc1garbage", encode(VehicleState(1, "0,0,E", 0, "", False),
+                                                     "x", 1, 0.0)[:-2],
+                        encode(commit("z", 1, [(0, 0)]), "x", 1, 0.0).replace(b"\x01", b"\x07",
+                                                                               1)]:
+            replies = list(session.get(key, payload=payload, timeout=10))
+            assert len(replies) == 1
+            answer = decode(replies[0].ok.payload.to_bytes()).message
+            assert answer.ok is False and answer.reason.startswith("malformed request")
+        assert Requester(session, "t").request(key, commit("fine", 1, [(0, 0)])).message.ok
+        assert service.stop() == 0
+    finally:
+        session.close()
+    assert "rejected a request" in service.log.read_text()

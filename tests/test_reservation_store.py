@@ -1,0 +1,124 @@
+"""The reservation service's state machine and journal (no network here; the process is tested
+in test_reservation_service.py)."""
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fleet.protocol import Change, CommitRequest, ReleaseRequest, Reply, SnapshotRequest, body_of
+from fleet.protocol import build_message as build
+from fleet.reservations import Change as TableChange
+from fleet.reservations import ReservationTable
+from reservation.journal import Journal, JournalError
+from reservation.store import ReservationStore, to_intervals
+
+INF = math.inf
+
+
+def commit(rid, vehicle, cells, t0=0.0, t1=10.0, release_from=None):
+    return CommitRequest(rid, vehicle, [(c, r, t0, t1) for c, r in cells], release_from)
+
+
+def test_commit_is_atomic_and_a_conflict_names_the_holder():
+    store = ReservationStore()
+    assert store.handle(commit("a", 1, [(0, 0), (0, 1)])).reply == Reply("a", True, 1)
+    out = store.handle(commit("b", 2, [(5, 5), (0, 1)], t0=5.0, t1=6.0))
+    assert out.reply.ok is False and out.reply.conflict_vehicle == 1
+    assert out.reply.conflict_cell == [0, 1] and "held by vehicle 1" in out.reply.reason
+    assert out.published == [] and store.revision == 1
+    assert store.table.conflict(9, (5, 5), 0, INF) is None  # nothing of b's commit applied
+
+
+def test_a_retried_request_is_applied_once():
+    store = ReservationStore()
+    first = store.handle(commit("same", 1, [(0, 0)]))
+    again = store.handle(commit("same", 1, [(0, 0)]))
+    assert again.reply == first.reply and again.published == [] and store.revision == 1
+    refused = store.handle(commit("x", 2, [(0, 0)]))
+    assert store.handle(commit("x", 2, [(0, 0)])).reply == refused.reply
+
+
+def test_bad_intervals_are_refused_with_a_reason():
+    out = ReservationStore().handle(commit("bad", 1, [(0, 0)], t0=5.0, t1=5.0))
+    assert out.reply.ok is False and "must have t0 < t1" in out.reply.reason
+
+
+def test_snapshot_and_diff_let_a_mirror_follow(tmp_path):
+    store = ReservationStore()
+    store.handle(commit("a", 1, [(0, 0)]))
+    mirror_rev = store.revision
+    store.handle(commit("b", 2, [(1, 1)], t1=INF))
+    store.handle(ReleaseRequest("c", 1, 3.0))
+    diff = store.handle(SnapshotRequest(mirror_rev)).reply
+    assert [c["revision"] for c in diff.changes] == [2, 3]
+    mirror = ReservationTable()
+    mirror.commit(1, to_intervals([(0, 0, 0.0, 10.0)]))
+    for body in diff.changes:
+        change = build(Change, body)
+        mirror.apply(TableChange(change.revision, change.vehicle, change.release_from,
+                                 to_intervals(change.intervals)))
+    assert mirror.reservations() == store.table.reservations()
+    full = store.handle(SnapshotRequest()).reply
+    assert full.revision == 3 and sorted(full.reservations) == sorted(
+        (r.vehicle, *r.cell, r.t0, r.t1) for r in store.table.reservations())
+
+
+def test_restart_from_the_journal_gives_the_same_table(tmp_path):
+    path = tmp_path / "journal.msgpack"
+    store = ReservationStore(path)
+    store.handle(commit("a", 1, [(0, 0), (0, 1)], t1=INF))
+    store.handle(commit("b", 2, [(3, 3)]))
+    store.handle(commit("c", 3, [(0, 0)]))  # refused: not journaled
+    store.handle(ReleaseRequest("d", 1, 4.0))
+    store.close()
+    again = ReservationStore(path)
+    assert again.table.reservations() == store.table.reservations()
+    assert again.revision == 3 and again.torn_bytes == 0
+    assert again.handle(commit("b", 2, [(3, 3)])).reply == Reply("b", True, 2)  # remembered
+
+
+def test_a_torn_last_record_is_cut_and_nothing_before_it_is_lost(tmp_path):
+    path = tmp_path / "journal.msgpack"
+    store = ReservationStore(path)
+    for k in range(5):
+        store.handle(commit(f"r{k}", k + 1, [(k, 0)]))
+    store.close()
+    whole = path.read_bytes()
+    path.write_bytes(whole[:-3])  # killed in the middle of the last write
+    again = ReservationStore(path)
+    assert again.revision == 4 and again.torn_bytes > 0
+    assert again.handle(commit("r5", 9, [(9, 9)])).reply.ok  # appends after the good records
+    again.close()
+    assert ReservationStore(path).revision == 5
+
+
+def test_garbage_in_the_journal_names_the_record(tmp_path):
+    path = tmp_path / "journal.msgpack"
+    store = ReservationStore(path)
+    store.handle(commit("a", 1, [(0, 0)]))
+    store.close()
+    with open(path, "ab") as f:
+        f.write(b"\xc1\xc1\xc1")  # 0xc1 is never valid msgpack
+    with pytest.raises(JournalError, match="record 2 at byte"):
+        Journal(path).replay()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(1, 3), st.integers(0, 3),
+                          st.integers(0, 3), st.integers(0, 20), st.integers(1, 10)),
+                max_size=25))
+def test_journal_replay_matches_the_live_table(tmp_path_factory, ops):
+    path = tmp_path_factory.mktemp("j") / "journal.msgpack"
+    store = ReservationStore(path)
+    for k, (is_commit, vehicle, c, r, t0, dt) in enumerate(ops):
+        if is_commit:
+            store.handle(CommitRequest(f"q{k}", vehicle, [(c, r, float(t0), float(t0 + dt))],
+                                       float(t0) if k % 3 == 0 else None))
+        else:
+            store.handle(ReleaseRequest(f"q{k}", vehicle, float(t0)))
+    store.close()
+    again = ReservationStore(path)
+    assert again.table.reservations() == store.table.reservations()
+    assert [body_of(c) for c in again.log] == [body_of(c) for c in store.log]
