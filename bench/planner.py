@@ -19,6 +19,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from bench.stats import percentile
 from fleet.layout import Layout, load_layout
 from fleet.maneuvers import body_cells_at_rest
 from fleet.planner import HybridAStar
@@ -33,12 +34,6 @@ class Task:
     goals: tuple[Pose, ...]
     t_start: float
 
-
-def _percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    k = (len(ordered) - 1) * q
-    lo, hi = int(k), min(int(k) + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (k - lo)
 
 
 def draw_scene(layout: Layout, rng: random.Random) -> tuple[set, list[Task]] | None:
@@ -109,12 +104,12 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         "queries": queries,
         "seed": seed,
         "p50_ms": round(statistics.median(times_ms), 3),
-        "p95_ms": round(_percentile(times_ms, 0.95), 3),
+        "p95_ms": round(percentile(times_ms, 0.95), 3),
         "max_ms": round(max(times_ms), 3),
         "mean_ms": round(statistics.fmean(times_ms), 3),
         "success_rate": round(outcomes["found"] / queries, 4),
         "found_p50_ms": round(statistics.median(found_ms), 3) if found_ms else None,
-        "found_p95_ms": round(_percentile(found_ms, 0.95), 3) if found_ms else None,
+        "found_p95_ms": round(percentile(found_ms, 0.95), 3) if found_ms else None,
         "over_100ms": sum(t > 100 for t in times_ms),
         "outcomes": dict(sorted(outcomes.items())),
         "expansions_p50": statistics.median(expansions),

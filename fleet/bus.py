@@ -5,6 +5,8 @@ it; in compose it is the `router` service); tests may connect peers directly."""
 from __future__ import annotations
 
 import json
+import socket
+import threading
 from dataclasses import dataclass
 
 import zenoh
@@ -97,3 +99,22 @@ class Requester:
             except ProtocolError as exc:
                 raise RequestFailed(f"{key}: malformed reply: {exc}") from None
         raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s")
+
+
+def free_port() -> int:
+    """A loopback TCP port nobody listens on right now (for tests and benchmarks)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_alive(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Block until a liveliness token matching `key` exists (True) or the timeout passes."""
+    seen = threading.Event()
+    subscriber = session.liveliness().declare_subscriber(
+        key, lambda sample: seen.set() if sample.kind == zenoh.SampleKind.PUT else None,
+        history=True)
+    try:
+        return seen.wait(timeout)
+    finally:
+        subscriber.undeclare()

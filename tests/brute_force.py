@@ -10,7 +10,9 @@ Table 1's links.
 
 from __future__ import annotations
 
+import functools
 import math
+from types import SimpleNamespace
 
 CELL = 2.0
 FRONT, REAR, HALF_WIDTH = 1.8, 1.0, 0.5
@@ -87,11 +89,23 @@ def path(start, end, kind, samples=120):
 
 
 def cells_visited(start, end, kind):
+    (sx, sy), (ex, ey) = start.cell, end.cell
+    return {(sx + a, sy + b) for a, b in _cells_from_origin(start.heading, ex - sx, ey - sy,
+                                                             kind)}
+
+
+@functools.cache
+def _cells_from_origin(heading, dx, dy, kind):
+    """The sweep of a step that starts at cell (0, 0); a step elsewhere is this one moved by
+    whole cells (cells are 2 m and the sample points sit 1e-7 m inside the body, far above
+    float rounding), so whole missions are checked in seconds."""
+    start = SimpleNamespace(cell=(0, 0), heading=heading)
+    end = SimpleNamespace(cell=(dx, dy))
     cells = set()
     for x, y, th in path(start, end, kind):
         for px, py in body_points(x, y, th):
             cells.add(point_cell(px, py))
-    return cells
+    return frozenset(cells)
 
 
 def holds(intervals, cell, t0, t1):

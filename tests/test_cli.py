@@ -138,3 +138,10 @@ def test_bench_strategies_json(capsys):
         assert {"end_time_s", "failures", "wait_s", "wall_s"} <= row.keys()
         assert row["end_time_s"] >= bound > 0
         assert row["ratio_to_bound"] == pytest.approx(row["end_time_s"] / bound, abs=1e-3)
+
+
+def test_bench_runtime_json(capsys):
+    assert main(["bench", "runtime", "--commits", "20", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["commits"] == 20 and result["refused"] == 0
+    assert 0 < result["commit_p50_ms"] <= result["commit_p99_ms"] <= result["commit_max_ms"]

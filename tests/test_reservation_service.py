@@ -1,18 +1,12 @@
 """The reservation service as a real process on real zenoh sessions over loopback."""
 
-import os
-import signal
-import socket
-import subprocess
-import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
-import pytest
 import zenoh
+from zenoh_helpers import client
 
-from fleet.bus import BusConfig, Keys, Requester, open_session
+from fleet.bus import Requester
 from fleet.protocol import (
     CommitRequest,
     Reply,
@@ -22,67 +16,6 @@ from fleet.protocol import (
     decode,
     encode,
 )
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Service:
-    """The service process, listening on its own loopback port; the test's session connects
-    to it and waits for its liveliness token (no sleeping)."""
-
-    def __init__(self, tmp: Path, run: str) -> None:
-        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.journal = tmp / "journal.msgpack"
-        self.keys = Keys(run)
-        self.log = tmp / "service.log"
-        self.proc: subprocess.Popen | None = None
-
-    def start(self) -> None:
-        with open(self.log, "ab") as log:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "reservation", "--run", self.keys.run, "--mode", "peer",
-                 "--listen", self.endpoint, "--journal", str(self.journal)],
-                cwd=ROOT, stderr=log, env={**os.environ, "PYTHONPATH": str(ROOT)})
-
-    def kill(self) -> None:
-        self.proc.kill()
-        self.proc.wait()
-
-    def stop(self) -> int:
-        self.proc.send_signal(signal.SIGTERM)
-        return self.proc.wait(timeout=30)
-
-
-def wait_alive(session: zenoh.Session, key: str, timeout: float = 30.0) -> None:
-    seen = threading.Event()
-    sub = session.liveliness().declare_subscriber(
-        key, lambda sample: seen.set() if sample.kind == zenoh.SampleKind.PUT else None,
-        history=True)
-    try:
-        assert seen.wait(timeout), f"{key} did not come alive within {timeout} s"
-    finally:
-        sub.undeclare()
-
-
-@pytest.fixture
-def service(tmp_path):
-    svc = Service(tmp_path, f"t{os.getpid()}")
-    svc.start()
-    yield svc
-    if svc.proc.poll() is None:
-        svc.kill()
-
-
-def client(svc: Service) -> zenoh.Session:
-    session = open_session(BusConfig("peer", (svc.endpoint,), ()))
-    wait_alive(session, svc.keys.reservation_alive)
-    return session
 
 
 def commit(rid, vehicle, cells, t0=0.0, t1=10.0):

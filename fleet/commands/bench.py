@@ -25,6 +25,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                             help="MLP weights for the ANN strategy (default: shipped)")
     strategies.add_argument("--json", action="store_true", help="print one JSON object")
     strategies.set_defaults(handler=run_strategies)
+    runtime = which.add_parser("runtime", help="reservation commit round trip over zenoh "
+                               "on loopback")
+    runtime.add_argument("--commits", type=int, default=2000)
+    runtime.add_argument("--seed", type=int, default=2026)
+    runtime.add_argument("--json", action="store_true", help="print one JSON object")
+    runtime.set_defaults(handler=run_runtime)
+
+
+def emitted_json(result: dict, as_json: bool) -> bool:
+    """Stamp the machine on a result; print it as one JSON object if asked (True then)."""
+    result["machine"] = f"{platform.machine()} {platform.python_implementation()} " \
+                        f"{platform.python_version()}"
+    if as_json:
+        print(json.dumps(result))
+    return as_json
 
 
 def run_planner(args: argparse.Namespace) -> int:
@@ -34,10 +49,7 @@ def run_planner(args: argparse.Namespace) -> int:
         raise ValueError("--queries must be at least 1")
     result = planner.run(args.layout, args.queries, args.seed,
                          None if args.json else planner.print_progress)
-    result["machine"] = f"{platform.machine()} {platform.python_implementation()} " \
-                        f"{platform.python_version()}"
-    if args.json:
-        print(json.dumps(result))
+    if emitted_json(result, args.json):
         return 0
     print(f"planner on {result['layout']}: {result['queries']} queries (seed {result['seed']})")
     print(f"  per query  p50 {result['p50_ms']} ms   p95 {result['p95_ms']} ms   "
@@ -68,7 +80,20 @@ def run_strategies(args: argparse.Namespace) -> int:
     result = strategies.run(args.layout, kinds, args.weights, progress)
     for bar in bars.values():
         bar.close()
-    result["machine"] = f"{platform.machine()} {platform.python_implementation()} " \
-                        f"{platform.python_version()}"
-    print(json.dumps(result) if args.json else strategies.table(result))
+    if not emitted_json(result, args.json):
+        print(strategies.table(result))
+    return 0
+
+
+def run_runtime(args: argparse.Namespace) -> int:
+    from bench import runtime
+
+    if args.commits < 1:
+        raise ValueError("--commits must be at least 1")
+    result = runtime.run(args.commits, args.seed)
+    if emitted_json(result, args.json):
+        return 0
+    print(f"reservation commit round trip over zenoh on loopback, {result['commits']} commits")
+    print(f"  p50 {result['commit_p50_ms']} ms   p99 {result['commit_p99_ms']} ms   "
+          f"max {result['commit_max_ms']} ms   refused {result['refused']}")
     return 0

@@ -1,0 +1,116 @@
+"""A local copy of the reservation table that follows the service: agents and the dispatcher
+plan against it (it is a `ReservationView`) and commit through the service.
+
+It starts from a snapshot and applies published changes in revision order. Changes that
+arrive before the snapshot, or out of order, wait in a buffer; a change older than the copy
+is dropped; a gap that the buffer cannot fill makes `needs_resync` true so the owner asks for
+a diff (`since_revision`) or a new snapshot.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import zenoh
+
+from fleet.bus import Keys, Requester
+from fleet.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message, decode
+from fleet.reservations import Change as TableChange
+from fleet.reservations import Reservation, ReservationTable
+from fleet.reservations import Snapshot as TableSnapshot
+from reservation.store import to_intervals
+
+MAX_BUFFERED = 10_000
+log = logging.getLogger("fleet.mirror")
+
+
+class TableMirror:
+    def __init__(self) -> None:
+        self.table = ReservationTable()
+        self.synced = False
+        self.needs_resync = False
+        self._pending: dict[int, Change] = {}
+        self._changed = threading.Condition()
+
+    # -- ReservationView ---------------------------------------------------------------------
+    def conflict(self, vehicle: int, cell, t0: float, t1: float) -> int | None:
+        return self.table.conflict(vehicle, cell, t0, t1)
+
+    def parked_from(self, vehicle: int, cell) -> float:
+        return self.table.parked_from(vehicle, cell)
+
+    @property
+    def revision(self) -> int:
+        return self.table.revision
+
+    # -- following -----------------------------------------------------------------------------
+    def load(self, snapshot: Snapshot) -> None:
+        """A whole snapshot, or a diff (`changes`) on top of the current copy."""
+        with self._changed:
+            if snapshot.changes:
+                for body in snapshot.changes:
+                    change = build_message(Change, body)
+                    assert isinstance(change, Change)
+                    self._pending.setdefault(change.revision, change)
+            else:
+                self.table = ReservationTable.from_snapshot(TableSnapshot(
+                    snapshot.revision, tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1
+                                             in snapshot.reservations)))
+            self.synced = True
+            self._drain()
+
+    def on_change(self, change: Change) -> None:
+        with self._changed:
+            if change.revision <= self.table.revision and self.synced:
+                return  # already in the copy
+            self._pending[change.revision] = change
+            if self.synced:
+                self._drain()
+            if len(self._pending) > MAX_BUFFERED:
+                self._pending.clear()
+                self.needs_resync = True
+
+    def _drain(self) -> None:
+        for old in [r for r in self._pending if r <= self.table.revision]:
+            del self._pending[old]
+        while (change := self._pending.pop(self.table.revision + 1, None)) is not None:
+            self.table.apply(TableChange(change.revision, change.vehicle, change.release_from,
+                                         to_intervals(change.intervals)))
+        self.needs_resync = bool(self._pending)  # a gap the buffer cannot fill yet
+        self._changed.notify_all()
+
+    def wait_for(self, revision: int, timeout: float) -> bool:
+        """Block until the copy has reached `revision` (True) or the timeout passed."""
+        with self._changed:
+            return self._changed.wait_for(lambda: self.table.revision >= revision, timeout)
+
+
+def follow(session: zenoh.Session, keys: Keys, mirror: TableMirror,
+           requester: Requester) -> zenoh.Subscriber:
+    """Subscribe to the service's changes, then load a snapshot (changes that arrive in between
+    wait in the mirror's buffer). Returns the subscriber; undeclare it to stop following."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        try:
+            message = decode(sample.payload.to_bytes()).message
+        except ProtocolError as exc:
+            log.warning("ignored a malformed change: %s", exc)
+            return
+        if isinstance(message, Change):
+            mirror.on_change(message)
+        else:
+            log.warning("ignored a %s on %s", message.TYPE, keys.reservation_change)
+
+    subscriber = session.declare_subscriber(keys.reservation_change, on_sample)
+    resync(mirror, keys, requester)
+    return subscriber
+
+
+def resync(mirror: TableMirror, keys: Keys, requester: Requester) -> None:
+    """Catch up: a diff when the copy is synced, else the whole table."""
+    since = mirror.revision if mirror.synced else -1
+    reply = requester.request(keys.reservation_request, SnapshotRequest(since)).message
+    if not isinstance(reply, Snapshot):
+        raise ProtocolError(f"expected a snapshot, got {reply.TYPE}")
+    mirror.load(reply)
