@@ -150,8 +150,7 @@ class Engine:
         self.present: set[Cell] = set() if fill else {s.cell for s in self.layout.stacks}
         self.total = len(self.layout.stacks)
         self.far = _far_clusters(self.layout)
-        self._planners: dict[frozenset[Cell], HybridAStar] = {}
-        self._exit_planners: dict[frozenset[Cell], HybridAStar] = {}
+        self._planners: dict[frozenset[Cell], HybridAStar] = {}  # by fill state
         self.record = MissionRecord(mission, self.layout.name, tuple(self.vehicles),
                                     tuple(self.starts))
         self.trip_times: list[float] = []
@@ -162,11 +161,14 @@ class Engine:
         self.planning_wall_s = 0.0
 
     # -- helpers -------------------------------------------------------------------------------
-    def planner(self) -> HybridAStar:
-        key = frozenset(self.present)
-        planner = self._planners.get(key) or self._exit_planners.get(key)
+    def planner(self, filled: set[Cell] | None = None) -> HybridAStar:
+        """The planner for a fill state (default: the current one). The states asked for are
+        the current one and the next few candidates, so a small cache serves them all."""
+        key = frozenset(self.present if filled is None else filled)
+        planner = self._planners.get(key)
         if planner is None:
-            self._planners.clear()  # fill states only move forward
+            if len(self._planners) > 16:
+                self._planners.clear()
             planner = self._planners[key] = HybridAStar(self.layout.grid_map(key),
                                                         self.layout.vehicle.dims)
         return planner
@@ -176,13 +178,7 @@ class Engine:
         """Unload poses from which a station dock is still reachable once the stack is filled
         (a pose beside the stack may be reachable only by sweeping the stack's own cell); none
         if filling the stack would wall in another forklift where it stands."""
-        key = frozenset(after)
-        planner = self._exit_planners.get(key)
-        if planner is None:
-            if len(self._exit_planners) > 16:
-                self._exit_planners.clear()
-            planner = self._exit_planners[key] = HybridAStar(self.layout.grid_map(key),
-                                                             self.layout.vehicle.dims)
+        planner = self.planner(after)
         docks = {planner.component(st.dock) for st in self.layout.stations}
         now = self.planner()
         docks_now = {now.component(st.dock) for st in self.layout.stations}
