@@ -79,3 +79,21 @@ def test_a_mirror_follows_the_service_over_zenoh(service):
     finally:
         reader.close()
         writer.close()
+
+
+def test_fleet_table_shows_the_services_table(service, capsys):
+    from fleet.cli import main
+
+    writer = client(service)
+    try:
+        put = Requester(writer, "writer")
+        for k in range(3):
+            assert put.request(service.keys.reservation_request, CommitRequest(
+                put.next_id(), 7, [(k, 2, 0.0, 9.0)])).message.ok
+    finally:
+        writer.close()
+    assert main(["table", "--run", service.keys.run, "--mode", "peer",
+                 "--connect", service.endpoint]) == 0
+    out = capsys.readouterr().out
+    assert f"fleet/{service.keys.run}: revision 3, 3 reserved intervals" in out
+    assert "vehicle 7: 3" in out
