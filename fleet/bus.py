@@ -4,9 +4,17 @@ it; in compose it is the `router` service); tests may connect peers directly."""
 
 from __future__ import annotations
 
+import argparse
+import faulthandler
 import json
+import logging
+import os
+import signal
 import socket
+import sys
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import zenoh
@@ -14,6 +22,10 @@ import zenoh
 from fleet.protocol import Envelope, Message, ProtocolError, decode, encode
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+# Congestion control for streams that must not lose a message (table changes, the clock, the
+# mission result): the publisher waits rather than drop. Their receivers only enqueue, so
+# they drain. State streams keep zenoh's default (drop), so a stalled reader stalls no one.
+RELIABLE = zenoh.CongestionControl.BLOCK
 
 
 @dataclass(frozen=True)
@@ -45,8 +57,39 @@ class Keys:
     def vehicle_state(self, vehicle: int) -> str:
         return f"{self.root}/vehicle/{vehicle}/state"
 
-    def vehicle_alive(self, vehicle: int) -> str:
+    def vehicle_alive(self, vehicle: int | str) -> str:
         return f"{self.root}/vehicle/{vehicle}/alive"
+
+    def vehicle_task(self, vehicle: int) -> str:
+        return f"{self.root}/vehicle/{vehicle}/task"
+
+    @property
+    def clock(self) -> str:
+        return f"{self.root}/clock"
+
+    def clock_ack(self, vehicle: int | str) -> str:
+        return f"{self.root}/clock/ack/{vehicle}"
+
+    @property
+    def dispatch_progress(self) -> str:
+        return f"{self.root}/dispatch/progress"
+
+    @property
+    def dispatch_done(self) -> str:
+        return f"{self.root}/dispatch/done"
+
+    @property
+    def dispatcher_alive(self) -> str:
+        return f"{self.root}/dispatch/alive"
+
+    @staticmethod
+    def vehicle_of(key: str) -> int | None:
+        """The vehicle id in a .../vehicle/<id>/... or .../ack/<id> key, if any."""
+        parts = str(key).split("/")
+        for i, part in enumerate(parts[:-1]):
+            if part in ("vehicle", "ack") and parts[i + 1].isdigit():
+                return int(parts[i + 1])
+        return None
 
 
 @dataclass(frozen=True)
@@ -55,6 +98,7 @@ class BusConfig:
     connect: tuple[str, ...] = (DEFAULT_ROUTER,)
     listen: tuple[str, ...] = ()
     lease_ms: int = 1000  # a lost peer is noticed after about 3/4 of this
+    connect_timeout_ms: int = -1  # -1: wait for the router however long it takes to start
 
     def zenoh_config(self) -> zenoh.Config:
         config = zenoh.Config()
@@ -62,7 +106,7 @@ class BusConfig:
         config.insert_json5("scouting/multicast/enabled", "false")  # loopback and named hosts
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
-        config.insert_json5("connect/timeout_ms", "-1")  # wait for the router to come up
+        config.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
         config.insert_json5("transport/link/tx/lease", str(self.lease_ms))
         return config
 
@@ -76,29 +120,62 @@ class RequestFailed(RuntimeError):
 
 
 class Requester:
-    """Sends requests with a per-sender sequence number and decodes the single reply."""
+    """Sends requests with a per-sender sequence number and decodes the single reply.
 
-    def __init__(self, session: zenoh.Session, sender: str, timeout_s: float = 5.0) -> None:
+    A request nobody answers (no queryable reachable: the server is starting, restarting, or
+    its router has not yet propagated it) is sent again with backoff for up to `retry_s`;
+    every request we send is idempotent (commits carry request ids, tasks task ids)."""
+
+    def __init__(self, session: zenoh.Session, sender: str, timeout_s: float = 5.0,
+                 retry_s: float = 15.0) -> None:
         self.session = session
         self.sender = sender
         self.timeout_s = timeout_s
-        self.seq = 0
+        self.retry_s = retry_s
+        self.seq = 0  # of messages sent
+        self.ids = 0  # of request ids handed out
 
     def next_id(self) -> str:
-        self.seq += 1
-        return f"{self.sender}:{self.seq}"
+        self.ids += 1
+        return f"{self.sender}:{self.ids}"
 
     def request(self, key: str, message: Message, sim_time: float = 0.0) -> Envelope:
+        self.seq += 1
         payload = encode(message, self.sender, self.seq, sim_time)
-        for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
-            if reply.ok is None:
-                raise RequestFailed(f"{key}: error reply: "
-                                    f"{reply.err.payload.to_bytes().decode(errors='replace')}")
-            try:
-                return decode(reply.ok.payload.to_bytes())
-            except ProtocolError as exc:
-                raise RequestFailed(f"{key}: malformed reply: {exc}") from None
-        raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s")
+        give_up = time.monotonic() + self.retry_s
+        backoff = 0.1
+        while True:
+            start = time.monotonic()
+            for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
+                if reply.ok is None:
+                    raise RequestFailed(f"{key}: error reply: "
+                                        f"{reply.err.payload.to_bytes().decode(errors='replace')}")
+                try:
+                    return decode(reply.ok.payload.to_bytes())
+                except ProtocolError as exc:
+                    raise RequestFailed(f"{key}: malformed reply: {exc}") from None
+            if time.monotonic() - start >= self.timeout_s:
+                raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s")
+            if time.monotonic() + backoff > give_up:
+                raise RequestFailed(f"{key}: nobody answered (no process serves this key)")
+            time.sleep(backoff)  # backoff before asking again, not synchronisation
+            backoff = min(2 * backoff, 2.0)
+
+
+def received(sample: zenoh.Sample, expected: type[Message] | tuple[type[Message], ...],
+             log: logging.Logger) -> Message | None:
+    """The message in a sample if it is valid and of an expected type; otherwise None, with
+    the reason logged (a malformed message never takes a process down)."""
+    try:
+        message = decode(sample.payload.to_bytes()).message
+    except ProtocolError as exc:
+        log.warning("rejected a message on %s: %s", sample.key_expr, exc)
+        return None
+    if not isinstance(message, expected):
+        log.warning("rejected a message on %s: a %s does not belong here", sample.key_expr,
+                    message.TYPE)
+        return None
+    return message
 
 
 def free_port() -> int:
@@ -118,3 +195,46 @@ def wait_alive(session: zenoh.Session, key: str, timeout: float) -> bool:
         return seen.wait(timeout)
     finally:
         subscriber.undeclare()
+
+
+def add_bus_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags every process shares: which run, and how to reach the others."""
+    p.add_argument("--run", default="default", help="run name: keys live under fleet/RUN/")
+    p.add_argument("--mode", choices=["client", "peer"], default="client",
+                   help="zenoh mode (default client of a router)")
+    p.add_argument("--connect", action="append", default=[],
+                   help=f"zenoh endpoint to connect to (default {DEFAULT_ROUTER}; repeatable)")
+    p.add_argument("--listen", action="append", default=[],
+                   help="zenoh endpoint to listen on (repeatable)")
+
+
+def bus_config(args: argparse.Namespace) -> BusConfig:
+    connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
+    return BusConfig(args.mode, connect, tuple(args.listen))
+
+
+def setup_logging() -> None:
+    """Processes log to stderr with a wall-clock timestamp (fleet run keeps one file each);
+    SIGUSR1 writes every thread's stack there (what a stuck process is doing)."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
+
+
+PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children
+
+
+def stop_on_signals(stop: Callable[[], None]) -> None:
+    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
+    of `fleet run` also stops when that parent is gone (killed outright, it could not stop
+    its children), so no orphan keeps running."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop())
+    parent = os.environ.get(PARENT_ENV)
+    if parent and parent.isdigit():
+        def watch() -> None:
+            while os.getppid() == int(parent):
+                time.sleep(1.0)  # polling the parent: there is no event to wait on
+            stop()
+
+        threading.Thread(target=watch, daemon=True, name="parent-watch").start()

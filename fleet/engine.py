@@ -18,16 +18,15 @@ from dataclasses import dataclass, field
 
 from fleet.dispatch import Decision, Dispatcher, Target, TaskKind, VehicleView
 from fleet.errors import UserError
+from fleet.execution import Executor, LocalExecutor, NoPacer, Pacer, Task
 from fleet.geometry import Cell
 from fleet.layout import Layout, load_layout
-from fleet.maneuvers import Manner, body_cells_at_rest
+from fleet.maneuvers import Manner
 from fleet.mission import Mission, MissionKind
 from fleet.params import DispatchParams
-from fleet.planner import HybridAStar
+from fleet.planner import HybridAStar, PlannerCache
 from fleet.reservations import Interval, ReservationTable
 from fleet.trajectory import PlanFailure, Pose, Trajectory
-
-GOODS = 0  # owner id of stacks waiting to be picked up, in the reservation table
 
 
 class MissionStuck(UserError):
@@ -116,31 +115,31 @@ def _far_clusters(layout: Layout) -> set[str]:
 
 
 class Engine:
-    """Runs one mission in one process."""
+    """Runs one mission: in one process by default, or with the forklifts elsewhere when given
+    an executor and a pacer for them (fleet/execution.py)."""
 
     def __init__(self, mission: Mission, options: EngineOptions | None = None,
-                 layout: Layout | None = None) -> None:
+                 layout: Layout | None = None, executor: Executor | None = None,
+                 pacer: Pacer | None = None) -> None:
         self.mission = mission
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
+        self.planners = PlannerCache(self.layout.grid_map, self.layout.vehicle.dims)
+        self.executor = executor or LocalExecutor(self.planners)
+        self.pacer = pacer or NoPacer()
         starts = list(mission.starts or self.layout.vehicle_starts)
         n = mission.vehicles if mission.vehicles is not None else len(starts)
         if not 1 <= n <= len(starts):
             raise ValueError(f"{n} vehicles requested but layout {self.layout.name} has "
                              f"{len(starts)} start poses")
         self.starts = starts[:n]
-        self.table = ReservationTable()
         fill = mission.kind is MissionKind.FILL
         first = TaskKind.DELIVER
         handling = self.options.params.t_claim if fill else 0.0
         self.vehicles = {i + 1: VehicleState(i + 1, pose, handling, first)
                          for i, pose in enumerate(self.starts)}
         for v in self.vehicles.values():
-            conflict = self.table.park(v.vehicle, body_cells_at_rest(v.pose.cell, v.pose.heading),
-                                       0.0)
-            if conflict is not None:
-                raise ValueError(f"start pose {v.pose} of vehicle {v.vehicle} overlaps vehicle "
-                                 f"{conflict.other}")
+            self.executor.park(v.vehicle, v.pose)
         by_cluster: dict[str, list] = {}
         for s in self.layout.stacks:
             by_cluster.setdefault(s.cluster, []).append(s)
@@ -150,28 +149,19 @@ class Engine:
         self.present: set[Cell] = set() if fill else {s.cell for s in self.layout.stacks}
         self.total = len(self.layout.stacks)
         self.far = _far_clusters(self.layout)
-        self._planners: dict[frozenset[Cell], HybridAStar] = {}  # by fill state
         self.record = MissionRecord(mission, self.layout.name, tuple(self.vehicles),
                                     tuple(self.starts))
         self.trip_times: list[float] = []
         self.dispatcher = Dispatcher(
             grid_for=lambda: self.layout.grid_map(self.present),
-            store=self.table, strategy=mission.strategy, params=self.options.params,
+            store=self.executor.store, strategy=mission.strategy, params=self.options.params,
             cluster_names=tuple(c.name for c in self.layout.clusters), mlp=self.options.mlp)
         self.planning_wall_s = 0.0
 
     # -- helpers -------------------------------------------------------------------------------
     def planner(self, filled: set[Cell] | None = None) -> HybridAStar:
-        """The planner for a fill state (default: the current one). The states asked for are
-        the current one and the next few candidates, so a small cache serves them all."""
-        key = frozenset(self.present if filled is None else filled)
-        planner = self._planners.get(key)
-        if planner is None:
-            if len(self._planners) > 16:
-                self._planners.clear()
-            planner = self._planners[key] = HybridAStar(self.layout.grid_map(key),
-                                                        self.layout.vehicle.dims)
-        return planner
+        """The planner for a fill state (default: the current one)."""
+        return self.planners.get(frozenset(self.present if filled is None else filled))
 
     def poses_with_a_way_out(self, poses: list[Pose], after: set[Cell],
                              others: list[Pose]) -> list[Pose]:
@@ -199,7 +189,7 @@ class Engine:
             if not queue:
                 continue
             stack = queue[0]
-            if self.mission.kind is MissionKind.FILL and self.table.conflict(
+            if self.mission.kind is MissionKind.FILL and self.executor.store.conflict(
                     view.vehicle, stack.cell, view.t_free, math.inf) is not None:
                 continue  # another forklift stands on or will cross the stack's cell
             poses = self.layout.unload_poses(stack.cell, self.present - {stack.cell})
@@ -227,6 +217,11 @@ class Engine:
             active = self.active()
             if not active:
                 break
+            paced = self.pacer.before_decision(min(v.t_free for v in active),
+                                               {v.vehicle: v.t_free for v in active})
+            for v in active:
+                v.wait_s += paced[v.vehicle] - v.t_free
+                v.t_free = paced[v.vehicle]
             views = [v.view() for v in active]
             remaining = self.remaining()
             outcome = self.dispatcher.decide(views, failed, self.targets_for, remaining)
@@ -261,15 +256,20 @@ class Engine:
                                    f"{self.record.failures[-1]}")
         rec = self.record
         rec.all_parked_time = max((s.t_end for s in rec.subtasks), default=0.0)
+        self.pacer.finish(max(rec.end_time, rec.all_parked_time))
         rec.busy_s = {v.vehicle: v.busy_s for v in self.vehicles.values()}
         rec.wait_s = {v.vehicle: v.wait_s for v in self.vehicles.values()}
         return rec
 
     def _plan(self, decision: Decision) -> Trajectory | PlanFailure:
+        """Plan and commit (the executor does both; a failure commits nothing)."""
         v = self.vehicles[decision.vehicle]
+        fill = self.mission.kind is MissionKind.FILL
+        deliver = decision.kind is TaskKind.DELIVER
+        task = Task(v.vehicle, decision.kind, v.pose, decision.t_i, decision.target.goals,
+                    frozenset(self.present), loaded=deliver == fill)
         t0 = time.perf_counter()
-        result = self.planner().plan(v.vehicle, v.pose, decision.t_i, decision.target.goals,
-                                     self.table)
+        result = self.executor.execute(task)
         self.planning_wall_s += time.perf_counter() - t0
         return result
 
@@ -277,9 +277,6 @@ class Engine:
                remaining: dict[str, int]) -> None:
         p = self.options.params
         v = self.vehicles[decision.vehicle]
-        conflict = self.table.commit(v.vehicle, traj.intervals, release_from=traj.t_start)
-        if conflict is not None:  # the planner checked against this very table
-            raise AssertionError(f"planned trajectory conflicts: {conflict}")
         target = decision.target
         deliver = decision.kind is TaskKind.DELIVER
         handling = (p.t_unload if deliver else p.t_claim) if fill else \
@@ -289,10 +286,10 @@ class Engine:
             stack = self.queue[target.name].pop(0)
             if fill:
                 self.present.add(stack.cell)
-                self.table.commit(GOODS, [Interval(stack.cell, traj.t_end, math.inf)])
+                self.executor.reserve_goods([Interval(stack.cell, traj.t_end, math.inf)])
             else:
                 self.present.discard(stack.cell)
-                self.table.commit(GOODS, [Interval(stack.cell, 0.0, t_done)])
+                self.executor.reserve_goods([Interval(stack.cell, 0.0, t_done)])
             self.record.stacks_done.append((target.name, stack.index, t_done))
             self.record.end_time = max(self.record.end_time, t_done)
             if self.options.collect_training:

@@ -17,7 +17,10 @@ from __future__ import annotations
 import heapq
 import math
 from dataclasses import dataclass
+from functools import cache
 from typing import NamedTuple
+
+import numpy as np
 
 from fleet.geometry import Cell
 from fleet.gridmap import GridMap
@@ -46,6 +49,18 @@ class _Edge(NamedTuple):
     heading: int
     end_cells: tuple[Cell, ...]
     body_cells: tuple[Cell, ...]  # start and intermediate cells
+
+
+@cache
+def _candidate_edges(moves: tuple[Move, ...], x: int, y: int) -> tuple[_Edge, ...]:
+    """Every move from (x, y) with absolute cells, whatever the map: planners for different
+    fill states share these and only filter them by their own static map."""
+    return tuple(_Edge(move.manner, move.manner.kind, move.manner.direction,
+                       x + move.end_delta[0], y + move.end_delta[1], move.end_heading,
+                       tuple((x + a, y + b) for a, b in sorted(move.end_cells)),
+                       tuple((x + a, y + b) for a, b in sorted(move.start_cells
+                                                               | move.middle_cells)))
+                 for move in moves)
 
 
 @dataclass
@@ -78,8 +93,8 @@ class HybridAStar:
         self.params = params
         self.velocity = VelocityPlanner(times)
         self.move_of = move_table(dims, grid.cell_size)
-        self.moves: list[list[Move]] = [[self.move_of[m, h] for m in Manner] for h in range(4)]
-        self._static: dict[tuple[Cell, int, Manner], int] = {}
+        self.moves = [tuple(self.move_of[m, h] for m in Manner) for h in range(4)]
+        self._static: dict[tuple[int, Manner], list[list[int]]] | None = None
         self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
         self._component: dict[tuple[Cell, int], int] | None = None
         self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
@@ -94,60 +109,87 @@ class HybridAStar:
         return self._component.get((pose.cell, pose.heading))
 
     def _components(self) -> dict[tuple[Cell, int], int]:
-        comp: dict[tuple[Cell, int], int] = {}
-        label = -1
-        for x in range(self.grid.cols):
-            for y in range(self.grid.rows):
-                for heading in range(4):
-                    seed = ((x, y), heading)
-                    if seed in comp or not self.grid.all_free(
-                            (x + a, y + b) for a, b in self.moves[heading][0].start_cells):
-                        continue
-                    label += 1
-                    comp[seed] = label
-                    todo = [seed]
-                    while todo:
-                        cell, h = todo.pop()
-                        for move in self.moves[h]:
-                            if move.manner is Manner.STOP or self.static_gamma(cell, move):
-                                continue
-                            nxt = ((cell[0] + move.end_delta[0], cell[1] + move.end_delta[1]),
-                                   move.end_heading)
-                            if nxt not in comp:
-                                comp[nxt] = label
-                                todo.append(nxt)
-        return comp
+        """Label every free pose with its connected component: union-find over the static
+        moves, vectorised (hook roots, then jump pointers until every edge agrees)."""
+        g = self.grid
+        if self._static is None:
+            self._static = self._static_table()
+
+        def node(x, y, h):
+            return (x * g.rows + y) * 4 + h
+
+        src, dst = [], []
+        for (heading, manner), gamma in self._static.items():
+            if manner is Manner.STOP:
+                continue
+            # a move's gamma ignores its start cells: require the start pose free as well
+            usable = (np.asarray(gamma) == 0) & (np.asarray(self._static[heading, Manner.STOP])
+                                                  == 0)
+            xs, ys = np.nonzero(usable)
+            move = self.move_of[manner, heading]
+            src.append(node(xs, ys, heading))
+            dst.append(node(xs + move.end_delta[0], ys + move.end_delta[1], move.end_heading))
+        u, v = np.concatenate(src), np.concatenate(dst)
+        parent = np.arange(g.cols * g.rows * 4)
+        while True:
+            ru, rv = parent[u], parent[v]
+            if np.array_equal(ru, rv):
+                break
+            np.minimum.at(parent, np.maximum(ru, rv), np.minimum(ru, rv))
+            while not np.array_equal(jumped := parent[parent], parent):
+                parent = jumped
+        labels = parent.tolist()
+        return {((x, y), h): labels[node(x, y, h)]
+                for h in range(4) for (x, y) in np.argwhere(
+                    np.asarray(self._static[h, Manner.STOP]) == 0).tolist()}
 
     def static_gamma(self, cell: Cell, move: Move) -> int:
         """Algorithm 3, lines 4-7 and 15-18: 1 if the end pose hits the static map, 2 if only
-        the sweep does, else 0. Cached per map."""
-        key = (cell, move.heading, move.manner)
-        gamma = self._static.get(key)
-        if gamma is None:
-            x, y = cell
-            if not self.grid.all_free((x + a, y + b) for a, b in move.end_cells):
-                gamma = 1
-            elif not self.grid.all_free((x + a, y + b) for a, b in move.middle_cells):
-                gamma = 2
-            else:
-                gamma = 0
-            self._static[key] = gamma
-        return gamma
+        the sweep does, else 0."""
+        x, y = cell
+        if 0 <= x < self.grid.cols and 0 <= y < self.grid.rows:
+            if self._static is None:
+                self._static = self._static_table()
+            return self._static[move.heading, move.manner][x][y]
+        if not self.grid.all_free((x + a, y + b) for a, b in move.end_cells):
+            return 1
+        return 2 if not self.grid.all_free((x + a, y + b) for a, b in move.middle_cells) else 0
+
+    def _static_table(self) -> dict[tuple[int, Manner], list[list[int]]]:
+        """static_gamma for every cell of the map at once, per (heading, manner): a cell is
+        free where the map is, so "all cells of a move free" is an AND of shifted copies of
+        the free mask. Building a planner for a new fill state is then a few milliseconds,
+        which the dispatcher and every agent do often."""
+        g = self.grid
+        pad = 1 + max(max(abs(a), abs(b)) for move in self.move_of.values()
+                      for a, b in move.swept)
+        free = np.zeros((g.cols + 2 * pad, g.rows + 2 * pad), dtype=bool)
+        free[pad:pad + g.cols, pad:pad + g.rows] = True
+        for x, y in g.blocked:
+            if 0 <= x < g.cols and 0 <= y < g.rows:
+                free[pad + x, pad + y] = False
+
+        def all_free(offsets: frozenset[Cell]) -> np.ndarray:
+            ok = np.ones((g.cols, g.rows), dtype=bool)
+            for a, b in offsets:
+                ok &= free[pad + a:pad + a + g.cols, pad + b:pad + b + g.rows]
+            return ok
+
+        table = {}
+        for (manner, heading), move in self.move_of.items():
+            gamma = np.where(all_free(move.end_cells), 0, 1)
+            gamma[(gamma == 0) & ~all_free(move.middle_cells)] = 2
+            table[heading, manner] = gamma.tolist()
+        return table
 
     def edges(self, x: int, y: int, heading: int) -> list[_Edge]:
         """The statically valid moves from a pose, with absolute cells (cached per map)."""
         found = self._edges.get((x, y, heading))
         if found is None:
-            found = []
-            for move in self.moves[heading]:
-                if self.static_gamma((x, y), move):
-                    continue  # static collisions fail at every time
-                found.append(_Edge(
-                    move.manner, move.manner.kind, move.manner.direction,
-                    x + move.end_delta[0], y + move.end_delta[1], move.end_heading,
-                    tuple((x + a, y + b) for a, b in sorted(move.end_cells)),
-                    tuple((x + a, y + b) for a, b in sorted(move.start_cells
-                                                             | move.middle_cells))))
+            found = [edge for move, edge in zip(self.moves[heading],
+                                                _candidate_edges(self.moves[heading], x, y),
+                                                strict=True)
+                     if not self.static_gamma((x, y), move)]  # static collisions always fail
             self._edges[x, y, heading] = found
         return found
 
@@ -338,3 +380,24 @@ class HybridAStar:
         pieces += [(c, t_end, INF) for c in goal_cells]
         return Trajectory(vehicle, start, goal, steps[0].t0 if steps else t_end, tuple(steps),
                           merge_intervals(pieces), expansions)
+
+
+class PlannerCache:
+    """One planner per fill state of a layout (its static map), the most recent few kept: a
+    mission asks for the current state and the next few candidates, and building a planner
+    (map + reachability) costs far more than a search."""
+
+    def __init__(self, grid_for, dims: VehicleDims, size: int = 16) -> None:
+        self.grid_for = grid_for  # filled cells -> GridMap
+        self.dims = dims
+        self.size = size
+        self._planners: dict[frozenset[Cell], HybridAStar] = {}  # least recently used first
+
+    def get(self, filled: frozenset[Cell]) -> HybridAStar:
+        planner = self._planners.pop(filled, None)
+        if planner is None:
+            planner = HybridAStar(self.grid_for(filled), self.dims)
+            if len(self._planners) >= self.size:
+                del self._planners[next(iter(self._planners))]
+        self._planners[filled] = planner
+        return planner

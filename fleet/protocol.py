@@ -8,6 +8,7 @@ what was wrong, so a process can log it and carry on.
 
 from __future__ import annotations
 
+import functools
 import math
 import types
 import typing
@@ -103,6 +104,88 @@ class Snapshot(Message):
     changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
 
 
+# (manner label, start pose, end pose, t0, t1, v0, v1, swept cells): one maneuver.
+WireStep = tuple[str, str, str, float, float, int, int, list[tuple[int, int]]]
+
+
+@dataclass(frozen=True)
+class TaskRequest(Message):
+    """The dispatcher asks a forklift's agent to plan and commit one subtask."""
+
+    TYPE: ClassVar[str] = "dispatch.task"
+    task_id: str
+    vehicle: int
+    kind: str  # "deliver" or "return"
+    start: str  # pose "col,row,H" where the dispatcher believes the forklift stands
+    t_i: float
+    goals: list[str]
+    filled: list[tuple[int, int]]  # stacks holding goods: the static map to plan on
+    loaded: bool
+    revision: int  # plan on a table at least this recent
+
+
+@dataclass(frozen=True)
+class TaskResult(Message):
+    """The agent's answer: the committed trajectory, or why there is none."""
+
+    TYPE: ClassVar[str] = "dispatch.task_result"
+    task_id: str
+    vehicle: int
+    ok: bool
+    revision: int  # the table revision that holds the committed trajectory
+    start: str = ""
+    goal: str = ""
+    t_start: float = 0.0
+    steps: list[WireStep] = field(default_factory=list)
+    intervals: list[WireInterval] = field(default_factory=list)
+    expansions: int = 0
+    failure: str = ""  # a FailureReason value when not ok
+    detail: str = ""
+    rejections: list[str] = field(default_factory=list)  # commits the store refused first
+
+
+@dataclass(frozen=True)
+class ClockTick(Message):
+    """The one source of "now". Fast mode: the clock stands at t until every agent acks this
+    tick. Real time: sim time = t + speed * (wall clock - wall)."""
+
+    TYPE: ClassVar[str] = "clock.tick"
+    tick: int
+    mode: str  # "fast" or "realtime"
+    t: float
+    speed: float = 1.0
+    wall: float = 0.0  # Unix time at which sim time was t (real time only)
+
+
+@dataclass(frozen=True)
+class ClockAck(Message):
+    TYPE: ClassVar[str] = "clock.ack"
+    tick: int
+    vehicle: int
+
+
+@dataclass(frozen=True)
+class Progress(Message):
+    TYPE: ClassVar[str] = "dispatch.progress"
+    done: int
+    total: int
+    t: float
+    failures: int
+
+
+@dataclass(frozen=True)
+class MissionDone(Message):
+    """The dispatcher's last word: the mission record (record_io.record_to_dict) or an error."""
+
+    TYPE: ClassVar[str] = "dispatch.done"
+    ok: bool
+    error: str = ""
+    record: dict = field(default_factory=dict)
+    digest: str = ""
+    wall_s: float = 0.0
+    rejections: list[str] = field(default_factory=list)  # commits refused before a replan
+
+
 @dataclass(frozen=True)
 class Envelope:
     message: Message
@@ -113,7 +196,8 @@ class Envelope:
 
 TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
-                              SnapshotRequest, Change, Snapshot)
+                              SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
+                              ClockTick, ClockAck, Progress, MissionDone)
 }
 
 
@@ -157,7 +241,7 @@ def decode(payload: bytes) -> Envelope:
 
 def build_message(cls: type[Message], body: dict) -> Message:
     """A message of type `cls` from its body map, validated (ProtocolError otherwise)."""
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(body) - known, key=str)
     if unknown:
@@ -170,6 +254,11 @@ def build_message(cls: type[Message], body: dict) -> Message:
             continue
         values[f.name] = _check(body[f.name], hints[f.name], f"{cls.TYPE}.{f.name}")
     return cls(**values)
+
+
+@functools.cache
+def _hints(cls: type[Message]) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
 
 
 def _check(value: Any, hint: Any, where: str) -> Any:

@@ -42,7 +42,12 @@ def record_to_dict(rec: MissionRecord) -> dict[str, Any]:
 
 
 def digest(rec: MissionRecord) -> str:
-    text = json.dumps(record_to_dict(rec), sort_keys=True, separators=(",", ":"))
+    return digest_of(record_to_dict(rec))
+
+
+def digest_of(record: dict[str, Any]) -> str:
+    """SHA-256 of a record's canonical JSON: equal digests, equal missions bit for bit."""
+    text = json.dumps(record, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

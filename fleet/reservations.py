@@ -214,14 +214,19 @@ class ReservationTable:
     @classmethod
     def from_snapshot(cls, snap: Snapshot) -> ReservationTable:
         table = cls()
+        table.load(snap)
+        return table
+
+    def load(self, snap: Snapshot) -> None:
+        """Become the table of the snapshot (in place, so holders of this object see it)."""
+        self._cells, self._cells_of, self.changes = {}, {}, []
         by_vehicle: dict[int, list[Interval]] = {}
         for r in snap.reservations:
             by_vehicle.setdefault(r.vehicle, []).append(Interval(r.cell, r.t0, r.t1))
         for vehicle, intervals in sorted(by_vehicle.items()):
             for iv in intervals:
-                table._insert(vehicle, iv)
-        table.revision = snap.revision
-        return table
+                self._insert(vehicle, iv)
+        self.revision = snap.revision
 
     def diff(self, since: int) -> list[Change]:
         """Changes after revision `since` (all of them kept in memory)."""

@@ -79,6 +79,8 @@ class FailureReason(Enum):
     GOAL_BLOCKED = "goal blocked"
     NO_PATH = "no path"
     ITERATION_CAP = "iteration cap"
+    LATE = "late"  # real time: the plan was ready only after its own start instant
+    REFUSED = "commit refused"  # the reservation store refused every replanned commit
 
 
 @dataclass(frozen=True)

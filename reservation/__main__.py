@@ -1,5 +1,5 @@
 import sys
 
-from reservation.service import main
+from fleet.cli import main
 
-sys.exit(main())
+sys.exit(main(["reservation", *sys.argv[1:]]))

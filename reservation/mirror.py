@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import zenoh
 
-from fleet.bus import Keys, Requester
-from fleet.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message, decode
+from fleet.bus import Keys, Requester, received
+from fleet.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
 from fleet.reservations import Change as TableChange
 from fleet.reservations import Reservation, ReservationTable
 from fleet.reservations import Snapshot as TableSnapshot
@@ -26,12 +28,16 @@ log = logging.getLogger("fleet.mirror")
 
 
 class TableMirror:
+    """`table` stays the same object for the mirror's life (a snapshot is loaded in place),
+    so a planner may be handed the table itself; hold `frozen()` while it reads."""
+
     def __init__(self) -> None:
         self.table = ReservationTable()
         self.synced = False
         self.needs_resync = False
         self._pending: dict[int, Change] = {}
         self._changed = threading.Condition()
+        self._frozen = 0
 
     # -- ReservationView ---------------------------------------------------------------------
     def conflict(self, vehicle: int, cell, t0: float, t1: float) -> int | None:
@@ -54,7 +60,7 @@ class TableMirror:
                     assert isinstance(change, Change)
                     self._pending.setdefault(change.revision, change)
             else:
-                self.table = ReservationTable.from_snapshot(TableSnapshot(
+                self.table.load(TableSnapshot(
                     snapshot.revision, tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1
                                              in snapshot.reservations)))
             self.synced = True
@@ -71,7 +77,23 @@ class TableMirror:
                 self._pending.clear()
                 self.needs_resync = True
 
+    @contextmanager
+    def frozen(self) -> Iterator[TableMirror]:
+        """Hold the copy still (changes wait in the buffer) while a planner reads it: the
+        change callback never blocks on a search and a search never sees a half-applied
+        change."""
+        with self._changed:
+            self._frozen += 1
+        try:
+            yield self
+        finally:
+            with self._changed:
+                self._frozen -= 1
+                self._drain()
+
     def _drain(self) -> None:
+        if self._frozen:
+            return
         for old in [r for r in self._pending if r <= self.table.revision]:
             del self._pending[old]
         while (change := self._pending.pop(self.table.revision + 1, None)) is not None:
@@ -82,8 +104,12 @@ class TableMirror:
 
     def wait_for(self, revision: int, timeout: float) -> bool:
         """Block until the copy has reached `revision` (True) or the timeout passed."""
+        return self.wait_until(lambda table: table.revision >= revision, timeout)
+
+    def wait_until(self, predicate: Callable[[ReservationTable], bool], timeout: float) -> bool:
+        """Block until `predicate(table)` holds (True) or the timeout passed."""
         with self._changed:
-            return self._changed.wait_for(lambda: self.table.revision >= revision, timeout)
+            return self._changed.wait_for(lambda: predicate(self.table), timeout)
 
 
 def follow(session: zenoh.Session, keys: Keys, mirror: TableMirror,
@@ -92,15 +118,9 @@ def follow(session: zenoh.Session, keys: Keys, mirror: TableMirror,
     wait in the mirror's buffer). Returns the subscriber; undeclare it to stop following."""
 
     def on_sample(sample: zenoh.Sample) -> None:
-        try:
-            message = decode(sample.payload.to_bytes()).message
-        except ProtocolError as exc:
-            log.warning("ignored a malformed change: %s", exc)
-            return
-        if isinstance(message, Change):
+        message = received(sample, Change, log)
+        if message is not None:
             mirror.on_change(message)
-        else:
-            log.warning("ignored a %s on %s", message.TYPE, keys.reservation_change)
 
     subscriber = session.declare_subscriber(keys.reservation_change, on_sample)
     resync(mirror, keys, requester)

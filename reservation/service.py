@@ -12,13 +12,18 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
-import signal
-import sys
 from pathlib import Path
 
 import zenoh
 
-from fleet.bus import BusConfig, Keys, open_session
+from fleet.bus import (
+    RELIABLE,
+    Keys,
+    add_bus_arguments,
+    bus_config,
+    open_session,
+    stop_on_signals,
+)
 from fleet.protocol import ProtocolError, Reply, decode, encode
 from reservation.store import ReservationStore
 
@@ -36,7 +41,8 @@ class ReservationService:
         self.rejected = 0
 
     def run(self) -> None:
-        publisher = self.session.declare_publisher(self.keys.reservation_change)
+        publisher = self.session.declare_publisher(self.keys.reservation_change,
+                                                   congestion_control=RELIABLE)
         queryable = self.session.declare_queryable(self.keys.reservation_request,
                                                    self.inbox.put)
         token = self.session.liveliness().declare_token(self.keys.reservation_alive)
@@ -59,7 +65,7 @@ class ReservationService:
                 envelope = decode(payload)
             except ProtocolError as exc:
                 self.rejected += 1
-                log.warning("rejected a request: %s", exc)
+                log.warning("rejected a request on %s: %s", query.key_expr, exc)
                 query.reply(query.key_expr, self._encode(
                     Reply("", False, self.store.revision, reason=f"malformed request: {exc}")))
                 return []
@@ -78,24 +84,18 @@ class ReservationService:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--run", default="default", help="run name: keys live under fleet/RUN/")
+    add_bus_arguments(p)
     p.add_argument("--journal", type=Path, default=Path("reservation.journal"),
                    help="append-only journal (replayed on start)")
-    p.add_argument("--mode", choices=["client", "peer"], default="client")
-    p.add_argument("--connect", action="append", default=[],
-                   help="zenoh endpoint to connect to (default tcp/127.0.0.1:7447)")
-    p.add_argument("--listen", action="append", default=[], help="zenoh endpoint to listen on")
 
 
 def serve(args: argparse.Namespace) -> int:
     store = ReservationStore(args.journal)
     if store.torn_bytes:
         log.warning("cut a torn last record (%d bytes) off %s", store.torn_bytes, args.journal)
-    connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
-    session = open_session(BusConfig(args.mode, connect, tuple(args.listen)))
+    session = open_session(bus_config(args))
     service = ReservationService(store, session, Keys(args.run))
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: service.stop())
+    stop_on_signals(service.stop)
     try:
         service.run()
     finally:
@@ -103,9 +103,3 @@ def serve(args: argparse.Namespace) -> int:
         session.close()
     return 0
 
-
-def main(argv: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
-    p = argparse.ArgumentParser(prog="fleet reservation", description=__doc__)
-    add_arguments(p)
-    return serve(p.parse_args(argv))

@@ -141,7 +141,14 @@ def test_bench_strategies_json(capsys):
 
 
 def test_bench_runtime_json(capsys):
-    assert main(["bench", "runtime", "--commits", "20", "--json"]) == 0
+    assert main(["bench", "runtime", "--commits", "20", "--ratio-layout", "small",
+                 "--ratio-repeats", "1", "--agents", "2,3", "--window", "2", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["commits"] == 20 and result["refused"] == 0
     assert 0 < result["commit_p50_ms"] <= result["commit_p99_ms"] <= result["commit_max_ms"]
+    assert result["same_record"] is True  # processes and in-process gave one record
+    assert result["multiprocess_ratio"] == pytest.approx(
+        result["multiprocess_wall_s"] / result["inprocess_wall_s"], abs=0.01)
+    assert [row["agents"] for row in result["fleets"]] == [2, 3]
+    assert result["max_realtime_agents"] in (0, 2, 3)
+    assert all(row["rss_per_agent_mb"] > 10 for row in result["fleets"])

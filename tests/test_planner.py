@@ -9,8 +9,8 @@ import pytest
 
 from fleet.gridmap import GridMap
 from fleet.maneuvers import body_cells_at_rest
-from fleet.params import SearchParams
-from fleet.planner import HybridAStar
+from fleet.params import SearchParams, VehicleDims
+from fleet.planner import HybridAStar, PlannerCache
 from fleet.reservations import ReservationTable
 from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 
@@ -164,3 +164,62 @@ def test_deadline_check_lets_through_a_vehicle_that_parks_later():
     late = planner.plan(1, Pose((1, 1), 0), 39.0, [Pose((9, 1), 0)], table)
     assert isinstance(late, PlanFailure) and late.reason is FailureReason.NO_PATH
     assert late.expansions == 1
+
+
+def components_by_search(planner: HybridAStar) -> set[frozenset]:
+    """Reference: the pose graph's components found by plain graph search from every free
+    pose, following statically free moves (the planner's own sweep test is brute-forced in
+    test_maneuvers)."""
+    grid = planner.grid
+    free = {((x, y), h) for x in range(grid.cols) for y in range(grid.rows) for h in range(4)
+            if grid.all_free((x + a, y + b) for a, b in planner.moves[h][0].start_cells)}
+    seen, parts = set(), set()
+    for seed in sorted(free):
+        if seed in seen:
+            continue
+        part, todo = {seed}, [seed]
+        while todo:
+            (x, y), h = todo.pop()
+            for move in planner.moves[h][1:]:
+                if not grid.all_free((x + a, y + b) for a, b in move.swept):
+                    continue
+                nxt = ((x + move.end_delta[0], y + move.end_delta[1]), move.end_heading)
+                if nxt not in part:
+                    part.add(nxt)
+                    todo.append(nxt)
+        seen |= part
+        parts.add(frozenset(part))
+    return parts
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_components_match_a_plain_graph_search(seed):
+    rng = random.Random(seed)
+    blocked = frozenset((rng.randrange(12), rng.randrange(9)) for _ in range(rng.randrange(30)))
+    planner = HybridAStar(GridMap(12, 9, blocked))
+    labels: dict[int, set] = {}
+    for x in range(12):
+        for y in range(9):
+            for h in range(4):
+                label = planner.component(Pose((x, y), h))
+                if label is not None:
+                    labels.setdefault(label, set()).add(((x, y), h))
+    assert {frozenset(p) for p in labels.values()} == components_by_search(planner)
+
+
+def test_planner_cache_keeps_the_most_recently_used():
+    built = []
+
+    def grid_for(filled):
+        built.append(filled)
+        return GridMap(6, 6, filled)
+
+    cache = PlannerCache(grid_for, VehicleDims(), size=2)
+    a, b, c = frozenset({(0, 0)}), frozenset({(1, 1)}), frozenset({(2, 2)})
+    first = cache.get(a)
+    cache.get(b)
+    assert cache.get(a) is first  # a is now the most recent
+    cache.get(c)  # evicts b
+    assert cache.get(a) is first
+    cache.get(b)
+    assert built == [a, b, c, b]

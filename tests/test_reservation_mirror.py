@@ -97,3 +97,17 @@ def test_fleet_table_shows_the_services_table(service, capsys):
     out = capsys.readouterr().out
     assert f"fleet/{service.keys.run}: revision 3, 3 reserved intervals" in out
     assert "vehicle 7: 3" in out
+
+
+def test_a_frozen_mirror_holds_changes_back_until_thawed():
+    store = ReservationStore()
+    commits(store, 2)
+    mirror = TableMirror()
+    mirror.load(store.snapshot())
+    table = mirror.table
+    with mirror.frozen():
+        for change in commits(store, 3, 2):
+            mirror.on_change(change)
+        assert mirror.revision == 2  # a planner reading now sees one consistent table
+    assert mirror.revision == 5 and mirror.table is table
+    assert mirror.table.reservations() == store.table.reservations()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import sys
 from pathlib import Path
 
 
@@ -25,10 +26,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                             help="MLP weights for the ANN strategy (default: shipped)")
     strategies.add_argument("--json", action="store_true", help="print one JSON object")
     strategies.set_defaults(handler=run_strategies)
-    runtime = which.add_parser("runtime", help="reservation commit round trip over zenoh "
-                               "on loopback")
+    runtime = which.add_parser("runtime", help="the distributed runtime: commit round trip, "
+                               "multi-process / in-process wall time, largest real-time fleet")
     runtime.add_argument("--commits", type=int, default=2000)
     runtime.add_argument("--seed", type=int, default=2026)
+    runtime.add_argument("--ratio-layout", default="paper",
+                         help="layout of the multi-process vs in-process fill (default paper)")
+    runtime.add_argument("--ratio-repeats", type=int, default=3,
+                         help="runs of each, alternated (default 3; 0 skips)")
+    runtime.add_argument("--agents", default="25,50,100,150",
+                         help="fleet sizes to try in real time, ascending (default "
+                         "25,50,100,150; 'none' skips)")
+    runtime.add_argument("--window", type=float, default=15.0,
+                         help="seconds of state messages measured per fleet (default 15)")
     runtime.add_argument("--json", action="store_true", help="print one JSON object")
     runtime.set_defaults(handler=run_runtime)
 
@@ -90,10 +100,38 @@ def run_runtime(args: argparse.Namespace) -> int:
 
     if args.commits < 1:
         raise ValueError("--commits must be at least 1")
+    sizes = [] if args.agents == "none" else [int(n) for n in args.agents.split(",")]
+    if sizes != sorted(sizes) or any(n < 1 for n in sizes):
+        raise ValueError(f"--agents {args.agents}: give ascending fleet sizes, e.g. 25,50,100")
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
     result = runtime.run(args.commits, args.seed)
+    say(f"commit round trip: p50 {result['commit_p50_ms']} ms, p99 {result['commit_p99_ms']} ms")
+    if args.ratio_repeats > 0:
+        from bench import multiprocess
+
+        result |= multiprocess.run(args.ratio_layout, "ann", args.ratio_repeats, say)
+    if sizes:
+        from bench import fleet_scale
+
+        result |= fleet_scale.run(sizes, args.window, progress=say)
     if emitted_json(result, args.json):
         return 0
     print(f"reservation commit round trip over zenoh on loopback, {result['commits']} commits")
     print(f"  p50 {result['commit_p50_ms']} ms   p99 {result['commit_p99_ms']} ms   "
           f"max {result['commit_max_ms']} ms   refused {result['refused']}")
+    if "multiprocess_ratio" in result:
+        print(f"fast-mode fill on {result['ratio_layout']}, median of "
+              f"{result['ratio_repeats']}: processes {result['multiprocess_wall_s']} s, "
+              f"in-process {result['inprocess_wall_s']} s, ratio "
+              f"{result['multiprocess_ratio']} (same record: {result['same_record']})")
+    if "fleets" in result:
+        print(f"real time at speed 1 on the {result['layout']} layout:")
+        for row in result["fleets"]:
+            print(f"  {row['agents']:>4} agents: {row['received_share']:.1%} of states, "
+                  f"lateness p99 {row['late_p99_ms']} ms, {row['rss_per_agent_mb']} MB per "
+                  f"agent -> {'keeps' if row['keeps_real_time'] else 'misses'} real time")
+        print(f"  largest fleet in real time: {result['max_realtime_agents']}")
     return 0

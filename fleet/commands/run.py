@@ -1,13 +1,16 @@
-"""`fleet run`: run a whole mission and print its summary."""
+"""`fleet run`: run a whole mission (as processes on zenoh, or in one process) and print its
+summary."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
-from fleet.engine import EngineOptions, MissionRecord, run_mission
+from fleet.engine import EngineOptions, run_mission
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import ProgressBar
@@ -15,15 +18,22 @@ from fleet.progress import ProgressBar
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run a whole fill or empty mission",
-                       description="Run a mission: the dispatcher assigns subtasks, every "
-                       "forklift plans with the improved hybrid A* against the shared "
-                       "reservation table.")
+                       description="Run a mission: a zenoh router, the reservation service, "
+                       "one agent process per forklift and the dispatcher, on this machine. "
+                       "The dispatcher assigns subtasks; every forklift plans with the "
+                       "improved hybrid A* against the shared reservation table.")
     add_mission_args(p)
+    p.add_argument("--clock", choices=["fast", "realtime"], default="fast",
+                   help="fast: discrete events, deterministic (default); realtime: sim time "
+                   "= speed x wall time")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="sim seconds per wall second with --clock realtime (default 1)")
     p.add_argument("--inprocess", action="store_true",
-                   help="run the in-process reference engine (one process, deterministic); "
-                   "for now this is also what runs without the flag, until the distributed "
-                   "runtime lands")
-    p.add_argument("--out", type=Path, help="directory to write the mission record into")
+                   help="run the in-process reference engine instead (one process, no "
+                   "zenoh); fast mode gives the same record bit for bit")
+    p.add_argument("--port", type=int, help="router port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--out", type=Path, help="directory to keep the mission record "
+                   "(mission.json), the reservation journal and each process's log in")
     p.set_defaults(handler=run)
 
 
@@ -53,23 +63,26 @@ def engine_options(mission: Mission, layout: Layout, weights: Path | None,
     return EngineOptions(mlp=mlp, progress=progress)
 
 
-def summary_lines(rec: MissionRecord, wall_s: float) -> list[str]:
-    end = rec.end_time
+def summary_lines(rec: dict[str, Any], wall_s: float, digest: str) -> list[str]:
+    """The summary of a mission record (record_io.record_to_dict)."""
+    m = rec["mission"]
+    end = rec["end_time_s"]
     lines = [
-        f"mission {rec.mission.kind.value} on {rec.layout} with {len(rec.vehicles)} forklifts, "
-        f"strategy {rec.mission.strategy.value}",
+        f"mission {m['kind']} on {m['layout']} with {m['vehicles']} forklifts, "
+        f"strategy {m['strategy']}",
         f"  end time           {end:.2f} s (last stack done); every forklift parked at "
-        f"{rec.all_parked_time:.2f} s",
-        f"  stacks             {len(rec.stacks_done)}",
-        f"  subtasks           {len(rec.subtasks)}",
-        f"  decision failures  {rec.decision_failures}",
-        f"  waiting time       {rec.total_wait_s:.2f} s in all",
+        f"{rec['all_parked_s']:.2f} s",
+        f"  stacks             {len(rec['stacks_done'])}",
+        f"  subtasks           {len(rec['subtasks'])}",
+        f"  decision failures  {rec['decision_failures']}",
+        f"  waiting time       {sum(rec['wait_s'].values()):.2f} s in all",
         f"  wall time          {wall_s:.1f} s",
+        f"  record digest      {digest[:16]}",
         "  forklift  busy s   wait s   utilisation",
     ]
-    for v in rec.vehicles:
-        busy = rec.busy_s.get(v, 0.0)
-        lines.append(f"  {v:>8} {busy:8.1f} {rec.wait_s.get(v, 0.0):8.1f}   "
+    for v in sorted(rec["busy_s"], key=int):
+        busy = rec["busy_s"][v]
+        lines.append(f"  {v:>8} {busy:8.1f} {rec['wait_s'].get(v, 0.0):8.1f}   "
                      f"{busy / end if end else 0:.0%}")
     return lines
 
@@ -77,23 +90,67 @@ def summary_lines(rec: MissionRecord, wall_s: float) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     mission = mission_from_args(args)
     layout = load_layout(mission.layout)
-    options = engine_options(mission, layout, args.weights)
+    n = mission.vehicles if mission.vehicles is not None else len(layout.vehicle_starts)
+    if not 1 <= n <= len(layout.vehicle_starts):
+        raise ValueError(f"--vehicles {n}: layout {layout.name} has start poses for 1 to "
+                         f"{len(layout.vehicle_starts)} forklifts")
+    if args.speed <= 0:
+        raise ValueError(f"--speed must be positive, not {args.speed}")
+    if not args.inprocess:
+        engine_options(mission, layout, args.weights)  # bad weights: refused before starting
     bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}")
 
-    def progress(done: int, total: int, t: float, failures: int) -> None:
+    def progress(done: int, t: float, failures: int) -> None:
         bar.update(done, f"stacks  t={t:7.1f} s  failures {failures}")
 
     t0 = time.perf_counter()
-    options.progress = progress
-    rec = run_mission(mission, options, layout)
-    bar.close()
-    wall = time.perf_counter() - t0
-    print("\n".join(summary_lines(rec, wall)))
-    if args.out:
-        from fleet.record_io import record_to_dict
+    try:
+        if args.inprocess:
+            record = _run_inprocess(mission, layout, args.weights, progress)
+        else:
+            record = _run_processes(mission, n, args, progress)
+    finally:
+        bar.close()
+    if record is None:
+        return 1
+    from fleet.record_io import digest_of
 
+    print("\n".join(summary_lines(record, time.perf_counter() - t0, digest_of(record))))
+    if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         path = args.out / "mission.json"
-        path.write_text(json.dumps(record_to_dict(rec)))
+        path.write_text(json.dumps(record))
         print(f"wrote {path}")
     return 0
+
+
+def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
+                   progress) -> dict[str, Any]:
+    from fleet.record_io import record_to_dict
+
+    options = engine_options(mission, layout, weights,
+                             lambda done, total, t, failures: progress(done, t, failures))
+    return record_to_dict(run_mission(mission, options, layout))
+
+
+def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
+                   progress) -> dict[str, Any] | None:
+    import signal
+    import sys
+
+    from fleet.distributed import RunSpec, run_processes
+
+    def interrupted(*_) -> None:
+        raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
+
+    signal.signal(signal.SIGTERM, interrupted)
+
+    with tempfile.TemporaryDirectory(prefix="fleet-run-") as tmp:
+        run_dir = args.out or Path(tmp)
+        spec = RunSpec(mission, n, run_dir, args.clock, args.speed, args.weights, args.port)
+        outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
+        if outcome.done is None or not outcome.done.ok:
+            where = f"; logs in {outcome.log_dir}" if args.out else ""
+            print(f"fleet run: the mission failed: {outcome.error}{where}", file=sys.stderr)
+            return None
+        return outcome.done.record

@@ -1,19 +1,27 @@
-"""The service processes, each startable alone: `fleet reservation` (more to come)."""
+"""The service processes, each startable alone (`fleet run` starts them all; the compose
+deployment starts one per container): `fleet router`, `fleet reservation`, `fleet agent`,
+`fleet dispatcher`; and `fleet table` to look at the reservation service."""
 
 from __future__ import annotations
 
 import argparse
-import logging
-import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from dispatcher import process as dispatcher_process
+    from fleet import router
     from reservation import service
+    from vehicle_agent import process as agent_process
 
-    p = sub.add_parser("reservation", help="run the reservation service process",
-                       description=service.__doc__)
-    service.add_arguments(p)
-    p.set_defaults(handler=run_reservation)
+    for name, module, summary in (
+            ("router", router, "run a zenoh router for the other processes"),
+            ("reservation", service, "run the reservation service process"),
+            ("agent", agent_process, "run one forklift's agent process"),
+            ("dispatcher", dispatcher_process, "run the dispatcher process")):
+        p = sub.add_parser(name, help=summary, description=module.__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(p)
+        p.set_defaults(handler=_serve(module))
     t = sub.add_parser("table", help="show the reservation service's table, or follow it",
                        description="Load the table from a running reservation service and "
                        "print who holds how many cells; with --follow, print every change "
@@ -26,11 +34,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.set_defaults(handler=run_table)
 
 
-def run_reservation(args: argparse.Namespace) -> int:
-    from reservation import service
+def _serve(module):
+    def handler(args: argparse.Namespace) -> int:
+        from fleet.bus import setup_logging
 
-    logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
-    return service.serve(args)
+        setup_logging()
+        return module.serve(args)
+
+    return handler
 
 
 def run_table(args: argparse.Namespace) -> int:

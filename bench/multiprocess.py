@@ -1,0 +1,38 @@
+"""Fast-mode multi-process run against the in-process reference, side by side: the same
+`fleet run` command line with and without --inprocess, alternated, each a fresh process
+(so both pay interpreter start-up and imports), and their records compared by digest."""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+
+def _wall(args: list[str]) -> tuple[float, str]:
+    start = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "fleet", "run", *args], capture_output=True,
+                         text=True, check=True).stdout
+    digest = next(line.split()[-1] for line in out.splitlines() if "record digest" in line)
+    return time.perf_counter() - start, digest
+
+
+def run(layout: str = "paper", strategy: str = "ann", repeats: int = 3,
+        progress: Callable[[str], None] | None = None) -> dict:
+    base = ["--layout", layout, "--strategy", strategy, "--mission", "fill"]
+    walls: dict[str, list[float]] = {"inprocess": [], "processes": []}
+    digests = set()
+    for k in range(repeats):
+        for name, extra in (("inprocess", ["--inprocess"]), ("processes", [])):
+            wall, digest = _wall(base + extra)
+            walls[name].append(wall)
+            digests.add(digest)
+            if progress:
+                progress(f"run {k + 1}/{repeats} {name}: {wall:.1f} s")
+    inproc, procs = statistics.median(walls["inprocess"]), statistics.median(walls["processes"])
+    return {"ratio_layout": layout, "ratio_strategy": strategy, "ratio_repeats": repeats,
+            "inprocess_wall_s": round(inproc, 2), "multiprocess_wall_s": round(procs, 2),
+            "multiprocess_ratio": round(procs / inproc, 3),
+            "same_record": len(digests) == 1}

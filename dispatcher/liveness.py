@@ -1,0 +1,68 @@
+"""Who is alive: the liveliness tokens of the agents and the reservation service."""
+
+from __future__ import annotations
+
+import threading
+
+import zenoh
+
+from fleet.bus import Keys
+from fleet.errors import UserError
+
+
+class ParticipantLost(UserError):
+    """A process the mission depends on went away (its liveliness token is gone)."""
+
+
+class Liveness:
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.keys = keys
+        self.alive: set[int] = set()
+        self.lost: set[int] = set()
+        self.service_alive = False
+        self.changed = threading.Condition()
+        self._vehicles = session.liveliness().declare_subscriber(
+            keys.vehicle_alive("*"), self._on_vehicle, history=True)
+        self._service = session.liveliness().declare_subscriber(
+            keys.reservation_alive, self._on_service, history=True)
+
+    def _on_vehicle(self, sample: zenoh.Sample) -> None:
+        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        if vehicle is None:
+            return
+        with self.changed:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(vehicle)
+            else:
+                self.alive.discard(vehicle)
+                self.lost.add(vehicle)
+            self.changed.notify_all()
+
+    def _on_service(self, sample: zenoh.Sample) -> None:
+        with self.changed:
+            self.service_alive = sample.kind == zenoh.SampleKind.PUT
+            self.changed.notify_all()
+
+    def wait_for(self, vehicles: list[int], timeout: float) -> None:
+        with self.changed:
+            if not self.changed.wait_for(lambda: set(vehicles) <= self.alive, timeout):
+                missing = sorted(set(vehicles) - self.alive)
+                raise ParticipantLost(f"forklift agents {missing} did not come up within "
+                                      f"{timeout:g} s")
+
+    def wait_gone(self, vehicle: int, timeout: float) -> bool:
+        """Give the liveliness subscriber a moment to hear of a vehicle that just went."""
+        with self.changed:
+            return self.changed.wait_for(lambda: vehicle not in self.alive, timeout)
+
+    def check(self, vehicles: list[int]) -> None:
+        """Raise if one of `vehicles` went away."""
+        with self.changed:
+            gone = sorted(set(vehicles) - self.alive)
+        if gone:
+            raise ParticipantLost(f"forklift {gone[0]} went away (its agent's liveliness "
+                                  f"token is gone)")
+
+    def close(self) -> None:
+        self._vehicles.undeclare()
+        self._service.undeclare()

@@ -1,0 +1,125 @@
+"""`fleet dispatcher` / `python -m dispatcher`: the dispatcher process.
+
+It owns the mission: it waits for the reservation service and the forklift agents, runs the
+engine's dispatching loop (rank, Algorithm 1, scores, MLP) with the agents as executor and
+the clock as pacer, publishes progress on fleet/<run>/dispatch/progress and, at the end, the
+mission record on fleet/<run>/dispatch/done. It then stays up until it is stopped, so the
+last message is delivered before its session closes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import threading
+import time
+from pathlib import Path
+
+from dispatcher.clock import FastClock, RealtimeClock
+from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.remote import SENDER, RemoteExecutor
+from fleet.bus import (
+    RELIABLE,
+    Keys,
+    Requester,
+    RequestFailed,
+    add_bus_arguments,
+    bus_config,
+    open_session,
+    stop_on_signals,
+)
+from fleet.commands.run import add_mission_args, engine_options, mission_from_args
+from fleet.engine import Engine, MissionStuck
+from fleet.layout import load_layout
+from fleet.protocol import MissionDone, Progress, ProtocolError, encode
+from fleet.record_io import digest_of, record_to_dict
+from reservation.mirror import TableMirror, follow
+
+log = logging.getLogger("fleet.dispatcher")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_bus_arguments(p)
+    add_mission_args(p)
+    p.add_argument("--clock", choices=["fast", "realtime"], default="fast")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="real-time clock: sim seconds per wall second (default 1)")
+    p.add_argument("--out", type=Path, help="directory to write mission.json into")
+    p.add_argument("--startup-timeout", type=float, default=120.0,
+                   help="seconds to wait for the reservation service and every agent")
+    p.add_argument("--exit-when-done", action="store_true",
+                   help="exit after publishing the result instead of waiting to be stopped")
+
+
+def serve(args: argparse.Namespace) -> int:
+    mission = mission_from_args(args)
+    layout = load_layout(mission.layout)
+    options = engine_options(mission, layout, args.weights)
+    n = mission.vehicles if mission.vehicles is not None else len(layout.vehicle_starts)
+    vehicles = list(range(1, n + 1))
+    keys = Keys(args.run)
+    stop = threading.Event()
+    stop_on_signals(stop.set)
+    session = open_session(bus_config(args))
+    try:
+        token = session.liveliness().declare_token(keys.dispatcher_alive)
+        progress_pub = session.declare_publisher(keys.dispatch_progress)
+        done_pub = session.declare_publisher(keys.dispatch_done, congestion_control=RELIABLE)
+        seq = iter(range(1, 1 << 62))
+        liveness = Liveness(session, keys)
+        done = run_mission(session, keys, args, mission, layout, options, vehicles, liveness,
+                           lambda message, t: progress_pub.put(encode(message, SENDER,
+                                                                      next(seq), t)))
+        done_pub.put(encode(done, SENDER, next(seq), done.record.get("end_time_s", 0.0)))
+        if args.out and done.ok:
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / "mission.json").write_text(json.dumps(done.record))
+        log.info("mission %s; %s", "done" if done.ok else "failed", done.error or done.digest)
+        if not args.exit_when_done:
+            stop.wait()
+        liveness.close()
+        for declared in (done_pub, progress_pub, token):
+            declared.undeclare()
+    finally:
+        session.close()
+    return 0 if done.ok else 1
+
+
+def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: list[int],
+                liveness: Liveness, publish) -> MissionDone:
+    """Wait for everyone, run the engine, and say how it went (never raises for a mission
+    that could not finish: the error goes into the result)."""
+    t0 = time.perf_counter()
+    clock = None
+    try:
+        with liveness.changed:
+            if not liveness.changed.wait_for(lambda: liveness.service_alive,
+                                             args.startup_timeout):
+                raise ParticipantLost("no reservation service came up")
+        mirror = TableMirror()
+        changes = follow(session, keys, mirror, Requester(session, SENDER))
+        liveness.wait_for(vehicles, args.startup_timeout)
+        log.info("%d forklifts and the reservation service are up", len(vehicles))
+        if args.clock == "fast":
+            clock = FastClock(session, keys, vehicles, liveness, log)
+        else:
+            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness)
+
+        def progress(done: int, total: int, t: float, failures: int) -> None:
+            publish(Progress(done, total, t, failures), t)
+
+        options.progress = progress
+        executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
+        record = Engine(mission, options, layout, executor, clock).run()
+        changes.undeclare()
+        as_dict = record_to_dict(record)
+        return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
+                           wall_s=time.perf_counter() - t0, rejections=executor.rejections)
+    except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError) as exc:
+        log.error("mission failed: %s", exc)
+        return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)
+    finally:
+        if clock is not None:
+            clock.close()
+

@@ -1,0 +1,87 @@
+"""The engine's executor when the forklifts are agent processes: a task goes to the agent on
+fleet/<run>/vehicle/<id>/task, the agent plans and commits, and the answer is the committed
+trajectory. The dispatcher reads the reservation table from its own mirror of the service and
+waits for the mirror to hold each change before deciding again, so it decides on exactly the
+table the in-process engine would."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import zenoh
+
+from dispatcher.liveness import Liveness, ParticipantLost
+from fleet.bus import Keys, Requester, RequestFailed
+from fleet.execution import GOODS, Task
+from fleet.maneuvers import body_cells_at_rest
+from fleet.protocol import CommitRequest, Reply, TaskResult
+from fleet.reservations import Interval, ReservationTable, ReservationView
+from fleet.trajectory import PlanFailure, Pose, Trajectory
+from fleet.wire import result_from_wire, task_to_wire
+from reservation.mirror import TableMirror
+from reservation.store import to_wire
+
+SENDER = "dispatcher"
+TASK_TIMEOUT_S = 120.0  # a search is capped far below this; the agent may first resync
+SYNC_TIMEOUT_S = 30.0
+
+
+class RemoteExecutor:
+    def __init__(self, session: zenoh.Session, keys: Keys, mirror: TableMirror,
+                 liveness: Liveness, vehicles: list[int]) -> None:
+        self.keys = keys
+        self.mirror = mirror
+        self.liveness = liveness
+        self.vehicles = vehicles
+        self.store_requester = Requester(session, SENDER)
+        # no retry: an agent that does not answer is gone (liveliness says so)
+        self.task_requester = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
+        self.rejections: list[str] = []  # commits the store refused before an agent replanned
+
+    @property
+    def store(self) -> ReservationView:
+        # The table itself: only this dispatcher's own requests change it, and it waits for
+        # each change to arrive before it reads again.
+        return self.mirror.table
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        cells = set(body_cells_at_rest(pose.cell, pose.heading))
+
+        def parked(table: ReservationTable) -> bool:
+            return cells <= {r.cell for r in table.reservations(vehicle) if r.t1 == math.inf}
+
+        if not self.mirror.wait_until(parked, SYNC_TIMEOUT_S):
+            raise ParticipantLost(f"forklift {vehicle} is not parked at {pose} (its agent "
+                                  f"holds {self.mirror.table.reservations(vehicle)})")
+
+    def execute(self, task: Task) -> Trajectory | PlanFailure:
+        message = task_to_wire(task, self.task_requester.next_id(), self.mirror.revision)
+        try:
+            reply = self.task_requester.request(self.keys.vehicle_task(task.vehicle), message,
+                                                task.t_i).message
+        except RequestFailed as exc:
+            self.liveness.wait_gone(task.vehicle, 2.0)  # a dead agent: say so, not "no reply"
+            self.liveness.check(self.vehicles)
+            raise ParticipantLost(f"forklift {task.vehicle}: {exc}") from None
+        if not isinstance(reply, TaskResult) or reply.task_id != message.task_id:
+            raise ParticipantLost(f"forklift {task.vehicle} answered task {message.task_id} "
+                                  f"with {reply}")
+        self.rejections.extend(reply.rejections)
+        result = result_from_wire(reply)
+        if isinstance(result, Trajectory):
+            self._sync(reply.revision)
+        return result
+
+    def reserve_goods(self, intervals: Sequence[Interval]) -> None:
+        request = CommitRequest(self.store_requester.next_id(), GOODS, to_wire(intervals))
+        reply = self.store_requester.request(self.keys.reservation_request, request).message
+        if not isinstance(reply, Reply):
+            raise ParticipantLost(f"the reservation service answered a {reply.TYPE}")
+        if reply.ok:
+            self._sync(reply.revision)
+
+    def _sync(self, revision: int) -> None:
+        if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):
+            raise ParticipantLost(f"the reservation table did not reach revision {revision} "
+                                  f"within {SYNC_TIMEOUT_S:g} s")

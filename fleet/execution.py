@@ -1,0 +1,110 @@
+"""The seam between the dispatching loop and the forklifts (DESIGN.md section 7, the one
+store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
+`Pacer` holds the loop to a clock.
+
+In one process, `LocalExecutor` plans with the improved hybrid A* against a
+`ReservationTable` it owns and `NoPacer` lets the loop run flat out. The distributed runtime
+implements the same two interfaces over zenoh (`dispatcher.remote`): a task goes to the
+forklift's agent process, which plans against its mirror of the reservation service and
+commits there; the pacer publishes the clock. Everything the engine decides is therefore the
+same code in both, which is what makes a fast-mode run of processes equal, bit for bit, the
+in-process run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from fleet.dispatch import TaskKind
+from fleet.geometry import Cell
+from fleet.maneuvers import body_cells_at_rest
+from fleet.planner import PlannerCache
+from fleet.reservations import Interval, ReservationTable, ReservationView
+from fleet.trajectory import PlanFailure, Pose, Trajectory
+
+
+@dataclass(frozen=True)
+class Task:
+    """One subtask for one forklift: drive from `start` at rest at `t_i` to any of `goals`,
+    on the static map of the warehouse with the stacks in `filled` occupied."""
+
+    vehicle: int
+    kind: TaskKind
+    start: Pose
+    t_i: float
+    goals: tuple[Pose, ...]
+    filled: frozenset[Cell]
+    loaded: bool  # carrying goods on this trip
+
+
+class Executor(Protocol):
+    @property
+    def store(self) -> ReservationView:
+        """The reservation table as the dispatcher sees it (current after every call below)."""
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        """The vehicle stands at its start pose, reserved to infinity."""
+
+    def execute(self, task: Task) -> Trajectory | PlanFailure:
+        """Plan the task and commit its trajectory (releasing the vehicle's parking from t_i);
+        a failure commits nothing."""
+
+    def reserve_goods(self, intervals: Sequence[Interval]) -> None:
+        """Reserve stack cells for the goods on them (owner GOODS); refused silently where a
+        vehicle holds the cell, exactly as the table refuses a conflicting commit."""
+
+
+class Pacer(Protocol):
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        """Called before each dispatching decision with the earliest instant the next decision
+        can be for and each active vehicle's free time; returns the free times to decide with
+        (a real-time clock moves those that already passed to a reachable instant)."""
+
+    def finish(self, t_end: float) -> None:
+        """The mission is over at sim time t_end."""
+
+
+GOODS = 0  # owner id of stacks with goods on them, in the reservation table
+
+
+class LocalExecutor:
+    """Plans in this process against a table this process owns."""
+
+    def __init__(self, planners: PlannerCache) -> None:
+        self.planners = planners
+        self.table = ReservationTable()
+
+    @property
+    def store(self) -> ReservationView:
+        return self.table
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        conflict = self.table.park(vehicle, body_cells_at_rest(pose.cell, pose.heading), 0.0)
+        if conflict is not None:
+            raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
+                             f"{conflict.other}")
+
+    def execute(self, task: Task) -> Trajectory | PlanFailure:
+        result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
+                                                     task.goals, self.table)
+        if isinstance(result, Trajectory):
+            conflict = self.table.commit(task.vehicle, result.intervals,
+                                         release_from=result.t_start)
+            if conflict is not None:  # the planner checked against this very table
+                raise AssertionError(f"planned trajectory conflicts: {conflict}")
+        return result
+
+    def reserve_goods(self, intervals: Sequence[Interval]) -> None:
+        self.table.commit(GOODS, intervals)
+
+
+class NoPacer:
+    """The in-process reference: no clock to wait for."""
+
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        return t_free
+
+    def finish(self, t_end: float) -> None:
+        pass

@@ -1,0 +1,74 @@
+"""Child processes of one run: spawned (never forked: a forked zenoh session hangs), one log
+file each, and stopped together, politely first (SIGTERM lets each close its zenoh session)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleet.bus import PARENT_ENV
+
+STOP_TIMEOUT_S = 10.0
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen
+    log: Path
+
+
+class Launcher:
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.children: list[Child] = []
+        log_dir.mkdir(parents=True, exist_ok=True)
+
+    def start(self, name: str, fleet_args: list[str]) -> Child:
+        """Start `python -m fleet <fleet_args>` in its own process group (a Ctrl-C in the
+        terminal reaches only us; we stop the children in order)."""
+        path = self.log_dir / f"{name}.log"
+        with open(path, "wb") as log:
+            proc = subprocess.Popen([sys.executable, "-m", "fleet", *fleet_args],
+                                    stdin=subprocess.DEVNULL, stdout=log,
+                                    stderr=subprocess.STDOUT, start_new_session=True,
+                                    env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                         PARENT_ENV: str(os.getpid())})
+        child = Child(name, proc, path)
+        self.children.append(child)
+        return child
+
+    def exited(self) -> list[Child]:
+        return [c for c in self.children if c.proc.poll() is not None]
+
+    def stop_all(self) -> None:
+        """SIGTERM to every child but the first (the router), wait, then the router: a
+        process closing its zenoh session while its router is already gone can hang. What
+        does not stop in time gets SIGUSR1 (its stacks go to its log), then SIGKILL."""
+        first, rest = self.children[:1], self.children[1:]
+        for group in (rest, first):
+            for child in group:
+                if child.proc.poll() is None:
+                    child.proc.send_signal(signal.SIGTERM)
+            for child in group:
+                self._reap(child)
+
+    @staticmethod
+    def _reap(child: Child) -> None:
+        try:
+            child.proc.wait(STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            child.proc.send_signal(signal.SIGUSR1)
+            try:
+                child.proc.wait(1.0)
+            except subprocess.TimeoutExpired:
+                child.proc.kill()
+                child.proc.wait()
+
+    def tail(self, child: Child, lines: int = 5) -> str:
+        text = child.log.read_text(errors="replace").splitlines()
+        return "\n".join(f"    {line}" for line in text[-lines:])

@@ -1,0 +1,307 @@
+"""The distributed runtime: real processes (router, reservation service, one agent per
+forklift, dispatcher) talking over real zenoh sessions on loopback."""
+
+import itertools
+import logging
+import os
+import select
+import signal
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import msgpack
+import pytest
+from mission_check import journal_overlaps, record_problems
+from test_paper_missions import check_paper_mission
+
+from fleet.bus import PARENT_ENV, BusConfig, Keys, Requester, free_port, open_session, wait_alive
+from fleet.commands.run import engine_options
+from fleet.distributed import RunSpec, run_processes
+from fleet.engine import run_mission
+from fleet.layout import load_layout
+from fleet.mission import Mission, MissionKind, Strategy
+from fleet.protocol import (
+    Progress,
+    Reply,
+    TaskRequest,
+    TaskResult,
+    VehicleState,
+    decode,
+    encode,
+)
+from fleet.record_io import digest
+from reservation.mirror import TableMirror, follow
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("strategy,kind", [("ann", "fill"), ("ann", "empty"),
+                                           ("traffic", "fill"), ("traffic", "empty")])
+def test_fast_mode_processes_equal_the_inprocess_reference(strategy, kind, tmp_path):
+    mission = Mission("paper", MissionKind(kind), Strategy(strategy))
+    layout = load_layout("paper")
+    reference = run_mission(mission, engine_options(mission, layout, None), layout)
+    check_paper_mission(reference)  # the reference itself is sound (test_paper_missions.py)
+    outcome = run_processes(RunSpec(mission, 4, tmp_path))
+    assert outcome.error == ""
+    assert outcome.done.digest == digest(reference)
+    assert outcome.done.record["end_time_s"] == reference.end_time
+    assert journal_overlaps(tmp_path / "reservation.journal") == []
+
+
+# -- hostile messages on every key while a mission runs ---------------------------------------
+
+def hostile_payloads(key: str) -> list[bytes]:
+    good = encode(VehicleState(1, "0,0,E", 0, "", False), "intruder", 1, 0.0)
+    wrong_version = msgpack.packb({"v": 99, "type": "vehicle.state", "sender": "intruder",
+                                   "seq": 1, "t": 0.0, "body": {}})
+    return [b"\xc1 not msgpack " + key.encode(), good[:-3], wrong_version]
+
+
+class Intruder:
+    """Once the mission is under way (its first progress message), sends garbage, a truncated
+    message and a wrong-version message to every key some process listens on."""
+
+    def __init__(self, vehicles: int) -> None:
+        self.vehicles = vehicles
+        self.sent: dict[str, list] = defaultdict(list)
+        self.states: dict[int, list[float]] = defaultdict(list)
+        self.rejections: list[str] = []  # what fleet run's own listener logged
+
+    def on_ready(self, session, keys, launcher) -> None:
+        self.session, self.keys = session, keys
+        self.subscriber = session.declare_subscriber(keys.vehicle_state("*"), self._on_state)
+
+    def _on_state(self, sample) -> None:
+        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        self.states[vehicle].append(decode(sample.payload.to_bytes()).sim_time)
+
+    def on_progress(self, progress: Progress) -> None:
+        if self.sent:
+            return
+        keys = self.keys
+        for key in (keys.reservation_change, keys.clock, keys.dispatch_progress,
+                    keys.dispatch_done, *(keys.clock_ack(v) for v in self.vehicle_ids)):
+            for payload in hostile_payloads(key):
+                self.session.put(key, payload)
+                self.sent[key].append(payload)
+        for key in (keys.reservation_request, *(keys.vehicle_task(v) for v in self.vehicle_ids)):
+            for payload in hostile_payloads(key):
+                self.sent[key] += list(self.session.get(key, payload=payload, timeout=30))
+
+    @property
+    def vehicle_ids(self) -> range:
+        return range(1, self.vehicles + 1)
+
+    def run(self, spec: RunSpec):
+        handler = ListHandler(self.rejections)
+        logging.getLogger("fleet.run").addHandler(handler)
+        try:
+            return run_processes(spec, self.on_progress, self.on_ready)
+        finally:
+            logging.getLogger("fleet.run").removeHandler(handler)
+
+    def check(self, run_dir: Path, clock: str) -> None:
+        """Every listener logged each of the three, with the key, and answered the queries
+        with a refusal."""
+        keys = self.keys
+        agents = [f"agent-{v}" for v in self.vehicle_ids]
+        listeners = {keys.reservation_change: [*agents, "dispatcher"], keys.clock: agents,
+                     keys.reservation_request: ["reservation"]}
+        for v in self.vehicle_ids:
+            listeners[keys.vehicle_task(v)] = [f"agent-{v}"]
+            if clock == "fast":  # only the fast clock waits for acknowledgements
+                listeners[keys.clock_ack(v)] = ["dispatcher"]
+        logs = {p.stem: p.read_text() for p in (run_dir / "logs").glob("*.log")}
+        for key, names in listeners.items():
+            for name in names:
+                rejected = [line for line in logs[name].splitlines()
+                            if f"rejected a message on {key}:" in line
+                            or f"rejected a request on {key}:" in line]
+                assert len(rejected) == 3, (name, key, logs[name][-2000:])
+        for key in (keys.dispatch_progress, keys.dispatch_done):
+            assert len([r for r in self.rejections if f"on {key}:" in r]) == 3
+        for reply in self.sent[keys.reservation_request]:
+            answer = decode(reply.ok.payload.to_bytes()).message
+            assert isinstance(answer, Reply) and not answer.ok
+            assert answer.reason.startswith("malformed request")
+        for v in self.vehicle_ids:
+            replies = self.sent[keys.vehicle_task(v)]
+            assert len(replies) == 3
+            assert all(r.err.payload.to_bytes().startswith(b"rejected: ") for r in replies)
+
+
+class ListHandler(logging.Handler):
+    def __init__(self, into: list[str]) -> None:
+        super().__init__(logging.WARNING)
+        self.into = into
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.into.append(record.getMessage())
+
+
+def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
+    """Garbage on every key during a fast-mode run: every listener rejects it with a logged
+    reason, nobody dies, and the record is still identical to the in-process reference."""
+    mission = Mission("small", MissionKind.FILL, Strategy.ANN)
+    layout = load_layout("small")
+    reference = run_mission(mission, engine_options(mission, layout, None), layout)
+    intruder = Intruder(2)
+    outcome = intruder.run(RunSpec(mission, 2, tmp_path))
+    assert outcome.error == ""
+    assert outcome.done.digest == digest(reference)
+    intruder.check(tmp_path, "fast")
+
+
+def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
+    mission = Mission("small", MissionKind.FILL, Strategy.ANN)
+    intruder = Intruder(2)
+    outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock="realtime", speed=40.0))
+    assert outcome.error == ""
+    record = outcome.done.record
+    assert record_problems(record, load_layout("small")) == []
+    assert len(record["stacks_done"]) == 24
+    assert journal_overlaps(tmp_path / "reservation.journal") == []
+    for vehicle in intruder.vehicle_ids:  # 10 Hz of wall time: 4 sim s apart at speed 40
+        times = sorted(intruder.states[vehicle])
+        gaps = sorted(b - a for a, b in itertools.pairwise(times))
+        assert len(times) > 50 and 2.0 < gaps[len(gaps) // 2] < 8.0
+    intruder.check(tmp_path, "realtime")
+
+
+def test_a_dead_agent_stops_the_run_and_every_process_with_it(tmp_path):
+    children = {}
+
+    def on_ready(session, keys, launcher):
+        children.update({c.name: c.proc for c in launcher.children})
+
+    def on_progress(progress):
+        if children["agent-2"].poll() is None:
+            children["agent-2"].kill()
+
+    mission = Mission("small", MissionKind.FILL, Strategy.TRAFFIC)
+    outcome = run_processes(RunSpec(mission, 2, tmp_path), on_progress, on_ready)
+    assert outcome.done is not None and not outcome.done.ok  # the dispatcher's verdict
+    assert "forklift 2 went away" in outcome.error
+    assert children["agent-2"].returncode == -signal.SIGKILL
+    assert children["dispatcher"].returncode == 1  # the mission failed
+    others = {name: p.returncode for name, p in children.items()
+              if name not in ("agent-2", "dispatcher")}
+    assert others == dict.fromkeys(others, 0)  # each stopped cleanly, session closed
+
+
+# -- two agents, one contested goal ----------------------------------------------------------
+
+def fleet_process(args, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "fleet", *args], cwd=ROOT,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"}, **kwargs)
+
+
+def test_conflicting_commits_one_wins_the_other_is_told_why_and_replans(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    keys = Keys(f"c{os.getpid()}")
+    common = ["--run", keys.run, "--connect", endpoint]
+    with open(tmp_path / "services.log", "wb") as logs:  # the children keep their copies
+        router = fleet_process(["router", "--listen", endpoint], stderr=logs)
+        service = fleet_process(["reservation", *common, "--journal",
+                                 str(tmp_path / "journal")], stderr=logs)
+    agents = {v: fleet_process(["agent", *common, "--id", str(v), "--layout", "small"],
+                               stderr=subprocess.PIPE, text=True) for v in (1, 2)}
+    session = open_session(BusConfig("client", (endpoint,), connect_timeout_ms=30_000))
+    try:
+        for v in agents:
+            assert wait_alive(session, keys.vehicle_alive(v), 60)
+        mirror = TableMirror()
+        changes = follow(session, keys, mirror, Requester(session, "test"))
+        assert mirror.wait_until(lambda table: table.vehicles() == [1, 2], 30)
+        starts = load_layout("small").vehicle_starts
+        goals = ["1,4,W", "1,3,W"]  # both forklifts prefer the same one
+        service.send_signal(signal.SIGSTOP)  # the commits queue up until both are planned
+        try:
+            pending = {v: session.get(keys.vehicle_task(v), timeout=60, payload=encode(
+                TaskRequest(f"t{v}", v, "deliver", str(starts[v - 1]), 0.0, goals, [], False,
+                            mirror.revision), "test", v, 0.0)) for v in agents}
+            for proc in agents.values():  # both have planned on the same table
+                while "committing task" not in proc.stderr.readline():
+                    pass
+        finally:
+            service.send_signal(signal.SIGCONT)
+        results = {v: decode(next(iter(pending[v])).ok.payload.to_bytes()).message
+                   for v in agents}
+        assert all(isinstance(r, TaskResult) and r.ok for r in results.values())
+        losers = [v for v, r in results.items() if r.rejections]
+        assert len(losers) == 1
+        loser, winner = losers[0], 3 - losers[0]
+        assert f"held by vehicle {winner}" in results[loser].rejections[0]
+        assert results[loser].goal != results[winner].goal  # the winner parks there for good
+        changes.undeclare()
+    finally:
+        session.close()
+        for proc in (*agents.values(), service, router):
+            proc.send_signal(signal.SIGTERM)
+        codes = [proc.wait(30) for proc in (*agents.values(), service, router)]
+    assert codes == [0, 0, 0, 0]  # each closed its session and exited
+    assert "refused the commit" in agents[loser].stderr.read()
+    assert journal_overlaps(tmp_path / "journal") == []
+
+
+# -- stopping ---------------------------------------------------------------------------------
+
+def children_of(pid: int) -> list[int]:
+    """Processes started by `fleet run` with this pid (they carry it in their environment)."""
+    marker = f"{PARENT_ENV}={pid}".encode()
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if marker in (entry / "environ").read_bytes().split(b"\0"):
+                    found.append(int(entry.name))
+            except OSError:
+                continue  # gone meanwhile, or not ours to read
+    return found
+
+
+def started_run(tmp_path) -> tuple[subprocess.Popen, list[int]]:
+    """`fleet run` on the paper warehouse as a user starts it, once its mission is under way
+    (its first progress message), with the pids of the processes it started."""
+    port = free_port()
+    run = fleet_process(["run", "--port", str(port), "--out", str(tmp_path)],
+                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    session = open_session(BusConfig("client", (f"tcp/127.0.0.1:{port}",),
+                                     connect_timeout_ms=60_000))
+    try:
+        progress = session.declare_subscriber(Keys("default").dispatch_progress)
+        progress.recv()  # blocks until the first subtask is done
+    finally:
+        session.close()
+    return run, children_of(run.pid)
+
+
+def exited(pid: int, timeout: float) -> bool:
+    """Wait for a process that is not our child to end (a pidfd becomes readable)."""
+    try:
+        fd = os.pidfd_open(pid)
+    except ProcessLookupError:
+        return True
+    try:
+        return bool(select.select([fd], [], [], timeout)[0])
+    finally:
+        os.close(fd)
+
+
+def test_fleet_run_stops_every_process_it_started_on_sigterm(tmp_path):
+    run, children = started_run(tmp_path)
+    assert len(children) == 7  # router, reservation, four agents, dispatcher
+    run.send_signal(signal.SIGTERM)
+    assert run.wait(60) == 130
+    assert "interrupted" in run.stderr.read().decode()
+    assert all(exited(pid, 0) for pid in children)
+
+
+def test_children_of_a_killed_fleet_run_stop_by_themselves(tmp_path):
+    run, children = started_run(tmp_path)
+    run.kill()  # no chance to stop anything
+    run.wait()
+    assert all(exited(pid, 30) for pid in children)

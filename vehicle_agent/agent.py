@@ -1,0 +1,276 @@
+"""The vehicle agent process: one forklift (DESIGN.md section 2).
+
+It declares a liveliness token, parks at its start pose (a reservation to infinity), keeps a
+mirror of the reservation service's table, and answers tasks on fleet/<run>/vehicle/<id>/task:
+plan with the improved hybrid A* against the mirror, commit through the service, replan when
+the service refuses the commit (another forklift got there first), answer with the committed
+trajectory. It drives what it committed on the clock and publishes its state: at every
+maneuver in fast mode (then acknowledges the tick), at 10 Hz in real time.
+
+Zenoh callbacks only enqueue; one worker thread does everything that blocks, in arrival order.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass
+
+import zenoh
+
+from fleet.bus import RELIABLE, Keys, Requester, RequestFailed, wait_alive
+from fleet.execution import Task
+from fleet.layout import Layout
+from fleet.maneuvers import body_cells_at_rest
+from fleet.planner import PlannerCache
+from fleet.protocol import (
+    ClockAck,
+    ClockTick,
+    CommitRequest,
+    Message,
+    ProtocolError,
+    Reply,
+    TaskRequest,
+    TaskResult,
+    decode,
+    encode,
+)
+from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.wire import result_to_wire, task_from_wire
+from reservation.mirror import TableMirror, follow, resync
+from reservation.store import to_wire
+from vehicle_agent.driving import Drive
+
+log = logging.getLogger("fleet.agent")
+MAX_COMMIT_ATTEMPTS = 5
+STATE_PERIOD_S = 0.1  # 10 Hz in real time
+SYNC_TIMEOUT_S = 10.0
+
+
+class SimClock:
+    """This process's view of the one clock: the last tick heard."""
+
+    def __init__(self) -> None:
+        self.tick: ClockTick | None = None
+
+    @property
+    def realtime(self) -> bool:
+        return self.tick is not None and self.tick.mode == "realtime"
+
+    def now(self) -> float:
+        tick = self.tick
+        if tick is None:
+            return 0.0
+        if tick.mode == "realtime":
+            return tick.t + tick.speed * (time.time() - tick.wall)
+        return tick.t
+
+
+@dataclass
+class _Inbox:
+    kind: str  # "task", "tick" or "stop"
+    item: object = None
+
+
+class Agent:
+    def __init__(self, session: zenoh.Session, keys: Keys, vehicle: int, layout: Layout,
+                 start: Pose) -> None:
+        self.session = session
+        self.keys = keys
+        self.vehicle = vehicle
+        self.layout = layout
+        self.sender = f"vehicle-{vehicle}"
+        self.requester = Requester(session, self.sender)
+        self.mirror = TableMirror()
+        self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)
+        self.drive = Drive(vehicle, start, layout)
+        self.drive_lock = threading.Lock()
+        self.clock = SimClock()
+        self.inbox: queue.Queue[_Inbox] = queue.Queue()
+        self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
+        self.published_until = -1.0
+        self.seq = itertools.count(1)  # shared by two threads; next() is atomic
+        self.rejected = 0
+        self.stopping = threading.Event()
+
+    # -- the process ---------------------------------------------------------------------------
+    def run(self, service_timeout_s: float = 60.0) -> None:
+        if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
+            raise RuntimeError(f"no reservation service on {self.keys.root} within "
+                               f"{service_timeout_s:g} s")
+        changes = follow(self.session, self.keys, self.mirror, self.requester)
+        self._park()
+        state_pub = self.session.declare_publisher(
+            self.keys.vehicle_state(self.vehicle),
+            congestion_control=zenoh.CongestionControl.DROP)  # a slow reader must not stall us
+        ack_pub = self.session.declare_publisher(self.keys.clock_ack(self.vehicle),
+                                                 congestion_control=RELIABLE)
+        queryable = self.session.declare_queryable(
+            self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
+        clock_sub = self.session.declare_subscriber(
+            self.keys.clock, lambda s: self.inbox.put(_Inbox("tick", s)))
+        token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
+        ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
+        ticker.start()
+        self._publish(state_pub, self.drive.state_at(0.0), 0.0)
+        log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
+        try:
+            while (entry := self.inbox.get()).kind != "stop":
+                if entry.kind == "task":
+                    self._answer(entry.item)
+                elif entry.kind == "tick":
+                    self._on_tick(entry.item, state_pub, ack_pub)
+                if self.mirror.needs_resync:
+                    resync(self.mirror, self.keys, self.requester)
+        finally:
+            self.stopping.set()
+            ticker.join()
+            for declared in (token, clock_sub, queryable, ack_pub, state_pub, changes):
+                declared.undeclare()
+
+    def stop(self) -> None:
+        self.inbox.put(_Inbox("stop"))
+
+    def _park(self) -> None:
+        cells = body_cells_at_rest(self.drive.pose.cell, self.drive.pose.heading)
+        reply = self._commit(f"{self.sender}:park", [(c[0], c[1], 0.0, float("inf"))
+                                                       for c in cells], None)
+        if not reply.ok:
+            raise RuntimeError(f"cannot park at the start pose {self.drive.pose}: "
+                               f"{reply.reason}")
+        self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+
+    # -- tasks ---------------------------------------------------------------------------------
+    def _answer(self, query: zenoh.Query) -> None:
+        try:
+            try:
+                message = self._decode(query.payload.to_bytes() if query.payload else b"",
+                                       TaskRequest, str(query.key_expr))
+            except ProtocolError as exc:
+                query.reply_err(f"rejected: {exc}".encode())
+                return
+            answer = self.answers.get(message.task_id)
+            if answer is None:
+                answer = self.answers[message.task_id] = self._perform(message)
+            query.reply(query.key_expr, self._encode(answer, message.t_i))
+        finally:
+            query.drop()
+
+    def _perform(self, message: TaskRequest) -> TaskResult:
+        try:
+            task = task_from_wire(message)
+        except ProtocolError as exc:
+            return self._failed(message, FailureReason.START_BLOCKED, f"bad task: {exc}")
+        if task.vehicle != self.vehicle:
+            return self._failed(message, FailureReason.START_BLOCKED,
+                                f"task for vehicle {task.vehicle} sent to {self.vehicle}")
+        if task.start != self.drive.pose:
+            return self._failed(message, FailureReason.START_BLOCKED,
+                                f"the task starts at {task.start} but the forklift will "
+                                f"stand at {self.drive.pose}")
+        if not self.mirror.wait_for(message.revision, SYNC_TIMEOUT_S):
+            resync(self.mirror, self.keys, self.requester)
+        rejections: list[str] = []
+        for attempt in range(MAX_COMMIT_ATTEMPTS):
+            result = self._plan(task)
+            if isinstance(result, PlanFailure):
+                return result_to_wire(message.task_id, self.vehicle, result,
+                                      self.mirror.revision, rejections)
+            if self.clock.realtime and self.clock.now() > result.t_start:
+                return self._failed(message, FailureReason.LATE,
+                                    f"planned for t={result.t_start:.2f} but it is already "
+                                    f"t={self.clock.now():.2f}", rejections)
+            log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
+            reply = self._commit(f"{self.sender}:{message.task_id}:{attempt}",
+                                 to_wire(result.intervals), result.t_start)
+            if reply.ok:
+                with self.drive_lock:
+                    self.drive.add(result, task.loaded)
+                return result_to_wire(message.task_id, self.vehicle, result, reply.revision,
+                                      rejections)
+            rejections.append(reply.reason)
+            log.info("task %s: the store refused the commit (%s); replanning",
+                     message.task_id, reply.reason)
+            self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+        return self._failed(message, FailureReason.REFUSED,
+                            f"{len(rejections)} commits refused; last: {rejections[-1]}",
+                            rejections)
+
+    def _plan(self, task: Task) -> Trajectory | PlanFailure:
+        planner = self.planners.get(task.filled)
+        with self.mirror.frozen():
+            return planner.plan(self.vehicle, task.start, task.t_i, task.goals,
+                                self.mirror.table)
+
+    def _failed(self, message: TaskRequest, reason: FailureReason, detail: str,
+                rejections: list[str] | None = None) -> TaskResult:
+        log.warning("task %s failed: %s: %s", message.task_id, reason.value, detail)
+        return result_to_wire(message.task_id, self.vehicle, PlanFailure(reason, detail, 0),
+                              self.mirror.revision, rejections or [])
+
+    def _commit(self, request_id: str, intervals, release_from: float | None) -> Reply:
+        """Commit through the service; a lost reply is retried with the same request id, so
+        the store applies it once."""
+        request = CommitRequest(request_id, self.vehicle, intervals, release_from)
+        for attempt in range(3):
+            try:
+                reply = self.requester.request(self.keys.reservation_request, request,
+                                               self.clock.now()).message
+            except RequestFailed as exc:
+                log.warning("commit %s: %s (attempt %d)", request_id, exc, attempt + 1)
+                continue
+            if isinstance(reply, Reply):
+                return reply
+            log.warning("commit %s: the service answered a %s", request_id, reply.TYPE)
+        raise RuntimeError(f"the reservation service did not answer commit {request_id}")
+
+    # -- the clock and the state stream --------------------------------------------------------
+    def _on_tick(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
+        try:
+            tick = self._decode(sample.payload.to_bytes(), ClockTick, str(sample.key_expr))
+        except ProtocolError:
+            return
+        if self.clock.tick is not None and tick.tick <= self.clock.tick.tick:
+            log.warning("ignored tick %d on %s: not after tick %d", tick.tick,
+                        sample.key_expr, self.clock.tick.tick)
+            return
+        self.clock.tick = tick
+        if tick.mode != "fast":
+            return
+        with self.drive_lock:
+            for t in self.drive.maneuver_starts(self.published_until, tick.t):
+                self._publish(state_pub, self.drive.state_at(t), t)
+            self.published_until = max(self.published_until, tick.t)
+            self.drive.forget_before(tick.t)
+        ack_pub.put(self._encode(ClockAck(tick.tick, self.vehicle), tick.t))
+
+    def _realtime_states(self, state_pub) -> None:
+        while not self.stopping.wait(STATE_PERIOD_S):
+            if not self.clock.realtime:
+                continue
+            t = self.clock.now()
+            with self.drive_lock:
+                state = self.drive.state_at(t)
+                self.drive.forget_before(t)
+            self._publish(state_pub, state, t)
+
+    # -- wire ----------------------------------------------------------------------------------
+    def _publish(self, publisher, state, t: float) -> None:
+        publisher.put(self._encode(state, t))
+
+    def _encode(self, message: Message, t: float) -> bytes:
+        return encode(message, self.sender, next(self.seq), t)
+
+    def _decode(self, payload: bytes, expected: type, key: str):
+        try:
+            message = decode(payload).message
+            if not isinstance(message, expected):
+                raise ProtocolError(f"expected {expected.TYPE}, got {message.TYPE}")
+        except ProtocolError as exc:
+            self.rejected += 1
+            log.warning("rejected a message on %s: %s", key, exc)
+            raise
+        return message
