@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="exit after publishing the result instead of waiting to be stopped")
 
 
+class Stopped(Exception):
+    """SIGTERM or SIGINT arrived in the middle of the mission."""
+
+
 def serve(args: argparse.Namespace) -> int:
     mission = mission_from_args(args)
     layout = load_layout(mission.layout)
@@ -60,7 +64,14 @@ def serve(args: argparse.Namespace) -> int:
     vehicles = list(range(1, n + 1))
     keys = Keys(args.run)
     stop = threading.Event()
-    stop_on_signals(stop.set)
+    in_mission = threading.Event()
+
+    def stop_requested() -> None:  # runs in the main thread, wherever it is
+        stop.set()
+        if in_mission.is_set():
+            raise Stopped("stopped by a signal before the mission ended")
+
+    stop_on_signals(stop_requested)
     session = open_session(bus_config(args))
     try:
         token = session.liveliness().declare_token(keys.dispatcher_alive)
@@ -68,9 +79,15 @@ def serve(args: argparse.Namespace) -> int:
         done_pub = session.declare_publisher(keys.dispatch_done, congestion_control=RELIABLE)
         seq = iter(range(1, 1 << 62))
         liveness = Liveness(session, keys)
-        done = run_mission(session, keys, args, mission, layout, options, vehicles, liveness,
-                           lambda message, t: progress_pub.put(encode(message, SENDER,
-                                                                      next(seq), t)))
+        try:
+            in_mission.set()
+            done = run_mission(session, keys, args, mission, layout, options, vehicles,
+                               liveness, lambda message, t: progress_pub.put(
+                                   encode(message, SENDER, next(seq), t)))
+        except Stopped as exc:  # arrived just as the mission returned
+            done = MissionDone(False, error=str(exc))
+        finally:
+            in_mission.clear()
         done_pub.put(encode(done, SENDER, next(seq), done.record.get("end_time_s", 0.0)))
         if args.out and done.ok:
             args.out.mkdir(parents=True, exist_ok=True)
@@ -116,7 +133,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         as_dict = record_to_dict(record)
         return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                            wall_s=time.perf_counter() - t0, rejections=executor.rejections)
-    except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError) as exc:
+    except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError, Stopped) as exc:
         log.error("mission failed: %s", exc)
         return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)
     finally:

@@ -235,6 +235,6 @@ def stop_on_signals(stop: Callable[[], None]) -> None:
         def watch() -> None:
             while os.getppid() == int(parent):
                 time.sleep(1.0)  # polling the parent: there is no event to wait on
-            stop()
+            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
 
         threading.Thread(target=watch, daemon=True, name="parent-watch").start()

@@ -41,14 +41,26 @@ def test_inside_a_maneuver_the_position_moves_between_its_poses():
     assert math.isclose(mid.x, (xa + xb) / 2) and math.isclose(mid.y, (ya + yb) / 2)
 
 
-def test_fast_mode_publishes_each_maneuver_start_once():
+def test_fast_mode_publishes_each_maneuver_start_and_arrival_once():
     layout, traj = small_trip()
     drive = Drive(1, traj.start, layout)
     drive.add(traj, loaded=False)
-    first = drive.maneuver_starts(-1.0, traj.steps[2].t0)
-    rest = drive.maneuver_starts(traj.steps[2].t0, math.inf)
+    first = drive.due(traj.steps[2].t0)
+    rest = drive.due(traj.t_end + 100)
     assert first == [s.t0 for s in traj.steps[:3]]
     assert rest == sorted({s.t0 for s in traj.steps[3:]} | {traj.t_end})
+    assert drive.due(math.inf) == []
+
+
+def test_a_leg_committed_at_the_instant_of_the_last_tick_still_gets_its_first_state():
+    layout, traj = small_trip(0.0)
+    drive = Drive(1, traj.start, layout)
+    drive.add(traj, loaded=False)
+    assert drive.due(traj.t_end + 5) != []  # the clock stands at t_end + 5 ...
+    back = HybridAStar(layout.grid_map(), layout.vehicle.dims).plan(
+        1, traj.goal, traj.t_end + 5, [traj.start], ReservationTable())
+    drive.add(back, loaded=False)  # ... and the next leg starts right then
+    assert drive.due(traj.t_end + 5) == [back.t_start]
 
 
 def test_forgetting_old_legs_keeps_the_pose():
@@ -58,6 +70,7 @@ def test_forgetting_old_legs_keeps_the_pose():
     back = HybridAStar(layout.grid_map(), layout.vehicle.dims).plan(
         1, traj.goal, traj.t_end + 5, [traj.start], ReservationTable())
     drive.add(back, loaded=False)
+    drive.due(back.t_start)  # fast mode published the first leg
     drive.forget_before(back.t_start)
     assert len(drive.legs) == 1 and drive.rest_pose == traj.goal
     assert drive.state_at(traj.t_end + 1).pose == str(traj.goal)

@@ -153,6 +153,13 @@ def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
     assert outcome.error == ""
     assert outcome.done.digest == digest(reference)
     intruder.check(tmp_path, "fast")
+    for vehicle in intruder.vehicle_ids:  # a state at every maneuver start and arrival
+        expected = set()
+        for sub in outcome.done.record["subtasks"]:
+            if sub["vehicle"] == vehicle:
+                expected |= {step[3] for step in sub["steps"]} | {sub["t_end"]}
+        # (the state at rest at t=0 may go out before this listener subscribed)
+        assert set(intruder.states[vehicle]) - {0.0} == expected - {0.0}
 
 
 def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):

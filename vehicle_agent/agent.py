@@ -91,7 +91,6 @@ class Agent:
         self.clock = SimClock()
         self.inbox: queue.Queue[_Inbox] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
-        self.published_until = -1.0
         self.seq = itertools.count(1)  # shared by two threads; next() is atomic
         self.rejected = 0
         self.stopping = threading.Event()
@@ -241,9 +240,8 @@ class Agent:
         if tick.mode != "fast":
             return
         with self.drive_lock:
-            for t in self.drive.maneuver_starts(self.published_until, tick.t):
+            for t in self.drive.due(tick.t):
                 self._publish(state_pub, self.drive.state_at(t), t)
-            self.published_until = max(self.published_until, tick.t)
             self.drive.forget_before(tick.t)
         ack_pub.put(self._encode(ClockAck(tick.tick, self.vehicle), tick.t))
 
@@ -254,7 +252,7 @@ class Agent:
             t = self.clock.now()
             with self.drive_lock:
                 state = self.drive.state_at(t)
-                self.drive.forget_before(t)
+                self.drive.forget_before(t, published=False)
             self._publish(state_pub, state, t)
 
     # -- wire ----------------------------------------------------------------------------------

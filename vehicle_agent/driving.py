@@ -16,10 +16,14 @@ from fleet.protocol import VehicleState
 from fleet.trajectory import Pose, Trajectory
 
 
-@dataclass(frozen=True)
+@dataclass
 class Leg:
     trajectory: Trajectory
     loaded: bool
+    sent: int = 0  # events (maneuver starts, then the arrival) already published in fast mode
+
+    def events(self) -> list[float]:
+        return [s.t0 for s in self.trajectory.steps] + [self.trajectory.t_end]
 
 
 class Drive:
@@ -38,9 +42,11 @@ class Drive:
     def add(self, trajectory: Trajectory, loaded: bool) -> None:
         self.legs.append(Leg(trajectory, loaded))
 
-    def forget_before(self, t: float) -> None:
-        """Drop legs that ended before t (their goal becomes the rest pose)."""
-        while self.legs and self.legs[0].trajectory.t_end < t and len(self.legs) > 1:
+    def forget_before(self, t: float, published: bool = True) -> None:
+        """Drop legs that ended before t (their goal becomes the rest pose); the last leg
+        stays. With `published`, only legs whose every state fast mode has published."""
+        while (len(self.legs) > 1 and self.legs[0].trajectory.t_end < t
+               and (not published or self.legs[0].sent == len(self.legs[0].events()))):
             self.rest_pose = self.legs.pop(0).trajectory.goal
 
     def state_at(self, t: float) -> VehicleState:
@@ -61,16 +67,16 @@ class Drive:
                                        step.manner.label)
         return self._state(pose, Manner.STOP, 0.0, 0, loaded, "")
 
-    def maneuver_starts(self, after: float, until: float) -> list[float]:
-        """Instants in (after, until] at which a maneuver starts or a leg ends (fast mode
-        publishes the state at each)."""
+    def due(self, until: float) -> list[float]:
+        """Instants up to `until` whose state fast mode has not published yet: each maneuver
+        start and each arrival, once (a leg committed at the very instant of the last tick
+        still gets its first state). Marks them published."""
         out = []
         for leg in self.legs:
-            for step in leg.trajectory.steps:
-                if after < step.t0 <= until:
-                    out.append(step.t0)
-            if after < leg.trajectory.t_end <= until:
-                out.append(leg.trajectory.t_end)
+            events = leg.events()
+            while leg.sent < len(events) and events[leg.sent] <= until:
+                out.append(events[leg.sent])
+                leg.sent += 1
         return sorted(set(out))
 
     def _state(self, start: Pose, manner: Manner, s: float, speed: int, loaded: bool,

@@ -145,9 +145,14 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
 
     signal.signal(signal.SIGTERM, interrupted)
 
+    from fleet.bus import free_port
+
+    port = args.port or free_port()
+    print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with: fleet table "
+          f"--connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="fleet-run-") as tmp:
         run_dir = args.out or Path(tmp)
-        spec = RunSpec(mission, n, run_dir, args.clock, args.speed, args.weights, args.port)
+        spec = RunSpec(mission, n, run_dir, args.clock, args.speed, args.weights, port)
         outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
         if outcome.done is None or not outcome.done.ok:
             where = f"; logs in {outcome.log_dir}" if args.out else ""
