@@ -246,9 +246,11 @@ def test_conflicting_commits_one_wins_the_other_is_told_why_and_replans(tmp_path
         changes.undeclare()
     finally:
         session.close()
-        for proc in (*agents.values(), service, router):
-            proc.send_signal(signal.SIGTERM)
-        codes = [proc.wait(30) for proc in (*agents.values(), service, router)]
+        codes = []
+        for group in ((*agents.values(), service), (router,)):  # the router last
+            for proc in group:
+                proc.send_signal(signal.SIGTERM)
+            codes += [proc.wait(30) for proc in group]
     assert codes == [0, 0, 0, 0]  # each closed its session and exited
     assert "refused the commit" in agents[loser].stderr.read()
     assert journal_overlaps(tmp_path / "journal") == []

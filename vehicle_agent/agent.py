@@ -69,9 +69,13 @@ class SimClock:
         return tick.t
 
 
+class Stopped(Exception):
+    """SIGTERM or SIGINT: the agent leaves whatever it was doing."""
+
+
 @dataclass
 class _Inbox:
-    kind: str  # "task", "tick" or "stop"
+    kind: str  # "task" or "tick"
     item: object = None
 
 
@@ -117,7 +121,8 @@ class Agent:
         self._publish(state_pub, self.drive.state_at(0.0), 0.0)
         log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
         try:
-            while (entry := self.inbox.get()).kind != "stop":
+            while True:
+                entry = self.inbox.get()
                 if entry.kind == "task":
                     self._answer(entry.item)
                 elif entry.kind == "tick":
@@ -131,7 +136,11 @@ class Agent:
                 declared.undeclare()
 
     def stop(self) -> None:
-        self.inbox.put(_Inbox("stop"))
+        """Stop now, from a signal handler (it runs in the main thread, which is the worker):
+        a task or commit in progress is abandoned; nothing half-done is committed, because a
+        commit is one request the service applies whole or not at all."""
+        self.stopping.set()
+        raise Stopped("stopped by a signal")
 
     def _park(self) -> None:
         cells = body_cells_at_rest(self.drive.pose.cell, self.drive.pose.heading)

@@ -14,7 +14,7 @@ from fleet.bus import (
 from fleet.errors import UserError
 from fleet.layout import load_layout
 from fleet.trajectory import Pose
-from vehicle_agent.agent import Agent
+from vehicle_agent.agent import Agent, Stopped
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,6 +38,8 @@ def serve(args: argparse.Namespace) -> int:
         agent = Agent(session, Keys(args.run), args.id, layout, start)
         stop_on_signals(agent.stop)
         agent.run()
+    except Stopped:
+        pass  # a clean stop: the session is closed below
     finally:
         session.close()
     return 0
