@@ -32,6 +32,7 @@ def measure(agents: int, layout: Path, window_s: float, startup_timeout_s: float
     common = ["--run", keys.run, "--connect", endpoint]
     received: list[tuple[float, float]] = []  # (receive wall, sim time carried)
     clock: list[ClockTick] = []
+    clock_started = threading.Event()
     lock = threading.Lock()
 
     def on_state(sample) -> None:
@@ -47,6 +48,7 @@ def measure(agents: int, layout: Path, window_s: float, startup_timeout_s: float
         message = decode(sample.payload.to_bytes()).message
         if isinstance(message, ClockTick):
             clock.append(message)
+            clock_started.set()
 
     with tempfile.TemporaryDirectory(prefix="fleet-scale-") as tmp:
         launcher = Launcher(Path(tmp) / "logs")
@@ -66,7 +68,8 @@ def measure(agents: int, layout: Path, window_s: float, startup_timeout_s: float
                                           "--clock", "realtime", "--speed", "1",
                                           "--startup-timeout", str(startup_timeout_s)])
             deadline = time.monotonic() + startup_timeout_s
-            while not clock:  # the dispatcher starts the clock once every agent is up
+            # the dispatcher starts the clock once every agent is up
+            while not clock_started.wait(1.0):  # the timeout paces the check on the children
                 for child in launcher.exited():
                     raise RuntimeError(f"{agents} agents: {child.name} exited with status "
                                        f"{child.proc.returncode} before the clock started:\n"
@@ -74,7 +77,6 @@ def measure(agents: int, layout: Path, window_s: float, startup_timeout_s: float
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"{agents} agents: the clock did not start within "
                                        f"{startup_timeout_s:g} s")
-                time.sleep(0.5)  # a benchmark's wait for a slow start, not synchronisation
             time.sleep(2.0)  # let every agent hear the clock before the window opens
             with lock:
                 received.clear()

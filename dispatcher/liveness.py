@@ -43,6 +43,11 @@ class Liveness:
             self.service_alive = sample.kind == zenoh.SampleKind.PUT
             self.changed.notify_all()
 
+    def wait_for_service(self, timeout: float) -> None:
+        with self.changed:
+            if not self.changed.wait_for(lambda: self.service_alive, timeout):
+                raise ParticipantLost(f"no reservation service came up within {timeout:g} s")
+
     def wait_for(self, vehicles: list[int], timeout: float) -> None:
         with self.changed:
             if not self.changed.wait_for(lambda: set(vehicles) <= self.alive, timeout):

@@ -110,10 +110,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
     t0 = time.perf_counter()
     clock = None
     try:
-        with liveness.changed:
-            if not liveness.changed.wait_for(lambda: liveness.service_alive,
-                                             args.startup_timeout):
-                raise ParticipantLost("no reservation service came up")
+        liveness.wait_for_service(args.startup_timeout)
         mirror = TableMirror()
         changes = follow(session, keys, mirror, Requester(session, SENDER))
         liveness.wait_for(vehicles, args.startup_timeout)

@@ -123,8 +123,9 @@ class Requester:
     """Sends requests with a per-sender sequence number and decodes the single reply.
 
     A request nobody answers (no queryable reachable: the server is starting, restarting, or
-    its router has not yet propagated it) is sent again with backoff for up to `retry_s`;
-    every request we send is idempotent (commits carry request ids, tasks task ids)."""
+    its router has not yet propagated it), or whose reply does not come within `timeout_s`,
+    is sent again with backoff for up to `retry_s`; every request we send is idempotent
+    (commits carry request ids, tasks task ids)."""
 
     def __init__(self, session: zenoh.Session, sender: str, timeout_s: float = 5.0,
                  retry_s: float = 15.0) -> None:
@@ -154,10 +155,10 @@ class Requester:
                     return decode(reply.ok.payload.to_bytes())
                 except ProtocolError as exc:
                     raise RequestFailed(f"{key}: malformed reply: {exc}") from None
-            if time.monotonic() - start >= self.timeout_s:
-                raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s")
+            timed_out = time.monotonic() - start >= self.timeout_s
             if time.monotonic() + backoff > give_up:
-                raise RequestFailed(f"{key}: nobody answered (no process serves this key)")
+                raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s" if timed_out
+                                    else f"{key}: nobody answered (no process serves this key)")
             time.sleep(backoff)  # backoff before asking again, not synchronisation
             backoff = min(2 * backoff, 2.0)
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from fleet.bus import RELIABLE, Keys, Requester, RequestFailed, wait_alive
+from fleet.bus import RELIABLE, Keys, Requester, RequestFailed, received, wait_alive
 from fleet.execution import Task
 from fleet.layout import Layout
 from fleet.maneuvers import body_cells_at_rest
@@ -96,7 +96,6 @@ class Agent:
         self.inbox: queue.Queue[_Inbox] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
         self.seq = itertools.count(1)  # shared by two threads; next() is atomic
-        self.rejected = 0
         self.stopping = threading.Event()
 
     # -- the process ---------------------------------------------------------------------------
@@ -220,26 +219,22 @@ class Agent:
                               self.mirror.revision, rejections or [])
 
     def _commit(self, request_id: str, intervals, release_from: float | None) -> Reply:
-        """Commit through the service; a lost reply is retried with the same request id, so
-        the store applies it once."""
+        """Commit through the service (the requester retries a lost reply with the same
+        request id, which the store applies once)."""
         request = CommitRequest(request_id, self.vehicle, intervals, release_from)
-        for attempt in range(3):
-            try:
-                reply = self.requester.request(self.keys.reservation_request, request,
-                                               self.clock.now()).message
-            except RequestFailed as exc:
-                log.warning("commit %s: %s (attempt %d)", request_id, exc, attempt + 1)
-                continue
-            if isinstance(reply, Reply):
-                return reply
-            log.warning("commit %s: the service answered a %s", request_id, reply.TYPE)
-        raise RuntimeError(f"the reservation service did not answer commit {request_id}")
+        try:
+            reply = self.requester.request(self.keys.reservation_request, request,
+                                           self.clock.now()).message
+        except RequestFailed as exc:
+            raise RuntimeError(f"commit {request_id}: {exc}") from None
+        if not isinstance(reply, Reply):
+            raise RuntimeError(f"commit {request_id}: the service answered a {reply.TYPE}")
+        return reply
 
     # -- the clock and the state stream --------------------------------------------------------
     def _on_tick(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
-        try:
-            tick = self._decode(sample.payload.to_bytes(), ClockTick, str(sample.key_expr))
-        except ProtocolError:
+        tick = received(sample, ClockTick, log)
+        if tick is None:
             return
         if self.clock.tick is not None and tick.tick <= self.clock.tick.tick:
             log.warning("ignored tick %d on %s: not after tick %d", tick.tick,
@@ -277,7 +272,6 @@ class Agent:
             if not isinstance(message, expected):
                 raise ProtocolError(f"expected {expected.TYPE}, got {message.TYPE}")
         except ProtocolError as exc:
-            self.rejected += 1
             log.warning("rejected a message on %s: %s", key, exc)
             raise
         return message

@@ -5,15 +5,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
+from fleet.bus import free_port
+from fleet.distributed import RunSpec, run_processes
 from fleet.engine import EngineOptions, run_mission
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import ProgressBar
+from fleet.record_io import digest_of, record_to_dict
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -113,8 +118,6 @@ def run(args: argparse.Namespace) -> int:
         bar.close()
     if record is None:
         return 1
-    from fleet.record_io import digest_of
-
     print("\n".join(summary_lines(record, time.perf_counter() - t0, digest_of(record))))
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -126,8 +129,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
                    progress) -> dict[str, Any]:
-    from fleet.record_io import record_to_dict
-
     options = engine_options(mission, layout, weights,
                              lambda done, total, t, failures: progress(done, t, failures))
     return record_to_dict(run_mission(mission, options, layout))
@@ -135,18 +136,10 @@ def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
                    progress) -> dict[str, Any] | None:
-    import signal
-    import sys
-
-    from fleet.distributed import RunSpec, run_processes
-
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
     signal.signal(signal.SIGTERM, interrupted)
-
-    from fleet.bus import free_port
-
     port = args.port or free_port()
     print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with: fleet table "
           f"--connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)

@@ -10,6 +10,7 @@ import argparse
 def register(sub: argparse._SubParsersAction) -> None:
     from dispatcher import process as dispatcher_process
     from fleet import router
+    from fleet.bus import add_bus_arguments
     from reservation import service
     from vehicle_agent import process as agent_process
 
@@ -26,10 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Load the table from a running reservation service and "
                        "print who holds how many cells; with --follow, print every change "
                        "as it is published until Ctrl-C.")
-    t.add_argument("--run", default="default", help="run name: keys live under fleet/RUN/")
-    t.add_argument("--mode", choices=["client", "peer"], default="client")
-    t.add_argument("--connect", action="append", default=[],
-                   help="zenoh endpoint to connect to (default tcp/127.0.0.1:7447)")
+    add_bus_arguments(t)
     t.add_argument("--follow", action="store_true", help="keep printing changes")
     t.set_defaults(handler=run_table)
 
@@ -45,11 +43,11 @@ def _serve(module):
 
 
 def run_table(args: argparse.Namespace) -> int:
-    from fleet.bus import BusConfig, Keys, Requester, open_session
+    from fleet.bus import Keys, Requester, bus_config, open_session
     from reservation.mirror import TableMirror, follow
 
     keys = Keys(args.run)
-    session = open_session(BusConfig(args.mode, tuple(args.connect) or BusConfig().connect))
+    session = open_session(bus_config(args))
     try:
         mirror = TableMirror()
         subscriber = follow(session, keys, mirror, Requester(session, "fleet-table"))
