@@ -7,16 +7,21 @@ from __future__ import annotations
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 
 
 def _wall(args: list[str]) -> tuple[float, str]:
-    start = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "fleet", "run", *args], capture_output=True,
-                         text=True, check=True).stdout
+    # each run's recording, journal and logs go to a directory of its own, removed after
+    # (fleet run would otherwise keep them under runs/ in the current directory)
+    with tempfile.TemporaryDirectory(prefix="fleet-bench-run-") as out_dir:
+        start = time.perf_counter()
+        out = subprocess.run([sys.executable, "-m", "fleet", "run", *args, "--out", out_dir],
+                             capture_output=True, text=True, check=True).stdout
+        wall = time.perf_counter() - start  # not counting the removal of the directory
     digest = next(line.split()[-1] for line in out.splitlines() if "record digest" in line)
-    return time.perf_counter() - start, digest
+    return wall, digest
 
 
 def run(layout: str = "paper", strategy: str = "ann", repeats: int = 3,

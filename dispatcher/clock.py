@@ -87,7 +87,7 @@ class RealtimeClock:
         self.wall0 = time.time()
         self.tick = 0
         self.stopping = threading.Event()
-        self.publisher = session.declare_publisher(keys.clock)
+        self.publisher = session.declare_publisher(keys.clock, congestion_control=RELIABLE)
         self._publish()
         self.ticker = threading.Thread(target=self._tick, daemon=True)
         self.ticker.start()

@@ -2,28 +2,27 @@
 
 It owns the mission: it waits for the reservation service and the forklift agents, runs the
 engine's dispatching loop (rank, Algorithm 1, scores, MLP) with the agents as executor and
-the clock as pacer, publishes progress on fleet/<run>/dispatch/progress and, at the end, the
-mission record on fleet/<run>/dispatch/done. It then stays up until it is stopped, so the
+the clock as pacer, publishes what the run is (dispatch/mission), each subtask, stack done and
+decision failure as it happens, progress and, at the end, the mission record on
+fleet/<run>/dispatch/done. It then stays up until it is stopped, so the
 last message is delivered before its session closes.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import threading
 import time
-from pathlib import Path
 
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.remote import SENDER, RemoteExecutor
 from fleet.bus import (
-    RELIABLE,
     Keys,
     Requester,
     RequestFailed,
+    Stream,
     add_bus_arguments,
     bus_config,
     open_session,
@@ -32,8 +31,17 @@ from fleet.bus import (
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.engine import Engine, MissionStuck
 from fleet.layout import load_layout
-from fleet.protocol import MissionDone, Progress, ProtocolError, encode
+from fleet.protocol import (
+    DecisionFailure,
+    MissionDone,
+    Progress,
+    ProtocolError,
+    StackDone,
+    SubtaskEvent,
+    encode,
+)
 from fleet.record_io import digest_of, record_to_dict
+from fleet.recording import mission_info
 from reservation.mirror import TableMirror, follow
 
 log = logging.getLogger("fleet.dispatcher")
@@ -45,9 +53,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clock", choices=["fast", "realtime"], default="fast")
     p.add_argument("--speed", type=float, default=1.0,
                    help="real-time clock: sim seconds per wall second (default 1)")
-    p.add_argument("--out", type=Path, help="directory to write mission.json into")
     p.add_argument("--startup-timeout", type=float, default=120.0,
                    help="seconds to wait for the reservation service and every agent")
+    p.add_argument("--command", default="",
+                   help="the command line that started the run, for its recording (default: "
+                   "this process's)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit after publishing the result instead of waiting to be stopped")
 
@@ -75,28 +85,34 @@ def serve(args: argparse.Namespace) -> int:
     session = open_session(bus_config(args))
     try:
         token = session.liveliness().declare_token(keys.dispatcher_alive)
-        progress_pub = session.declare_publisher(keys.dispatch_progress)
-        done_pub = session.declare_publisher(keys.dispatch_done, congestion_control=RELIABLE)
-        seq = iter(range(1, 1 << 62))
+        info = mission_info(mission, layout, n, args.clock, args.speed, args.command)
+        info_pub = Stream(session, keys.dispatch_mission, SENDER, reliable=True)
+        info_answer = session.declare_queryable(  # for a recorder that joins late
+            keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0)))
+        # Every event must reach the recorder: publishers wait rather than drop.
+        streams = {kind: Stream(session, key, SENDER, reliable=True)
+                   for kind, key in ((Progress.TYPE, keys.dispatch_progress),
+                                     (SubtaskEvent.TYPE, keys.dispatch_subtask),
+                                     (StackDone.TYPE, keys.dispatch_stack),
+                                     (DecisionFailure.TYPE, keys.dispatch_failure))}
+        done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
         try:
             in_mission.set()
+            info_pub.put(info, 0.0)
             done = run_mission(session, keys, args, mission, layout, options, vehicles,
-                               liveness, lambda message, t: progress_pub.put(
-                                   encode(message, SENDER, next(seq), t)))
+                               liveness, lambda message, t: streams[message.TYPE].put(
+                                   message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
             in_mission.clear()
-        done_pub.put(encode(done, SENDER, next(seq), done.record.get("end_time_s", 0.0)))
-        if args.out and done.ok:
-            args.out.mkdir(parents=True, exist_ok=True)
-            (args.out / "mission.json").write_text(json.dumps(done.record))
+        done_pub.put(done, done.record.get("end_time_s", 0.0))
         log.info("mission %s; %s", "done" if done.ok else "failed", done.error or done.digest)
         if not args.exit_when_done:
             stop.wait()
         liveness.close()
-        for declared in (done_pub, progress_pub, token):
+        for declared in (done_pub, info_pub, info_answer, *streams.values(), token):
             declared.undeclare()
     finally:
         session.close()
@@ -124,6 +140,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
             publish(Progress(done, total, t, failures), t)
 
         options.progress = progress
+        options.events = publish
         executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
         record = Engine(mission, options, layout, executor, clock).run()
         changes.undeclare()

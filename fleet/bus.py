@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import itertools
 import json
 import logging
 import os
@@ -82,6 +83,30 @@ class Keys:
     def dispatcher_alive(self) -> str:
         return f"{self.root}/dispatch/alive"
 
+    @property
+    def dispatch_mission(self) -> str:
+        return f"{self.root}/dispatch/mission"
+
+    @property
+    def dispatch_subtask(self) -> str:
+        return f"{self.root}/dispatch/subtask"
+
+    @property
+    def dispatch_stack(self) -> str:
+        return f"{self.root}/dispatch/stack"
+
+    @property
+    def dispatch_failure(self) -> str:
+        return f"{self.root}/dispatch/failure"
+
+    @property
+    def recorder_alive(self) -> str:
+        return f"{self.root}/recorder/alive"
+
+    @property
+    def recorder_status(self) -> str:
+        return f"{self.root}/recorder/status"
+
     @staticmethod
     def vehicle_of(key: str) -> int | None:
         """The vehicle id in a .../vehicle/<id>/... or .../ack/<id> key, if any."""
@@ -113,6 +138,24 @@ class BusConfig:
 
 def open_session(config: BusConfig) -> zenoh.Session:
     return zenoh.open(config.zenoh_config())
+
+
+class Stream:
+    """A publisher with its own sequence numbers (1, 2, ...), so whoever records the key can
+    count the messages it missed."""
+
+    def __init__(self, session: zenoh.Session, key: str, sender: str,
+                 reliable: bool = False) -> None:
+        options = {"congestion_control": RELIABLE} if reliable else {}
+        self.publisher = session.declare_publisher(key, **options)
+        self.sender = sender
+        self.seq = itertools.count(1)  # next() is atomic: threads may share a stream
+
+    def put(self, message: Message, sim_time: float) -> None:
+        self.publisher.put(encode(message, self.sender, next(self.seq), sim_time))
+
+    def undeclare(self) -> None:
+        self.publisher.undeclare()
 
 
 class RequestFailed(RuntimeError):
@@ -221,7 +264,7 @@ def setup_logging() -> None:
     SIGUSR1 writes every thread's stack there (what a stuck process is doing)."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+    faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
 
 
 PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children

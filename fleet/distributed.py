@@ -1,12 +1,13 @@
 """One mission as processes on this machine (what `fleet run` does): a zenoh router on a
-loopback port, the reservation service, one agent per forklift and the dispatcher, all
-clients of the router. This process follows the dispatcher's progress and result, and stops
-every child when the mission ends, on Ctrl-C, or as soon as any child dies."""
+loopback port, the recorder, the reservation service, one agent per forklift and the
+dispatcher, all clients of the router. This process follows the dispatcher's progress and
+result, and stops every child when the mission ends, on Ctrl-C, or as soon as any child dies."""
 
 from __future__ import annotations
 
 import logging
 import queue
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -14,12 +15,13 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.bus import BusConfig, Keys, free_port, open_session, received
-from fleet.launcher import Launcher
+from fleet.bus import BusConfig, Keys, free_port, open_session, received, wait_alive
+from fleet.launcher import Child, Launcher
 from fleet.mission import Mission
-from fleet.protocol import MissionDone, Progress
+from fleet.protocol import MissionDone, Progress, RecorderStatus
 
 ROUTER_TIMEOUT_MS = 30_000
+RECORDED_TIMEOUT_S = 10.0
 log = logging.getLogger("fleet.run")
 
 
@@ -34,6 +36,13 @@ class RunSpec:
     port: int | None = None  # router port on 127.0.0.1 (default: a free one)
     run: str = "default"
     extra: dict[str, list[str]] = field(default_factory=dict)  # more flags per process kind
+    command: str = ""  # the user's command line, for the recording
+    foxglove: int | None = None  # serve the live Foxglove view on this port
+    record: bool = True  # start the recorder (benchmarks measure the run without it)
+
+    @property
+    def recording(self) -> Path:
+        return self.run_dir / "run.mcap"
 
 
 @dataclass
@@ -53,6 +62,8 @@ def dispatcher_args(spec: RunSpec) -> list[str]:
     args = ["--layout", m.layout, "--mission", m.kind.value, "--strategy", m.strategy.value,
             "--vehicles", str(spec.vehicles), "--seed", str(m.seed), "--clock", spec.clock,
             "--speed", repr(spec.speed)]
+    if spec.command:
+        args += ["--command", spec.command]
     if spec.weights is not None:
         args += ["--weights", str(spec.weights)]
     return args
@@ -68,6 +79,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     log_dir = spec.run_dir / "logs"
     journal = spec.run_dir / "reservation.journal"
     journal.unlink(missing_ok=True)  # a new run starts from an empty table
+    spec.recording.unlink(missing_ok=True)  # and a new recording
     launcher = Launcher(log_dir)
     inbox: queue.Queue[tuple[str, object]] = queue.Queue()
     session = None
@@ -78,6 +90,15 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         common = ["--run", spec.run, "--connect", endpoint]
+        recorded = threading.Event()  # the recorder holds the mission's result
+        if spec.record:
+            subscribers.append(session.declare_subscriber(
+                keys.recorder_status, lambda sample: _on_status(sample, recorded)))
+            live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
+            recorder = launcher.start("recorder", ["recorder", *common, "--out",
+                                                   str(spec.recording), *live,
+                                                   *spec.extra.get("recorder", [])])
+            _wait_started(session, keys.recorder_alive, launcher, recorder)
         launcher.start("reservation", ["reservation", *common, "--journal", str(journal),
                                        *spec.extra.get("reservation", [])])
         for v in range(1, spec.vehicles + 1):
@@ -88,6 +109,9 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         if on_ready is not None:
             on_ready(session, keys, launcher)
         done = _follow(inbox, launcher, on_progress)
+        if spec.record and not recorded.wait(RECORDED_TIMEOUT_S):
+            log.warning("the recorder had not recorded the mission's result within %g s",
+                        RECORDED_TIMEOUT_S)
         for subscriber in subscribers:
             subscriber.undeclare()
         return RunOutcome(done, "" if done.ok else done.error, endpoint, log_dir)
@@ -120,6 +144,21 @@ def _follow(inbox: queue.Queue, launcher: Launcher,
             return message
         if isinstance(message, Progress) and on_progress is not None:
             on_progress(message)
+
+
+def _on_status(sample: zenoh.Sample, recorded: threading.Event) -> None:
+    status = received(sample, RecorderStatus, log)
+    if status is not None and status.done_seen:
+        recorded.set()
+
+
+def _wait_started(session: zenoh.Session, token: str, launcher: Launcher, child: Child) -> None:
+    """Wait for a child's liveliness token; fail at once, with its log, if it exits."""
+    deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
+    while not wait_alive(session, token, 0.5):  # the slice only paces the exit check
+        if child.proc.poll() is not None or time.monotonic() > deadline:
+            raise RunFailed(f"{child.name} did not start; the end of {child.log}:\n"
+                            f"{launcher.tail(child)}")
 
 
 def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:

@@ -25,6 +25,7 @@ from fleet.maneuvers import Manner
 from fleet.mission import Mission, MissionKind
 from fleet.params import DispatchParams
 from fleet.planner import HybridAStar, PlannerCache
+from fleet.protocol import DecisionFailure, Message, StackDone, SubtaskEvent
 from fleet.reservations import Interval, ReservationTable
 from fleet.trajectory import PlanFailure, Pose, Trajectory
 
@@ -64,6 +65,16 @@ class Subtask:
     postponed: bool
 
 
+def subtask_event(s: Subtask) -> SubtaskEvent:
+    """A subtask as the dispatcher announces it (and as mission records hold it)."""
+    return SubtaskEvent(
+        s.vehicle, s.kind.value, s.target, s.stack_index, s.t_i, s.t_end, s.t_done,
+        s.postponed,
+        [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
+         for st in s.trajectory.steps],
+        [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in s.trajectory.intervals])
+
+
 @dataclass(frozen=True)
 class FailureEvent:
     t: float
@@ -100,6 +111,9 @@ class EngineOptions:
     collect_training: bool = False
     max_consecutive_failures: int = 400
     progress: Callable[[int, int, float, int], None] | None = None  # done, total, t, failures
+    # Each subtask, stack done and decision failure as it happens, with its sim time (the
+    # dispatcher publishes them; the in-process run records them).
+    events: Callable[[Message, float], None] | None = None
 
 
 def _far_clusters(layout: Layout) -> set[str]:
@@ -233,7 +247,7 @@ class Engine:
             failed = [v for v in failed if v not in outcome.postponements]  # a new instant
             decision = outcome.decision
             if decision is None:
-                self.record.failures.append(FailureEvent(
+                self._failed(FailureEvent(
                     min(v.t_free for v in active), None, "dispatch",
                     f"no solid decision within iter_dispatch={p.iter_dispatch}"))
                 streak += 1
@@ -244,8 +258,8 @@ class Engine:
                     failed, streak = [], 0
                 else:
                     self.record.decision_failures += 1
-                    self.record.failures.append(FailureEvent(decision.t_i, decision.vehicle,
-                                                             "plan", result.reason.value))
+                    self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
+                                              result.reason.value))
                     if self.options.collect_training and decision.kind is TaskKind.DELIVER:
                         self._collect(decision, None, remaining)
                     failed = [v for v in failed if v != decision.vehicle] + [decision.vehicle]
@@ -260,6 +274,15 @@ class Engine:
         rec.busy_s = {v.vehicle: v.busy_s for v in self.vehicles.values()}
         rec.wait_s = {v.vehicle: v.wait_s for v in self.vehicles.values()}
         return rec
+
+    def _emit(self, message: Message, t: float) -> None:
+        if self.options.events is not None:
+            self.options.events(message, t)
+
+    def _failed(self, failure: FailureEvent) -> None:
+        self.record.failures.append(failure)
+        self._emit(DecisionFailure(failure.t, failure.vehicle, failure.stage, failure.reason),
+                   failure.t)
 
     def _plan(self, decision: Decision) -> Trajectory | PlanFailure:
         """Plan and commit (the executor does both; a failure commits nothing)."""
@@ -291,6 +314,7 @@ class Engine:
                 self.present.discard(stack.cell)
                 self.executor.reserve_goods([Interval(stack.cell, 0.0, t_done)])
             self.record.stacks_done.append((target.name, stack.index, t_done))
+            self._emit(StackDone(target.name, stack.index, v.vehicle, t_done), t_done)
             self.record.end_time = max(self.record.end_time, t_done)
             if self.options.collect_training:
                 self._collect(decision, traj, remaining)
@@ -305,9 +329,11 @@ class Engine:
         else:
             v.linked_kind = TaskKind.RETURN if v.linked_cluster else None
         self.trip_times.append(traj.t_end - decision.t_i)
-        self.record.subtasks.append(Subtask(
-            v.vehicle, decision.kind, target.name, target.stack_index, target.stack_cell,
-            decision.t_i, traj.t_end, t_done, traj, decision.postponed))
+        subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,
+                          target.stack_cell, decision.t_i, traj.t_end, t_done, traj,
+                          decision.postponed)
+        self.record.subtasks.append(subtask)
+        self._emit(subtask_event(subtask), decision.t_i)
         if self.options.progress:
             self.options.progress(len(self.record.stacks_done), self.total, traj.t_end,
                                   self.record.decision_failures)

@@ -13,6 +13,7 @@ in-process run.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -21,6 +22,7 @@ from fleet.dispatch import TaskKind
 from fleet.geometry import Cell
 from fleet.maneuvers import body_cells_at_rest
 from fleet.planner import PlannerCache
+from fleet.protocol import Change
 from fleet.reservations import Interval, ReservationTable, ReservationView
 from fleet.trajectory import PlanFailure, Pose, Trajectory
 
@@ -75,16 +77,25 @@ class LocalExecutor:
     def __init__(self, planners: PlannerCache) -> None:
         self.planners = planners
         self.table = ReservationTable()
+        self.changes: list[Change] = []  # what a reservation service would have published
+
+    def _log(self, vehicle: int, intervals: Sequence[Interval],
+             release_from: float | None) -> None:
+        self.changes.append(Change(self.table.revision, "commit", vehicle,
+                                   [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals],
+                                   release_from))
 
     @property
     def store(self) -> ReservationView:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        conflict = self.table.park(vehicle, body_cells_at_rest(pose.cell, pose.heading), 0.0)
+        cells = body_cells_at_rest(pose.cell, pose.heading)
+        conflict = self.table.park(vehicle, cells, 0.0)
         if conflict is not None:
             raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
                              f"{conflict.other}")
+        self._log(vehicle, [Interval(c, 0.0, math.inf) for c in cells], None)
 
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
@@ -94,10 +105,12 @@ class LocalExecutor:
                                          release_from=result.t_start)
             if conflict is not None:  # the planner checked against this very table
                 raise AssertionError(f"planned trajectory conflicts: {conflict}")
+            self._log(task.vehicle, result.intervals, result.t_start)
         return result
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
-        self.table.commit(GOODS, intervals)
+        if self.table.commit(GOODS, intervals) is None:
+            self._log(GOODS, intervals, None)
 
 
 class NoPacer:

@@ -13,6 +13,7 @@ from pathlib import Path
 from fleet.bus import PARENT_ENV
 
 STOP_TIMEOUT_S = 10.0
+STOPPED_LAST = ("recorder", "router")  # in this order, after every other child
 
 
 @dataclass
@@ -46,11 +47,13 @@ class Launcher:
         return [c for c in self.children if c.proc.poll() is not None]
 
     def stop_all(self) -> None:
-        """SIGTERM to every child but the first (the router), wait, then the router: a
-        process closing its zenoh session while its router is already gone can hang. What
-        does not stop in time gets SIGUSR1 (its stacks go to its log), then SIGKILL."""
-        first, rest = self.children[:1], self.children[1:]
-        for group in (rest, first):
+        """SIGTERM to the workers, wait, then the recorder (it records them leaving), then
+        the router: a process closing its zenoh session while its router is already gone can
+        hang. What does not stop in time gets SIGUSR1 (its stacks go to its log), then
+        SIGKILL."""
+        waves = [[c for c in self.children if c.name not in STOPPED_LAST]]
+        waves += [[c for c in self.children if c.name == name] for name in STOPPED_LAST]
+        for group in waves:
             for child in group:
                 if child.proc.poll() is None:
                     child.proc.send_signal(signal.SIGTERM)

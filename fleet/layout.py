@@ -198,14 +198,20 @@ def builtin_names() -> list[str]:
 def load_layout(name_or_path: str | Path) -> Layout:
     """A built-in layout by name (`paper`, `small`, ...) or a TOML file by path."""
     text = str(name_or_path)
+    where = f"layout {text}" if text in builtin_names() else text
+    return parse_layout(layout_source(name_or_path), where)
+
+
+def layout_source(name_or_path: str | Path) -> str:
+    """The TOML text of a built-in layout or a layout file."""
+    text = str(name_or_path)
     if text in builtin_names():
-        source = resources.files("fleet.layouts").joinpath(f"{text}.toml").read_text()
-        return parse_layout(source, f"layout {text}")
+        return resources.files("fleet.layouts").joinpath(f"{text}.toml").read_text()
     path = Path(text)
     if not path.is_file():
         raise UserError(f"layout {text!r} is neither a built-in layout "
                         f"({', '.join(builtin_names())}) nor a file")
-    return parse_layout(path.read_text(), str(path))
+    return path.read_text()
 
 
 def parse_layout(source: str, where: str) -> Layout:

@@ -1,22 +1,36 @@
 """Plots of a mission record (seed 000, Figures 13 to 18 style): the filling sequence by
-quarter, a Gantt chart of the subtasks, and a snapshot of the warehouse at one instant.
+quarter, a Gantt chart of the subtasks, a snapshot of the warehouse at one instant, a heat map
+of where the forklifts were, and an animation of the whole run.
 
-They read the record as the plain dict of `fleet.record_io`, so they draw any saved run.
+They read the record as the plain dict of `fleet.record_io` (for a recording, as rebuilt by
+`fleet.recorded_mission.record_of`), so they draw any saved run; the heat map also reads the
+recorded vehicle states.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
+from itertools import pairwise
+from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib import animation
+from matplotlib.collections import PatchCollection
+from matplotlib.colors import LogNorm, to_rgba
 from matplotlib.patches import Patch
+from PIL import Image
 
+from fleet.errors import UserError
+from fleet.geometry import Cell, body_corners, cells_under
 from fleet.layout import Layout
 from fleet.maneuvers import Manner, world_pose
 from fleet.plotting import COLORS, _body, _cell_square, draw_layout
+from fleet.protocol import VehicleState
 from fleet.record_io import held_intervals
 from fleet.trajectory import Pose
 
@@ -122,3 +136,252 @@ def snapshot(path: str, layout: Layout, record: dict, t: float, ahead: float = 2
         ax.text(x, y, str(v), ha="center", va="center", fontsize=8, color="white")
     _save(fig, ax, path, record, f"t = {t:.2f} s: forklifts and their reserved cells "
           f"(dark: now, light: next {ahead:g} s)")
+
+
+# ----------------------------------------------------------------------------- heat map
+
+# A state stands for at most this long: a gap in the recording (lost messages, a paused
+# clock, the end of a run) must not paint the last pose seen as occupied for the whole gap.
+STATE_GAP_CAP_S = 2.0
+
+
+def body_cells(layout: Layout, x: float, y: float, theta: float) -> set[Cell]:
+    """Cells under a forklift's body at a recorded pose. States carry world coordinates
+    (vehicle_agent/driving.py adds `layout.origin`); body_corners and cells_under work in the
+    frame where cell (0, 0) is centred at the origin, so the origin comes off first."""
+    ox, oy = layout.origin
+    return cells_under(body_corners(x - ox, y - oy, theta, layout.vehicle.dims),
+                       layout.cell_size)
+
+
+def occupancy_seconds(layout: Layout, states: Iterable[tuple[float, VehicleState]],
+                      cap_s: float = STATE_GAP_CAP_S) -> dict[Cell, float]:
+    """Seconds each cell was under some forklift's body. Each (sim time, state) counts for the
+    time until the same forklift's next state, at most cap_s; a forklift's last state counts
+    for nothing (nothing says how long it held). Cells off the grid are kept; states with a
+    non-finite time or pose are skipped."""
+    tracks: dict[int, list[tuple[float, VehicleState]]] = {}
+    for t, state in states:
+        if all(math.isfinite(v) for v in (t, state.x, state.y, state.theta)):
+            tracks.setdefault(state.vehicle, []).append((t, state))
+    seconds: dict[Cell, float] = {}
+    cells_at: dict[tuple[float, float, float], set[Cell]] = {}  # parked forklifts repeat poses
+    for track in tracks.values():
+        track.sort(key=lambda ts: ts[0])
+        for (t, state), (t_next, _) in pairwise(track):
+            dt = min(t_next - t, cap_s)
+            if dt <= 0:
+                continue
+            pose = (state.x, state.y, state.theta)
+            if pose not in cells_at:
+                cells_at[pose] = body_cells(layout, *pose)
+            for cell in cells_at[pose]:
+                seconds[cell] = seconds.get(cell, 0.0) + dt
+    return seconds
+
+
+def heat_map(path: str, layout: Layout, record: dict,
+             states: Iterable[tuple[float, VehicleState]],
+             cap_s: float = STATE_GAP_CAP_S) -> None:
+    """Cell occupancy over the run from the recorded vehicle states, over the layout."""
+    seconds = {c: s for c, s in occupancy_seconds(layout, states, cap_s).items()
+               if 0 <= c[0] < layout.cols and 0 <= c[1] < layout.rows and s > 0}
+    fig, ax = plt.subplots(figsize=(12, 8.5))
+    draw_layout(ax, layout)
+    busiest = ""
+    if seconds:
+        values = np.array(list(seconds.values()))
+        lo, hi = float(values.min()), float(values.max())
+        # Log scale: parked forklifts hold a few cells for hundreds of seconds while a lane
+        # sees seconds to minutes; a linear scale would show little but the parking spots.
+        squares = PatchCollection([_cell_square(layout, c) for c in seconds], cmap="YlOrRd",
+                                  norm=LogNorm(vmin=lo, vmax=max(hi, 2 * lo)), alpha=0.85,
+                                  edgecolor="none")
+        squares.set_array(values)
+        ax.add_collection(squares)
+        fig.colorbar(squares, ax=ax, shrink=0.8, label="seconds occupied (log scale)")
+        busiest = f"; busiest cell {hi:.0f} s"
+    _save(fig, ax, path, record, f"seconds each cell was under a forklift's body (log "
+          f"colour scale{busiest})")
+
+
+# ---------------------------------------------------------------------------- animation
+
+FRAMES = 150
+FPS = 10
+GIF_DPI = 80  # 960 x 680 pixels: readable, and a paper mission stays a few megabytes
+
+
+def frame_times(record: dict, frames: int) -> list[float]:
+    """`frames` instants spread evenly from 0 to when the last forklift parked (or the last
+    stack was done, if later), both ends included."""
+    end = max(record["end_time_s"], record.get("all_parked_s", 0.0))
+    if frames == 1:
+        return [end]
+    return [end * k / (frames - 1) for k in range(frames)]
+
+
+def _vehicle_color(vehicle: int) -> str:
+    return COLORS[(vehicle - 1) % len(COLORS)]
+
+
+class _RunArtists:
+    """The moving parts of an animation over a layout drawn once: stacks present, reserved
+    cells, the cluster names (kept readable over filled stacks, as in snapshot()), forklift
+    bodies and the title. `show(t)` updates them in place for instant t; `artists` lists them
+    in drawing order."""
+
+    def __init__(self, ax, layout: Layout, record: dict, ahead: float) -> None:
+        self.layout, self.record, self.ahead = layout, record, ahead
+        self.fill = record["mission"]["kind"] == "fill"
+        done_at = {(c, i): t for c, i, t in record["stacks_done"]}
+        self.stack_done = np.array([done_at.get((s.cluster, s.index), math.inf)
+                                    for s in layout.stacks])
+        self.stack_rgba = np.tile(to_rgba("0.35"), (len(layout.stacks), 1))
+        self.stacks = ax.add_collection(PatchCollection(
+            [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="none"))
+        # One square per (forklift, cell) ever held; each frame sets its alpha.
+        held = held_intervals(record)
+        square: dict[tuple[int, Cell], int] = {}
+        for vehicle, cell, _, _ in held:
+            square.setdefault((vehicle, tuple(cell)), len(square))
+        self.held_square = np.array([square[v, tuple(c)] for v, c, _, _ in held], dtype=int)
+        self.held_t0 = np.array([h[2] for h in held], dtype=float)
+        self.held_t1 = np.array([h[3] for h in held], dtype=float)
+        self.held_rgba = np.array([to_rgba(_vehicle_color(v)) for v, _ in square]).reshape(-1, 4)
+        self.held = ax.add_collection(PatchCollection(
+            [_cell_square(layout, c) for _, c in square], edgecolor="none"))
+        names = {c.name for c in layout.clusters}
+        self.cluster_names = [t for t in ax.texts if t.get_text() in names]
+        # Per-forklift records: pose_at then scans one forklift's subtasks, not the fleet's.
+        self.tracks = {v: {"starts": record["starts"],
+                           "subtasks": [s for s in record["subtasks"] if s["vehicle"] == v]}
+                       for v in range(1, len(record["starts"]) + 1)}
+        self.bodies = [ax.add_patch(_body(layout, 0.0, 0.0, 0.0, facecolor=_vehicle_color(v),
+                                          edgecolor="black", lw=0.8))
+                       for v in self.tracks]
+        self.labels = [ax.text(0.0, 0.0, str(v), ha="center", va="center", fontsize=8,
+                               color="white") for v in self.tracks]
+        m = record["mission"]
+        self.heading = f"{m['kind']} with {m['strategy']} on {m['layout']}"
+        self.title = ax.set_title("", fontsize=10)
+        self.artists = [self.stacks, self.held, *self.cluster_names, *self.bodies,
+                        *self.labels, *ax.spines.values(), self.title]
+        for artist in self.artists:
+            artist.set_animated(True)  # left out of the background, drawn by each frame
+
+    def show(self, t: float) -> None:
+        done = self.stack_done <= t
+        self.stack_rgba[:, 3] = done if self.fill else ~done
+        self.stacks.set_facecolor(self.stack_rgba)
+        alive = self.held_t1 > t  # as snapshot(): dark while held, light if held soon
+        now = alive & (self.held_t0 <= t)
+        soon = alive & (self.held_t0 < t + self.ahead)
+        alpha = np.zeros(len(self.held_rgba))
+        np.maximum.at(alpha, self.held_square[soon], 0.12)
+        np.maximum.at(alpha, self.held_square[now], 0.35)
+        rgba = self.held_rgba.copy()
+        rgba[:, 3] = alpha
+        self.held.set_facecolor(rgba)
+        for (v, track), body, label in zip(self.tracks.items(), self.bodies, self.labels,
+                                           strict=True):
+            x, y, th = pose_at(track, v, t, self.layout)
+            body.set_xy(body_corners(x, y, th, self.layout.vehicle.dims))
+            label.set_position((x, y))
+        self.title.set_text(f"{self.heading}, t = {t:7.1f} s: {int(done.sum())}/"
+                            f"{len(done)} stacks {'filled' if self.fill else 'emptied'}; "
+                            f"reserved cells dark: now, light: next {self.ahead:g} s")
+
+
+# The writers take each frame from the canvas as blitted, instead of matplotlib's savefig,
+# which would redraw the whole figure (every cell and label) twice per frame.
+
+
+class _GifWriter(animation.PillowWriter):
+    """Frames palettised as they come, to one palette made from sample frames (`sample()`
+    before the first frame): no colour flicker, a third of the memory of RGB frames, and
+    far faster than an adaptive palette per frame."""
+
+    def setup(self, fig, outfile, dpi=None) -> None:
+        super().setup(fig, outfile, dpi)
+        self._samples: list[np.ndarray] = []
+        self._palette: Image.Image | None = None
+
+    def _canvas(self) -> np.ndarray:
+        return np.asarray(self.fig.canvas.buffer_rgba())[..., :3]
+
+    def sample(self) -> None:
+        """Let the canvas as it is now contribute to the palette."""
+        self._samples.append(self._canvas().copy())
+
+    def grab_frame(self, **savefig_kwargs) -> None:
+        frame = self._canvas()
+        if self._palette is None:
+            montage = np.concatenate([*self._samples, frame])
+            self._palette = Image.fromarray(montage).quantize(
+                colors=255, method=Image.Quantize.MEDIANCUT)
+        self._frames.append(Image.fromarray(frame).quantize(palette=self._palette,
+                                                            dither=Image.Dither.NONE))
+
+
+class _Mp4Writer(animation.FFMpegWriter):
+    def grab_frame(self, **savefig_kwargs) -> None:
+        self._proc.stdin.write(bytes(self.fig.canvas.buffer_rgba()))
+
+
+def movie_writer(path: str, fps: int) -> animation.AbstractMovieWriter:
+    """The writer for an animation file: GIF with Pillow, MP4 with ffmpeg if installed."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".gif":
+        return _GifWriter(fps=fps)
+    if suffix == ".mp4":
+        if not animation.FFMpegWriter.isAvailable():
+            raise UserError(f"{path}: an MP4 needs ffmpeg, which is not on the PATH; install "
+                            f"it or write a .gif instead")
+        return _Mp4Writer(fps=fps, codec="h264")
+    raise UserError(f"{path}: an animation is a .gif or an .mp4 file, not "
+                    f"{suffix or 'a name without extension'}")
+
+
+def animate(path: str, layout: Layout, record: dict, fps: int = FPS, frames: int = FRAMES,
+            ahead: float = 20.0, dpi: int = GIF_DPI,
+            progress: Callable[[int, int], None] | None = None) -> int:
+    """An animation of the run (GIF, or MP4 by the path's extension): each frame a snapshot()
+    at one of `frames` instants spread over the mission. The layout is drawn once as the
+    background; each frame restores it and draws the moving artists on it. Returns the
+    frames written; `progress(done, total)` is told after each."""
+    if frames < 1 or fps < 1:
+        raise UserError(f"an animation needs at least one frame and one frame per second, "
+                        f"not {frames} frames at {fps} fps")
+    writer = movie_writer(path, fps)
+    fig, ax = plt.subplots(figsize=(12, 8.5), dpi=dpi)
+    try:
+        draw_layout(ax, layout)
+        artists = _RunArtists(ax, layout, record, ahead)
+        times = frame_times(record, frames)
+        artists.show(times[-1])  # the longest title, for tight_layout to make room
+        # Setting up may resize the figure (even pixel sizes for h264): background after it.
+        with writer.saving(fig, path, dpi):
+            fig.tight_layout()
+            canvas = fig.canvas
+            canvas.draw()
+            background = canvas.copy_from_bbox(fig.bbox)
+
+            def draw(t: float) -> None:
+                canvas.restore_region(background)
+                artists.show(t)
+                for artist in artists.artists:
+                    ax.draw_artist(artist)
+
+            if isinstance(writer, _GifWriter):  # the palette sees early, busy and late frames
+                for t in (times[0], times[len(times) // 2], times[-1]):
+                    draw(t)
+                    writer.sample()
+            for k, t in enumerate(times, start=1):
+                draw(t)
+                writer.grab_frame()
+                if progress is not None:
+                    progress(k, len(times))
+    finally:
+        plt.close(fig)
+    return len(times)

@@ -186,6 +186,76 @@ class MissionDone(Message):
     rejections: list[str] = field(default_factory=list)  # commits refused before a replan
 
 
+# (manner label, start pose, end pose, t0, t1, v0, v1): one maneuver of a recorded subtask.
+RecordStep = tuple[str, str, str, float, float, int, int]
+
+
+@dataclass(frozen=True)
+class MissionInfo(Message):
+    """What the run is: published by the dispatcher when the mission starts (and answered to
+    late joiners), so a recorder needs no flags to describe the run it records."""
+
+    TYPE: ClassVar[str] = "dispatch.mission"
+    layout: str  # the layout's name
+    layout_toml: str  # the layout itself, so a recording stands on its own
+    kind: str  # "fill" or "empty"
+    strategy: str
+    vehicles: int
+    seed: int
+    clock: str  # "fast", "realtime" or "inprocess"
+    speed: float
+    starts: list[str]  # start pose of forklift 1..N
+    command: str = ""
+    versions: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SubtaskEvent(Message):
+    """A subtask the dispatcher decided and a forklift committed (its whole trajectory)."""
+
+    TYPE: ClassVar[str] = "dispatch.subtask"
+    vehicle: int
+    kind: str  # "deliver" or "return"
+    target: str  # cluster or station
+    stack: int | None  # stack index in the cluster, for deliveries
+    t_i: float
+    t_end: float
+    t_done: float  # after claiming / unloading
+    postponed: bool
+    steps: list[RecordStep]
+    intervals: list[WireInterval]
+
+
+@dataclass(frozen=True)
+class StackDone(Message):
+    """A stack filled (or emptied): the goods are on it (or gone) from t."""
+
+    TYPE: ClassVar[str] = "dispatch.stack"
+    cluster: str
+    index: int
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class DecisionFailure(Message):
+    TYPE: ClassVar[str] = "dispatch.failure"
+    t: float
+    vehicle: int | None  # None: no solid decision at all
+    stage: str  # "dispatch" or "plan"
+    reason: str
+
+
+@dataclass(frozen=True)
+class RecorderStatus(Message):
+    """The recorder's answer on fleet/<run>/recorder/status: how much it holds."""
+
+    TYPE: ClassVar[str] = "recorder.status"
+    path: str
+    messages: int
+    done_seen: bool  # the dispatcher's mission result is in the file
+
+
 @dataclass(frozen=True)
 class Envelope:
     message: Message
@@ -197,7 +267,8 @@ class Envelope:
 TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
                               SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
-                              ClockTick, ClockAck, Progress, MissionDone)
+                              ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
+                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus)
 }
 
 

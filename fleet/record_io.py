@@ -8,7 +8,8 @@ import json
 import math
 from typing import Any
 
-from fleet.engine import MissionRecord
+from fleet.engine import MissionRecord, subtask_event
+from fleet.protocol import SubtaskEvent, body_of
 
 
 def _time(t: float) -> float | str:
@@ -29,16 +30,16 @@ def record_to_dict(rec: MissionRecord) -> dict[str, Any]:
         "stacks_done": [list(s) for s in rec.stacks_done],
         "failures": [{"t": f.t, "vehicle": f.vehicle, "stage": f.stage, "reason": f.reason}
                      for f in rec.failures],
-        "subtasks": [{
-            "vehicle": s.vehicle, "kind": s.kind.value, "target": s.target,
-            "stack": s.stack_index, "t_i": s.t_i, "t_end": s.t_end, "t_done": s.t_done,
-            "postponed": s.postponed,
-            "steps": [[st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0),
-                       int(st.v1)] for st in s.trajectory.steps],
-            "intervals": [[iv.cell[0], iv.cell[1], iv.t0, _time(iv.t1)]
-                          for iv in s.trajectory.intervals],
-        } for s in rec.subtasks],
+        "subtasks": [subtask_dict(subtask_event(s)) for s in rec.subtasks],
     }
+
+
+def subtask_dict(event: SubtaskEvent) -> dict[str, Any]:
+    """A subtask as JSON-able data (an infinite end written "inf")."""
+    body = body_of(event)
+    body["steps"] = [list(st) for st in event.steps]
+    body["intervals"] = [[c, r, t0, _time(t1)] for c, r, t0, t1 in event.intervals]
+    return body
 
 
 def digest(rec: MissionRecord) -> str:

@@ -17,15 +17,15 @@ from pathlib import Path
 import zenoh
 
 from fleet.bus import (
-    RELIABLE,
     Keys,
+    Stream,
     add_bus_arguments,
     bus_config,
     open_session,
     stop_on_signals,
 )
-from fleet.protocol import ProtocolError, Reply, decode, encode
-from reservation.store import ReservationStore
+from fleet.protocol import Change, ProtocolError, Reply, decode, encode
+from reservation.store import ReservationStore, change_time
 
 log = logging.getLogger("fleet.reservation")
 SENDER = "reservation"
@@ -41,8 +41,7 @@ class ReservationService:
         self.rejected = 0
 
     def run(self) -> None:
-        publisher = self.session.declare_publisher(self.keys.reservation_change,
-                                                   congestion_control=RELIABLE)
+        publisher = Stream(self.session, self.keys.reservation_change, SENDER, reliable=True)
         queryable = self.session.declare_queryable(self.keys.reservation_request,
                                                    self.inbox.put)
         token = self.session.liveliness().declare_token(self.keys.reservation_alive)
@@ -50,15 +49,15 @@ class ReservationService:
                  self.store.revision)
         try:
             while (query := self.inbox.get()) is not None:
-                for change_payload in self.answer(query):
-                    publisher.put(change_payload)
+                for change in self.answer(query):
+                    publisher.put(change, change_time(change))
         finally:
             token.undeclare()
             queryable.undeclare()
             publisher.undeclare()
 
-    def answer(self, query: zenoh.Query) -> list[bytes]:
-        """Reply to one query; the payloads of the changes to publish."""
+    def answer(self, query: zenoh.Query) -> list[Change]:
+        """Reply to one query; the changes to publish."""
         try:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
@@ -71,11 +70,11 @@ class ReservationService:
                 return []
             outcome = self.store.handle(envelope.message)
             query.reply(query.key_expr, self._encode(outcome.reply))
-            return [self._encode(change) for change in outcome.published]
+            return outcome.published
         finally:
             query.drop()
 
-    def _encode(self, message) -> bytes:
+    def _encode(self, message) -> bytes:  # replies; the change stream counts its own
         self.seq += 1
         return encode(message, SENDER, self.seq, 0.0)
 

@@ -33,6 +33,14 @@ def to_wire(intervals) -> list[WireInterval]:
     return [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals]
 
 
+def change_time(change: Change) -> float:
+    """The sim time a change is about (its publish time in a recording): where it releases
+    from, else where its first interval starts."""
+    if change.release_from is not None:
+        return change.release_from
+    return min((iv[2] for iv in change.intervals), default=0.0)
+
+
 @dataclass
 class Outcome:
     reply: Message

@@ -96,11 +96,12 @@ def test_run_then_plot(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "mission fill on small with 2 forklifts, strategy comprehensive" in out
     assert "stacks             24" in out
-    record = json.loads((tmp_path / "mission.json").read_text())
-    assert len(record["stacks_done"]) == 24
-    assert main(["plot", str(tmp_path), "--at", "100"]) == 0
+    assert "safety             pass: 0 overlaps, 0 moments outside a reservation" in out
+    assert "work               pass: 24 of 24 stacks, 0 twice, 0 lost" in out
+    assert "messages           pass" in out and "0 lost, 0 malformed" in out
+    assert main(["plot", str(tmp_path), "--at", "100", "--no-gif"]) == 0
     out = capsys.readouterr().out
-    for name in ("filling.png", "gantt.png", "snapshot_00100.00.png"):
+    for name in ("filling.png", "gantt.png", "heatmap.png", "snapshot_00100.00.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG", name
     assert "stacks per quarter of the end time" in out
 
@@ -110,13 +111,6 @@ def test_run_with_bad_weights_is_refused(tmp_path, capsys):
     bad.write_text("{not json")
     assert main(["run", "--layout", "small", "--weights", str(bad)]) == 2
     assert "not valid JSON" in capsys.readouterr().err
-
-
-def test_plot_of_something_else_is_refused(tmp_path, capsys):
-    other = tmp_path / "x.json"
-    other.write_text('{"a": 1}')
-    assert main(["plot", str(other)]) == 2
-    assert "not a mission record (missing" in capsys.readouterr().err
 
 
 def test_train_writes_weights_the_run_can_use(tmp_path, capsys):
@@ -152,3 +146,14 @@ def test_bench_runtime_json(capsys):
     assert [row["agents"] for row in result["fleets"]] == [2, 3]
     assert result["max_realtime_agents"] in (0, 2, 3)
     assert all(row["rss_per_agent_mb"] > 10 for row in result["fleets"])
+
+
+def test_bench_recorder_json(capsys):
+    assert main(["bench", "recorder", "--rates", "500", "--seconds", "1", "--repeats", "0",
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    [row] = result["rates"]
+    assert row["rate"] == 500 and row["sent"] >= 475  # paced for one second
+    assert row["lost"] == 0 and row["recorded"] == row["sent"] and row["file_complete"]
+    assert result["max_lossless_rate"] == 500 and result["goal_rate"] == 10_000
+    assert "wall_time" not in result  # --repeats 0 skips the fills

@@ -2,10 +2,14 @@
 
 import math
 
+import pytest
+
 from fleet.layout import load_layout
 from fleet.planner import HybridAStar
+from fleet.protocol import ClockTick
 from fleet.reservations import ReservationTable
 from fleet.trajectory import Pose
+from vehicle_agent.agent import realtime_period, tick_problem
 from vehicle_agent.driving import Drive
 
 
@@ -41,37 +45,70 @@ def test_inside_a_maneuver_the_position_moves_between_its_poses():
     assert math.isclose(mid.x, (xa + xb) / 2) and math.isclose(mid.y, (ya + yb) / 2)
 
 
-def test_fast_mode_publishes_each_maneuver_start_and_arrival_once():
+def test_states_are_due_on_the_shared_grid_each_instant_once():
     layout, traj = small_trip()
     drive = Drive(1, traj.start, layout)
     drive.add(traj, loaded=False)
-    first = drive.due(traj.steps[2].t0)
-    rest = drive.due(traj.t_end + 100)
-    assert first == [s.t0 for s in traj.steps[:3]]
-    assert rest == sorted({s.t0 for s in traj.steps[3:]} | {traj.t_end})
-    assert drive.due(math.inf) == []
+    assert drive.due(1.2, 0.5) == [0.0, 0.5, 1.0]
+    assert drive.due(1.4, 0.5) == []  # nothing new on the grid yet
+    assert drive.due(3.0, 0.5) == [1.5, 2.0, 2.5, 3.0]  # a late wake-up catches up
+    assert drive.due(2.0, 0.5) == []  # never twice, never back in time
+    assert drive.due(4.0, 0.5, before=True) == [3.5]  # a fast tick at 4.0: 4.0 may change
+    assert drive.due(4.0, 0.5) == [4.0]
 
 
-def test_a_leg_committed_at_the_instant_of_the_last_tick_still_gets_its_first_state():
-    layout, traj = small_trip(0.0)
-    drive = Drive(1, traj.start, layout)
-    drive.add(traj, loaded=False)
-    assert drive.due(traj.t_end + 5) != []  # the clock stands at t_end + 5 ...
-    back = HybridAStar(layout.grid_map(), layout.vehicle.dims).plan(
-        1, traj.goal, traj.t_end + 5, [traj.start], ReservationTable())
-    drive.add(back, loaded=False)  # ... and the next leg starts right then
-    assert drive.due(traj.t_end + 5) == [back.t_start]
+def test_grid_instants_are_the_same_in_every_process():
+    # Real time at speed 40: a state every 4 s of sim time, k * period computed alike.
+    a, b = Drive(1, small_trip()[1].start, load_layout("small")), \
+        Drive(2, small_trip()[1].start, load_layout("small"))
+    period = 40 * 0.1
+    assert a.due(17.3, period) == b.due(13.0, period) + b.due(17.3, period)
+    assert a.due(17.3, period)[-1:] == [] and a.next_k == b.next_k == 5
 
 
 def test_forgetting_old_legs_keeps_the_pose():
     layout, traj = small_trip(0.0)
     drive = Drive(1, traj.start, layout)
-    drive.add(traj, loaded=False)
+    drive.add(traj, loaded=True)
     back = HybridAStar(layout.grid_map(), layout.vehicle.dims).plan(
         1, traj.goal, traj.t_end + 5, [traj.start], ReservationTable())
     drive.add(back, loaded=False)
-    drive.due(back.t_start)  # fast mode published the first leg
+    drive.due(back.t_start, 0.5)  # fast mode published the first leg
+    before = drive.state_at(traj.t_end + 1)
     drive.forget_before(back.t_start)
     assert len(drive.legs) == 1 and drive.rest_pose == traj.goal
+    assert drive.state_at(traj.t_end + 1) == before  # the pose and the load it carries
     assert drive.state_at(traj.t_end + 1).pose == str(traj.goal)
     assert drive.pose == traj.start
+
+
+def test_a_grid_without_instants_is_refused():
+    drive = Drive(1, small_trip()[1].start, load_layout("small"))
+    for until, period in ((math.inf, 0.5), (10.0, 0.0), (10.0, -0.1), (10.0, math.nan)):
+        with pytest.raises(ValueError, match="no grid instants"):
+            drive.due(until, period)
+
+
+@pytest.mark.parametrize("tick,why", [
+    (ClockTick(5, "fast", 10.0), "not after tick 5"),
+    (ClockTick(6, "slow", 10.0), "unknown mode"),
+    (ClockTick(6, "fast", 1e300), "outside"),
+    (ClockTick(6, "fast", 9.0), "before the last tick's 10.0"),
+    (ClockTick(6, "realtime", 10.0, 2.0, 1e9), "is not the clock's fast"),
+])
+def test_a_tick_that_cannot_be_the_clocks_next_is_named(tick, why):
+    assert why in tick_problem(tick, ClockTick(5, "fast", 10.0))
+
+
+def test_real_time_ticks_need_a_positive_speed_and_keep_it():
+    good = ClockTick(1, "realtime", 0.0, 2.0, 1e9)
+    assert tick_problem(good, None) == ""
+    assert tick_problem(ClockTick(2, "realtime", 1.0, 2.0, 1e9 + 0.5), good) == ""
+    for speed in (0.0, -1.0, 1e9):
+        assert "speed" in tick_problem(ClockTick(1, "realtime", 0.0, speed, 1e9), None)
+    assert "speed 3.0" in tick_problem(ClockTick(2, "realtime", 1.0, 3.0, 1e9), good)
+
+
+def test_real_time_states_are_never_coarser_than_fast_mode():
+    assert realtime_period(1.0) == pytest.approx(0.1)  # 10 Hz of wall time
+    assert realtime_period(40.0) == 0.5  # not 4 s of sim time apart

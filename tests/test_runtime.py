@@ -2,7 +2,9 @@
 forklift, dispatcher) talking over real zenoh sessions on loopback."""
 
 import itertools
+import json
 import logging
+import math
 import os
 import select
 import signal
@@ -11,11 +13,14 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+import mcap.reader
 import msgpack
 import pytest
 from mission_check import journal_overlaps, record_problems
 from test_paper_missions import check_paper_mission
+from websockets.sync.client import connect
 
+from fleet.analysis import analyze
 from fleet.bus import PARENT_ENV, BusConfig, Keys, Requester, free_port, open_session, wait_alive
 from fleet.commands.run import engine_options
 from fleet.distributed import RunSpec, run_processes
@@ -25,13 +30,16 @@ from fleet.mission import Mission, MissionKind, Strategy
 from fleet.protocol import (
     Progress,
     Reply,
+    StackDone,
     TaskRequest,
     TaskResult,
     VehicleState,
     decode,
     encode,
 )
+from fleet.record_inprocess import vehicle_states
 from fleet.record_io import digest
+from fleet.recording import read_recording
 from reservation.mirror import TableMirror, follow
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -49,6 +57,22 @@ def test_fast_mode_processes_equal_the_inprocess_reference(strategy, kind, tmp_p
     assert outcome.done.digest == digest(reference)
     assert outcome.done.record["end_time_s"] == reference.end_time
     assert journal_overlaps(tmp_path / "reservation.journal") == []
+    with open(tmp_path / "run.mcap", "rb") as f:  # the mcap library's own reader
+        summary = mcap.reader.make_reader(f).get_summary()
+    schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert schemas["fleet/default/vehicle/1/state"] == "vehicle.state"
+    assert schemas["/view/forklifts"] == "foxglove.SceneUpdate"
+    recording = read_recording(tmp_path / "run.mcap")
+    report = analyze(recording)
+    assert report.passed and report.complete and report.finished
+    assert (len(report.overlaps), len(report.outside_reservation), report.messages_lost,
+            report.stacks_done, report.stacks_duplicated) == (0, 0, 0, 136, [])
+    assert report.end_time_s == reference.end_time
+    # Every forklift's recorded states are the ones the reference drives, instant by instant.
+    recorded = sorted((r.key, r.envelope.sim_time, m) for r, m in recording.of(VehicleState))
+    driven = sorted((o.key, o.sim_time, o.message)
+                    for o in vehicle_states(reference, layout, Keys()))
+    assert recorded == driven
 
 
 # -- hostile messages on every key while a mission runs ---------------------------------------
@@ -69,6 +93,7 @@ class Intruder:
         self.sent: dict[str, list] = defaultdict(list)
         self.states: dict[int, list[float]] = defaultdict(list)
         self.rejections: list[str] = []  # what fleet run's own listener logged
+        self.forged = 0  # well-formed messages in someone else's name
 
     def on_ready(self, session, keys, launcher) -> None:
         self.session, self.keys = session, keys
@@ -90,6 +115,12 @@ class Intruder:
         for key in (keys.reservation_request, *(keys.vehicle_task(v) for v in self.vehicle_ids)):
             for payload in hostile_payloads(key):
                 self.sent[key] += list(self.session.get(key, payload=payload, timeout=30))
+        # Well-formed but absurd, from someone else, where only the recorder listens.
+        absurd = VehicleState(1, "0,0,E", 0, "", False, math.inf, 1e300, 0.0)
+        for key, message in ((keys.vehicle_state(1), absurd),
+                             (keys.dispatch_stack, StackDone("s1", 1, 1, 1e300))):
+            self.session.put(key, encode(message, "intruder", 2**62, 1e300))
+            self.forged += 1
 
     @property
     def vehicle_ids(self) -> range:
@@ -153,13 +184,17 @@ def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
     assert outcome.error == ""
     assert outcome.done.digest == digest(reference)
     intruder.check(tmp_path, "fast")
-    for vehicle in intruder.vehicle_ids:  # a state at every maneuver start and arrival
-        expected = set()
-        for sub in outcome.done.record["subtasks"]:
-            if sub["vehicle"] == vehicle:
-                expected |= {step[3] for step in sub["steps"]} | {sub["t_end"]}
-        # (the state at rest at t=0 may go out before this listener subscribed)
-        assert set(intruder.states[vehicle]) - {0.0} == expected - {0.0}
+    recording = read_recording(tmp_path / "run.mcap")
+    report = analyze(recording)
+    assert report.passed, report.lines()
+    assert report.malformed == 3 * (4 + 2)  # the garbage put on 6 keys, recorded as it came
+    assert report.foreign == intruder.forged == 2  # recorded, and believed nowhere
+    last_tick = max(reference.end_time, reference.all_parked_time)
+    grid = [k * 0.5 for k in range(int(last_tick / 0.5) + 1) if k * 0.5 < last_tick]
+    for vehicle in intruder.vehicle_ids:  # every instant of the shared grid, exactly once
+        times = [r.envelope.sim_time for r, m in recording.of(VehicleState)
+                 if m.vehicle == vehicle and r.envelope.sender == f"vehicle-{vehicle}"]
+        assert times == grid
 
 
 def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
@@ -171,11 +206,40 @@ def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
     assert record_problems(record, load_layout("small")) == []
     assert len(record["stacks_done"]) == 24
     assert journal_overlaps(tmp_path / "reservation.journal") == []
-    for vehicle in intruder.vehicle_ids:  # 10 Hz of wall time: 4 sim s apart at speed 40
+    for vehicle in intruder.vehicle_ids:  # 10 Hz of wall time, but at most 0.5 s of sim time
         times = sorted(intruder.states[vehicle])
         gaps = sorted(b - a for a, b in itertools.pairwise(times))
-        assert len(times) > 50 and 2.0 < gaps[len(gaps) // 2] < 8.0
+        assert len(times) > 50 and gaps[len(gaps) // 2] == 0.5
     intruder.check(tmp_path, "realtime")
+    report = analyze(read_recording(tmp_path / "run.mcap"))
+    assert report.passed, report.lines()
+    assert report.stacks_done == 24 and report.messages_lost == 0
+    assert report.foreign == intruder.forged == 2
+
+
+def test_a_recorder_killed_mid_run_leaves_a_readable_recording(tmp_path):
+    """SIGKILL the recorder once it holds a few hundred messages: the run stops (a child
+    died), and `fleet analyze` reads what the file holds up to the last flushed chunk."""
+    mission = Mission("small", MissionKind.FILL, Strategy.TRAFFIC)
+
+    def on_ready(session, keys, launcher):
+        recorder = next(c.proc for c in launcher.children if c.name == "recorder")
+        statuses = session.declare_subscriber(keys.recorder_status)  # one a flush (~1 s)
+        while decode(statuses.recv().payload.to_bytes()).message.messages < 300:
+            pass
+        recorder.kill()
+        statuses.undeclare()
+
+    outcome = run_processes(RunSpec(mission, 2, tmp_path, clock="realtime", speed=20.0),
+                            on_ready=on_ready)
+    assert "recorder exited with status -9" in outcome.error
+    recording = read_recording(tmp_path / "run.mcap")
+    assert not recording.complete and recording.problem
+    assert len(recording.messages) > 0 and recording.span_s > 0
+    report = analyze(recording)
+    assert not report.passed and report.stacks_lost  # the rest of the mission is not in it
+    assert report.overlaps == [] and report.outside_reservation == []  # what is, is sound
+    assert report.messages_lost == 0  # a cut at the end loses nothing in the middle
 
 
 def test_a_dead_agent_stops_the_run_and_every_process_with_it(tmp_path):
@@ -302,7 +366,7 @@ def exited(pid: int, timeout: float) -> bool:
 
 def test_fleet_run_stops_every_process_it_started_on_sigterm(tmp_path):
     run, children = started_run(tmp_path)
-    assert len(children) == 7  # router, reservation, four agents, dispatcher
+    assert len(children) == 8  # router, recorder, reservation, four agents, dispatcher
     run.send_signal(signal.SIGTERM)
     assert run.wait(60) == 130
     assert "interrupted" in run.stderr.read().decode()
@@ -314,3 +378,34 @@ def test_children_of_a_killed_fleet_run_stop_by_themselves(tmp_path):
     run.kill()  # no chance to stop anything
     run.wait()
     assert all(exited(pid, 30) for pid in children)
+
+
+def test_the_live_view_shows_the_forklifts_of_a_running_mission(tmp_path):
+    """`fleet run --foxglove`: a Foxglove WebSocket client connected mid-mission is offered
+    the view channels and receives forklifts on /view/forklifts."""
+    port = free_port()
+    seen: dict[str, object] = {}
+
+    def on_progress(progress):
+        if seen:
+            return
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+                     open_timeout=10) as ws:
+            channels = {}
+            while "/view/forklifts" not in channels:
+                message = json.loads(ws.recv(timeout=10))
+                if message["op"] == "advertise":
+                    channels.update({c["topic"]: c for c in message["channels"]})
+            forklifts = channels["/view/forklifts"]
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": 1, "channelId": forklifts["id"]}]}))
+            while not isinstance(frame := ws.recv(timeout=10), bytes) or frame[0] != 1:
+                pass  # until the first message data frame
+            seen.update(channels=channels, data=frame[1 + 4 + 8:])
+
+    mission = Mission("small", MissionKind.FILL, Strategy.TRAFFIC)
+    outcome = run_processes(RunSpec(mission, 2, tmp_path, foxglove=port), on_progress)
+    assert outcome.error == ""
+    assert {"/view/warehouse", "/view/forklifts", "/view/reserved"} <= set(seen["channels"])
+    assert seen["channels"]["/view/forklifts"]["schemaName"] == "foxglove.SceneUpdate"
+    assert b"forklift/" in seen["data"]  # a SceneUpdate with a forklift entity

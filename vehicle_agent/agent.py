@@ -4,8 +4,9 @@ It declares a liveliness token, parks at its start pose (a reservation to infini
 mirror of the reservation service's table, and answers tasks on fleet/<run>/vehicle/<id>/task:
 plan with the improved hybrid A* against the mirror, commit through the service, replan when
 the service refuses the commit (another forklift got there first), answer with the committed
-trajectory. It drives what it committed on the clock and publishes its state: at every
-maneuver in fast mode (then acknowledges the tick), at 10 Hz in real time.
+trajectory. It drives what it committed on the clock and publishes its state on a grid of
+instants every forklift shares: every 0.5 s of sim time in fast mode (then acknowledges the
+tick), at 10 Hz in real time.
 
 Zenoh callbacks only enqueue; one worker thread does everything that blocks, in arrival order.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import queue
 import threading
 import time
@@ -21,7 +23,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from fleet.bus import RELIABLE, Keys, Requester, RequestFailed, received, wait_alive
+from fleet.bus import Keys, Requester, RequestFailed, Stream, received, wait_alive
 from fleet.execution import Task
 from fleet.layout import Layout
 from fleet.maneuvers import body_cells_at_rest
@@ -42,12 +44,41 @@ from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.wire import result_to_wire, task_from_wire
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
-from vehicle_agent.driving import Drive
+from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
 
 log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5
 STATE_PERIOD_S = 0.1  # 10 Hz in real time
+DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
+# No mission lasts 115 days of sim time or plays faster than 10 000x: a tick beyond is broken.
+SIM_TIME_LIMIT_S = 1e7
+MAX_SPEED = 1e4
 SYNC_TIMEOUT_S = 10.0
+
+
+def realtime_period(speed: float) -> float:
+    """Sim seconds between two states in real time: 10 Hz of wall time, but never coarser
+    than the fast mode's grid, so the recording's safety check sees as much at any speed."""
+    return min(speed * STATE_PERIOD_S, FAST_STATE_PERIOD_S)
+
+
+def tick_problem(tick: ClockTick, last: ClockTick | None) -> str:
+    """Why a tick cannot be the clock's next one ("" if it can)."""
+    if last is not None and tick.tick <= last.tick:
+        return f"not after tick {last.tick}"
+    if tick.mode not in ("fast", "realtime"):
+        return f"unknown mode {tick.mode!r}"
+    if last is not None and (tick.mode, tick.speed) != (last.mode, last.speed):
+        return f"mode {tick.mode} at speed {tick.speed} is not the clock's {last.mode} at " \
+            f"speed {last.speed}"
+    if not 0 <= tick.t <= SIM_TIME_LIMIT_S:
+        return f"sim time {tick.t} is outside [0, {SIM_TIME_LIMIT_S:g}] s"
+    if last is not None and tick.t < last.t:
+        return f"sim time {tick.t} is before the last tick's {last.t}"
+    if tick.mode == "realtime" and not (0 < tick.speed <= MAX_SPEED and
+                                         math.isfinite(tick.wall)):
+        return f"speed {tick.speed} or wall time {tick.wall} is not a real-time clock's"
+    return ""
 
 
 class SimClock:
@@ -95,7 +126,7 @@ class Agent:
         self.clock = SimClock()
         self.inbox: queue.Queue[_Inbox] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
-        self.seq = itertools.count(1)  # shared by two threads; next() is atomic
+        self.seq = itertools.count(1)  # of task replies (each stream counts its own)
         self.stopping = threading.Event()
 
     # -- the process ---------------------------------------------------------------------------
@@ -105,11 +136,12 @@ class Agent:
                                f"{service_timeout_s:g} s")
         changes = follow(self.session, self.keys, self.mirror, self.requester)
         self._park()
-        state_pub = self.session.declare_publisher(
-            self.keys.vehicle_state(self.vehicle),
-            congestion_control=zenoh.CongestionControl.DROP)  # a slow reader must not stall us
-        ack_pub = self.session.declare_publisher(self.keys.clock_ack(self.vehicle),
-                                                 congestion_control=RELIABLE)
+        # States are reliable too: a recording must hold every one (the recorder only
+        # enqueues, so it does not hold us up); acks pace the clock.
+        state_pub = Stream(self.session, self.keys.vehicle_state(self.vehicle), self.sender,
+                           reliable=True)
+        ack_pub = Stream(self.session, self.keys.clock_ack(self.vehicle), self.sender,
+                         reliable=True)
         queryable = self.session.declare_queryable(
             self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
         clock_sub = self.session.declare_subscriber(
@@ -117,7 +149,6 @@ class Agent:
         token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
         ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
         ticker.start()
-        self._publish(state_pub, self.drive.state_at(0.0), 0.0)
         log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
         try:
             while True:
@@ -236,33 +267,41 @@ class Agent:
         tick = received(sample, ClockTick, log)
         if tick is None:
             return
-        if self.clock.tick is not None and tick.tick <= self.clock.tick.tick:
-            log.warning("ignored tick %d on %s: not after tick %d", tick.tick,
-                        sample.key_expr, self.clock.tick.tick)
+        problem = tick_problem(tick, self.clock.tick)
+        if problem:
+            log.warning("ignored tick %d on %s: %s", tick.tick, sample.key_expr, problem)
             return
         self.clock.tick = tick
         if tick.mode != "fast":
             return
-        with self.drive_lock:
-            for t in self.drive.due(tick.t):
-                self._publish(state_pub, self.drive.state_at(t), t)
-            self.drive.forget_before(tick.t)
-        ack_pub.put(self._encode(ClockAck(tick.tick, self.vehicle), tick.t))
+        self._publish_states(state_pub, tick.t, FAST_STATE_PERIOD_S, before=True)
+        ack_pub.put(ClockAck(tick.tick, self.vehicle), tick.t)
 
-    def _realtime_states(self, state_pub) -> None:
-        while not self.stopping.wait(STATE_PERIOD_S):
-            if not self.clock.realtime:
+    def _realtime_states(self, state_pub: Stream) -> None:
+        """Wake when the next instant of the grid comes due and publish it (and any missed)."""
+        wait = STATE_PERIOD_S
+        while not self.stopping.wait(wait):
+            wait = STATE_PERIOD_S
+            tick = self.clock.tick
+            if tick is None or tick.mode != "realtime":
                 continue
-            t = self.clock.now()
-            with self.drive_lock:
-                state = self.drive.state_at(t)
-                self.drive.forget_before(t, published=False)
-            self._publish(state_pub, state, t)
+            period = realtime_period(tick.speed)
+            self._publish_states(state_pub, self.clock.now(), period)
+            ahead = (self.drive.next_k * period - self.clock.now()) / tick.speed
+            wait = min(STATE_PERIOD_S, max(0.0, ahead)) + DUE_MARGIN_S
+
+    def _publish_states(self, state_pub: Stream, until: float, period: float,
+                        before: bool = False) -> None:
+        """Every grid instant up to `until` not published yet (a late wake-up catches up)."""
+        with self.drive_lock:
+            due = self.drive.due(until, period, before)
+            states = [(t, self.drive.state_at(t)) for t in due]
+            if due:
+                self.drive.forget_before(due[-1])
+        for t, state in states:
+            state_pub.put(state, t)
 
     # -- wire ----------------------------------------------------------------------------------
-    def _publish(self, publisher, state, t: float) -> None:
-        publisher.put(self._encode(state, t))
-
     def _encode(self, message: Message, t: float) -> bytes:
         return encode(message, self.sender, next(self.seq), t)
 

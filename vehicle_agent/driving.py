@@ -4,10 +4,16 @@ A forklift stands at rest at its pose until its next trajectory starts, then fol
 trajectory maneuver by maneuver, and stands at the goal after it ends. Within a maneuver the
 progress is linear in time; the cells a maneuver sweeps are reserved for its whole window, so
 any progress profile stays inside the reservation.
+
+States are published at the instants k * period of one grid shared by every forklift (0.5 s
+of sim time in fast mode, 0.1 s of wall time in real time), so a verifier can compare the
+forklifts' poses at the very same instants. In fast mode a tick at t publishes the instants
+before t only: a subtask decided at t may still start at t.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from fleet.layout import Layout
@@ -15,15 +21,13 @@ from fleet.maneuvers import Manner, world_pose
 from fleet.protocol import VehicleState
 from fleet.trajectory import Pose, Trajectory
 
+FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
+
 
 @dataclass
 class Leg:
     trajectory: Trajectory
     loaded: bool
-    sent: int = 0  # events (maneuver starts, then the arrival) already published in fast mode
-
-    def events(self) -> list[float]:
-        return [s.t0 for s in self.trajectory.steps] + [self.trajectory.t_end]
 
 
 class Drive:
@@ -33,6 +37,7 @@ class Drive:
         self.rest_pose = pose  # where the forklift stands when no leg covers t
         self.legs: list[Leg] = []
         self.loaded = False
+        self.next_k = 0  # grid index of the next state to publish
 
     @property
     def pose(self) -> Pose:
@@ -42,12 +47,12 @@ class Drive:
     def add(self, trajectory: Trajectory, loaded: bool) -> None:
         self.legs.append(Leg(trajectory, loaded))
 
-    def forget_before(self, t: float, published: bool = True) -> None:
-        """Drop legs that ended before t (their goal becomes the rest pose); the last leg
-        stays. With `published`, only legs whose every state fast mode has published."""
-        while (len(self.legs) > 1 and self.legs[0].trajectory.t_end < t
-               and (not published or self.legs[0].sent == len(self.legs[0].events()))):
-            self.rest_pose = self.legs.pop(0).trajectory.goal
+    def forget_before(self, t: float) -> None:
+        """Drop legs that ended before t (their goal becomes the rest pose, their load what it
+        carries); the last leg stays."""
+        while len(self.legs) > 1 and self.legs[0].trajectory.t_end < t:
+            leg = self.legs.pop(0)
+            self.rest_pose, self.loaded = leg.trajectory.goal, leg.loaded
 
     def state_at(self, t: float) -> VehicleState:
         pose, loaded = self.rest_pose, self.loaded
@@ -67,17 +72,19 @@ class Drive:
                                        step.manner.label)
         return self._state(pose, Manner.STOP, 0.0, 0, loaded, "")
 
-    def due(self, until: float) -> list[float]:
-        """Instants up to `until` whose state fast mode has not published yet: each maneuver
-        start and each arrival, once (a leg committed at the very instant of the last tick
-        still gets its first state). Marks them published."""
-        out = []
-        for leg in self.legs:
-            events = leg.events()
-            while leg.sent < len(events) and events[leg.sent] <= until:
-                out.append(events[leg.sent])
-                leg.sent += 1
-        return sorted(set(out))
+    def due(self, until: float, period: float, before: bool = False) -> list[float]:
+        """The grid instants k * period up to `until` (with `before`, only those before it)
+        not published yet, from t = 0 on; marks them published."""
+        if not (math.isfinite(until) and math.isfinite(period) and period > 0):
+            raise ValueError(f"no grid instants up to {until} every {period} s")
+        last = math.floor(until / period)
+        while (last + 1) * period <= until:  # floor of a rounded quotient can fall one short
+            last += 1
+        while last >= 0 and (last * period > until or (before and last * period == until)):
+            last -= 1
+        out = [k * period for k in range(self.next_k, last + 1)]
+        self.next_k = max(self.next_k, last + 1)
+        return out
 
     def _state(self, start: Pose, manner: Manner, s: float, speed: int, loaded: bool,
                label: str) -> VehicleState:

@@ -41,6 +41,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                          help="seconds of state messages measured per fleet (default 15)")
     runtime.add_argument("--json", action="store_true", help="print one JSON object")
     runtime.set_defaults(handler=run_runtime)
+    recorder = which.add_parser("recorder", help="the recorder: messages a second without "
+                                "loss, and what recording costs a mission's wall time")
+    recorder.add_argument("--rates", default="2000,5000,10000,20000,40000",
+                          help="target messages a second, in all (default "
+                          "2000,5000,10000,20000,40000)")
+    recorder.add_argument("--seconds", type=float, default=5.0,
+                          help="seconds of publishing per rate (default 5)")
+    recorder.add_argument("--publishers", type=int, default=4,
+                          help="state streams, one per vehicle (default 4)")
+    recorder.add_argument("--repeats", type=int, default=3,
+                          help="fills with and without the recorder, alternated (default 3; "
+                          "0 skips)")
+    recorder.add_argument("--layout", default="paper",
+                          help="layout of the fills (default paper)")
+    recorder.add_argument("--json", action="store_true", help="print one JSON object")
+    recorder.set_defaults(handler=run_recorder)
 
 
 def emitted_json(result: dict, as_json: bool) -> bool:
@@ -134,4 +150,23 @@ def run_runtime(args: argparse.Namespace) -> int:
                   f"lateness p99 {row['late_p99_ms']} ms, {row['rss_per_agent_mb']} MB per "
                   f"agent -> {'keeps' if row['keeps_real_time'] else 'misses'} real time")
         print(f"  largest fleet in real time: {result['max_realtime_agents']}")
+    return 0
+
+
+def run_recorder(args: argparse.Namespace) -> int:
+    from bench import recorder
+
+    rates = [int(r) for r in args.rates.split(",")]
+    if any(r < 1 for r in rates):
+        raise ValueError(f"--rates {args.rates}: give positive rates, e.g. 2000,5000")
+    if args.seconds <= 0 or args.publishers < 1 or args.repeats < 0:
+        raise ValueError("--seconds must be positive, --publishers at least 1, --repeats "
+                         "at least 0")
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result = recorder.run(rates, args.seconds, args.publishers, args.repeats, args.layout, say)
+    if not emitted_json(result, args.json):
+        print(recorder.table(result))
     return 0

@@ -1,60 +1,98 @@
-"""`fleet plot RECORD`: the filling sequence, a Gantt chart and snapshots as PNG files."""
+"""`fleet plot RUN.mcap`: the filling sequence, a Gantt chart, a heat map of occupancy and
+snapshots as PNG files, and an animation of the run, all from its recording."""
 
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 from pathlib import Path
 
 from fleet.errors import UserError
-from fleet.layout import load_layout
+from fleet.progress import ProgressBar
+from fleet.recording import RUN_FILE, Recording, RecordingError, read_recording, recording_file
+
+FRAMES = 150
+FPS = 10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="draw a mission record (fleet run --out DIR)")
-    p.add_argument("record", type=Path, help="mission.json, or the directory holding it")
-    p.add_argument("--out", type=Path, help="directory for the PNG files (default: beside "
-                   "the record)")
+    p = sub.add_parser("plot", help="draw a recorded run (its MCAP recording)")
+    p.add_argument("recording", type=Path,
+                   help=f"the run's MCAP recording, or the directory holding {RUN_FILE}")
+    p.add_argument("--out", type=Path, help="directory for the files (default: beside the "
+                   "recording)")
     p.add_argument("--at", type=float, action="append", default=[],
                    help="also draw a snapshot at this time in seconds (repeatable; default: "
                    "at a quarter, half and three quarters of the end time)")
-    p.add_argument("--layout", help="layout name or file (default: the one in the record)")
+    p.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
+                   help="animate the run into run.gif (default; a few seconds for a paper "
+                   "mission); --no-gif skips it")
+    p.add_argument("--mp4", action="store_true",
+                   help="write the animation as run.mp4 instead (needs ffmpeg)")
+    p.add_argument("--frames", type=int, default=FRAMES,
+                   help=f"frames of the animation, spread evenly over the run (default "
+                   f"{FRAMES})")
+    p.add_argument("--fps", type=int, default=FPS,
+                   help=f"frames per second of the animation (default {FPS})")
     p.set_defaults(handler=run)
 
 
-def load_record(path: Path) -> dict:
-    if path.is_dir():
-        path = path / "mission.json"
+def read_run(path: Path) -> tuple[Recording, dict]:
+    """A run's recording and its mission record (fleet.recorded_mission.record_of). A
+    truncated recording (a killed recorder) is read as far as it goes, with a note."""
+    from fleet.recorded_mission import record_of
+
     try:
-        record = json.loads(path.read_text())
-    except OSError as exc:
-        raise UserError(f"cannot read {path}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise UserError(f"{path}: not a mission record (invalid JSON: {exc})") from None
-    missing = {"mission", "subtasks", "stacks_done", "end_time_s", "starts"} - set(record) \
-        if isinstance(record, dict) else {"everything"}
-    if missing:
-        raise UserError(f"{path}: not a mission record (missing {', '.join(sorted(missing))})")
-    return record
+        file = recording_file(path)
+        recording = read_recording(file)
+        record = record_of(recording)
+    except RecordingError as exc:
+        raise UserError(str(exc)) from None
+    if not recording.complete:
+        print(f"note: {file} is incomplete ({recording.problem}); using what it holds",
+              file=sys.stderr)
+    return recording, record
 
 
 def run(args: argparse.Namespace) -> int:
     from fleet import mission_plots
+    from fleet.protocol import VehicleState
 
-    record = load_record(args.record)
-    layout = load_layout(args.layout or record["mission"]["layout"])
-    out = args.out or (args.record if args.record.is_dir() else args.record.parent)
+    if args.frames < 1 or args.fps < 1:
+        raise UserError(f"--frames {args.frames} --fps {args.fps}: both must be at least 1")
+    for t in args.at:
+        if t < 0:
+            raise UserError(f"--at {t}: time must not be negative")
+    recording, record = read_run(args.recording)
+    try:
+        layout = recording.layout()
+    except RecordingError as exc:
+        raise UserError(str(exc)) from None
+    out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)
     end = record["end_time_s"]
     written = [out / "filling.png", out / "gantt.png"]
     mission_plots.filling_sequence(str(written[0]), layout, record)
     mission_plots.gantt(str(written[1]), record)
+    states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
+    if states:
+        written.append(out / "heatmap.png")
+        mission_plots.heat_map(str(written[-1]), layout, record, states)
+    else:
+        print(f"note: {recording.path} holds no vehicle states: no heat map", file=sys.stderr)
     for t in args.at or [end / 4, end / 2, 3 * end / 4]:
-        if t < 0:
-            raise UserError(f"--at {t}: time must not be negative")
         path = out / f"snapshot_{t:08.2f}.png"
         mission_plots.snapshot(str(path), layout, record, t)
         written.append(path)
+    if args.gif or args.mp4:
+        written.append(out / ("run.mp4" if args.mp4 else "run.gif"))
+        bar = ProgressBar(args.frames, written[-1].name)
+        try:
+            mission_plots.animate(str(written[-1]), layout, record, fps=args.fps,
+                                  frames=args.frames,
+                                  progress=lambda done, _: bar.update(done, "frames"))
+        finally:
+            bar.close()
     print(f"stacks per quarter of the end time: {mission_plots.quarters(record)}")
     for path in written:
         print(f"wrote {path}")

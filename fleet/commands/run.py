@@ -4,21 +4,23 @@ summary."""
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 from fleet.bus import free_port
 from fleet.distributed import RunSpec, run_processes
-from fleet.engine import EngineOptions, run_mission
+from fleet.engine import Engine, EngineOptions
+from fleet.errors import UserError
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import ProgressBar
+from fleet.protocol import Message, MissionDone, Progress
+from fleet.record_inprocess import inprocess_stream, write_recording
 from fleet.record_io import digest_of, record_to_dict
+from fleet.recording import mission_info, read_recording
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,8 +39,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run the in-process reference engine instead (one process, no "
                    "zenoh); fast mode gives the same record bit for bit")
     p.add_argument("--port", type=int, help="router port on 127.0.0.1 (default: a free one)")
-    p.add_argument("--out", type=Path, help="directory to keep the mission record "
-                   "(mission.json), the reservation journal and each process's log in")
+    p.add_argument("--out", type=Path, help="directory for the recording (run.mcap), the "
+                   "reservation journal and each process's log (default: "
+                   "runs/DATE-TIME-LAYOUT-STRATEGY)")
+    p.add_argument("--foxglove", type=int, metavar="PORT", nargs="?", const=8765,
+                   help="serve the live view over the Foxglove WebSocket protocol on "
+                   "127.0.0.1:PORT (default port 8765)")
     p.set_defaults(handler=run)
 
 
@@ -103,6 +109,12 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--speed must be positive, not {args.speed}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
+    if args.inprocess and (args.clock != "fast" or args.foxglove is not None):
+        raise UserError("--inprocess runs the fast clock without processes: it takes neither "
+                        "--clock realtime nor --foxglove")
+    out = args.out or Path("runs") / (f"{time.strftime('%Y%m%d-%H%M%S')}-{layout.name}-"
+                                      f"{mission.strategy.value}")
+    out.mkdir(parents=True, exist_ok=True)
     bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}")
 
     def progress(done: int, t: float, failures: int) -> None:
@@ -111,31 +123,58 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         if args.inprocess:
-            record = _run_inprocess(mission, layout, args.weights, progress)
+            record = _run_inprocess(mission, layout, n, args.weights, progress, out)
         else:
-            record = _run_processes(mission, n, args, progress)
+            record = _run_processes(mission, n, args, progress, out)
     finally:
         bar.close()
     if record is None:
+        print(f"fleet run: logs and what was recorded are in {out}", file=sys.stderr)
         return 1
     print("\n".join(summary_lines(record, time.perf_counter() - t0, digest_of(record))))
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        path = args.out / "mission.json"
-        path.write_text(json.dumps(record))
-        print(f"wrote {path}")
-    return 0
+    return _verdicts(out / "run.mcap")
 
 
-def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
-                   progress) -> dict[str, Any]:
-    options = engine_options(mission, layout, weights,
-                             lambda done, total, t, failures: progress(done, t, failures))
-    return record_to_dict(run_mission(mission, options, layout))
+def command_line() -> str:
+    return " ".join(["fleet", *sys.argv[1:]])
+
+
+def _verdicts(path: Path) -> int:
+    """Analyze the recording; a failed verdict fails the run."""
+    from fleet.analysis import analyze
+
+    report = analyze(read_recording(path))
+    print(f"  recording          {path}")
+    for line in report.verdict_lines():
+        print(f"  {line}")
+    print(f"  look closer: fleet analyze {path} ; fleet plot {path}")
+    return 0 if report.passed else 1
+
+
+def _run_inprocess(mission: Mission, layout: Layout, n: int, weights: Path | None,
+                   progress, out: Path) -> dict[str, Any]:
+    events: list[tuple[Message, float]] = []
+
+    def on_progress(done: int, total: int, t: float, failures: int) -> None:
+        events.append((Progress(done, total, t, failures), t))
+        progress(done, t, failures)
+
+    options = engine_options(mission, layout, weights, on_progress)
+    options.events = lambda message, t: events.append((message, t))
+    t0 = time.perf_counter()
+    engine = Engine(mission, options, layout)
+    record = engine.run()
+    as_dict = record_to_dict(record)
+    done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
+                       wall_s=time.perf_counter() - t0)
+    info = mission_info(mission, layout, n, "inprocess", command=command_line())
+    stream = inprocess_stream(info, record, layout, events, engine.executor.changes, done)
+    write_recording(out / "run.mcap", stream, layout)
+    return as_dict
 
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
-                   progress) -> dict[str, Any] | None:
+                   progress, out: Path) -> dict[str, Any] | None:
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
@@ -143,12 +182,13 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
     port = args.port or free_port()
     print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with: fleet table "
           f"--connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)
-    with tempfile.TemporaryDirectory(prefix="fleet-run-") as tmp:
-        run_dir = args.out or Path(tmp)
-        spec = RunSpec(mission, n, run_dir, args.clock, args.speed, args.weights, port)
-        outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
-        if outcome.done is None or not outcome.done.ok:
-            where = f"; logs in {outcome.log_dir}" if args.out else ""
-            print(f"fleet run: the mission failed: {outcome.error}{where}", file=sys.stderr)
-            return None
-        return outcome.done.record
+    if args.foxglove is not None:
+        print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
+              file=sys.stderr)
+    spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
+                   foxglove=args.foxglove, command=command_line())
+    outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
+    if outcome.done is None or not outcome.done.ok:
+        print(f"fleet run: the mission failed: {outcome.error}", file=sys.stderr)
+        return None
+    return outcome.done.record

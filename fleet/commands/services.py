@@ -1,6 +1,6 @@
 """The service processes, each startable alone (`fleet run` starts them all; the compose
 deployment starts one per container): `fleet router`, `fleet reservation`, `fleet agent`,
-`fleet dispatcher`; and `fleet table` to look at the reservation service."""
+`fleet dispatcher`, `fleet recorder`; and `fleet table` to look at the reservation service."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     from dispatcher import process as dispatcher_process
     from fleet import router
     from fleet.bus import add_bus_arguments
+    from recorder import process as recorder_process
     from reservation import service
     from vehicle_agent import process as agent_process
 
@@ -18,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             ("router", router, "run a zenoh router for the other processes"),
             ("reservation", service, "run the reservation service process"),
             ("agent", agent_process, "run one forklift's agent process"),
-            ("dispatcher", dispatcher_process, "run the dispatcher process")):
+            ("dispatcher", dispatcher_process, "run the dispatcher process"),
+            ("recorder", recorder_process, "record a run to an MCAP file")):
         p = sub.add_parser(name, help=summary, description=module.__doc__,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p)

@@ -1,0 +1,33 @@
+"""`fleet analyze RUN.mcap`: the run's numbers and its safety, work and message verdicts."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("analyze", help="analyze a recording: numbers and verdicts",
+                       description="Read a recording (also one a killed recorder left) and "
+                       "report the mission's end time, each forklift's distance and time, "
+                       "message counts and gaps, and the verdicts: safety (no two forklifts "
+                       "on one cell at once, none outside its reservation), work (every stack "
+                       "exactly once) and messages (none lost). Exit status 1 when a verdict "
+                       "fails.")
+    p.add_argument("recording", type=Path, help="an MCAP file, or a run directory holding "
+                   "run.mcap")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fleet.analysis import analyze
+    from fleet.recording import read_recording, recording_file
+
+    report = analyze(read_recording(recording_file(args.recording)))
+    if args.json:
+        print(json.dumps(report.to_json()))
+    else:
+        print("\n".join(report.lines()))
+    return 0 if report.passed else 1

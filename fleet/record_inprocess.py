@@ -1,0 +1,89 @@
+"""The in-process reference run written as a recording: the same keys, schemas, senders and
+sequence numbers a run of processes puts on the wire, so analysis and plots have one input.
+
+The engine's dispatch events are recorded as they happened; the reservation changes are the
+ones its table applied; the forklifts' states are driven from the committed trajectories on
+the fast-mode grid, exactly as each agent would publish them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleet.bus import Keys
+from fleet.dispatch import TaskKind
+from fleet.engine import MissionRecord
+from fleet.layout import Layout
+from fleet.mission import MissionKind
+from fleet.protocol import Change, Message, MissionDone, MissionInfo, encode
+from fleet.recording import RecordingWriter
+from reservation.store import change_time
+from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    key: str
+    message: Message
+    sender: str
+    sim_time: float
+
+
+def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys) -> list[Outgoing]:
+    """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick."""
+    fill = record.mission.kind is MissionKind.FILL
+    until = max(record.end_time, record.all_parked_time)
+    out = []
+    for vehicle, start in zip(record.vehicles, record.starts, strict=True):
+        drive = Drive(vehicle, start, layout)
+        for s in record.subtasks:
+            if s.vehicle == vehicle:
+                drive.add(s.trajectory, loaded=(s.kind is TaskKind.DELIVER) == fill)
+        out += [Outgoing(keys.vehicle_state(vehicle), drive.state_at(t), f"vehicle-{vehicle}",
+                         t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)]
+    return out
+
+
+def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
+                     events: list[tuple[Message, float]], changes: list[Change],
+                     done: MissionDone, keys: Keys | None = None) -> list[Outgoing]:
+    """Everything a run of processes would have published, in sim-time order."""
+    keys = keys or Keys()
+    key_of = {"dispatch.subtask": keys.dispatch_subtask, "dispatch.stack": keys.dispatch_stack,
+              "dispatch.failure": keys.dispatch_failure,
+              "dispatch.progress": keys.dispatch_progress}
+    stream = [Outgoing(keys.dispatch_mission, info, "dispatcher", 0.0)]
+    stream += [Outgoing(keys.reservation_change, c, "reservation", change_time(c))
+               for c in changes]
+    stream += [Outgoing(key_of[m.TYPE], m, "dispatcher", t) for m, t in events]
+    stream += vehicle_states(record, layout, keys)
+    stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
+    stream.append(Outgoing(keys.dispatch_done, done, "dispatcher", record.end_time))
+    return stream
+
+
+def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:
+    """Write a stream as a recording, with its Foxglove view channels. Log times are the
+    run's start (now) plus sim time, as the view channels have them."""
+    from fleet.scene import SceneViews
+
+    writer = RecordingWriter(path)
+    seq: dict[tuple[str, str], int] = defaultdict(int)
+    now = time.time_ns()
+    info = next(o.message for o in stream if isinstance(o.message, MissionInfo))
+    writer.describe(info)
+    views = SceneViews(layout, now, kind=info.kind, vehicles=info.vehicles)
+    for topic, message, log_ns in views.start():
+        writer.write_view(topic, message, log_ns)
+    try:
+        for o in stream:
+            seq[o.key, o.sender] += 1
+            payload = encode(o.message, o.sender, seq[o.key, o.sender], o.sim_time)
+            writer.write(o.key, payload, views.log_ns(o.sim_time), o.sim_time)
+            for topic, message, log_ns in views.on_message(o.key, o.message, o.sim_time):
+                writer.write_view(topic, message, log_ns)
+    finally:
+        writer.close()

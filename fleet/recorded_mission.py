@@ -1,0 +1,48 @@
+"""The mission record (the dict of fleet.record_io) rebuilt from a recording's dispatch
+events, so plots and summaries read recordings, including those of runs that never ended."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fleet.protocol import DecisionFailure, MissionDone, Progress, StackDone, SubtaskEvent
+from fleet.record_io import subtask_dict
+from fleet.recording import Recording, RecordingError
+
+
+def record_of(recording: Recording) -> dict[str, Any]:
+    info = recording.info
+    if info is None:
+        raise RecordingError(f"{recording.path}: no mission message (dispatch/mission) was "
+                             f"recorded, so the run is unknown")
+    subtasks = [subtask_dict(m) for _, m in recording.of(SubtaskEvent)]
+    stacks = [[m.cluster, m.index, m.t] for _, m in recording.of(StackDone)]
+    failures = [{"t": m.t, "vehicle": m.vehicle, "stage": m.stage, "reason": m.reason}
+                for _, m in recording.of(DecisionFailure)]
+    busy: dict[str, float] = {str(v): 0.0 for v in range(1, info.vehicles + 1)}
+    wait = dict(busy)
+    for s in subtasks:
+        for label, _, _, t0, t1, *_ in s["steps"]:
+            (wait if label == "stop" else busy)[str(s["vehicle"])] += t1 - t0
+    # Failures inside a decision are counted, not announced one by one: the last progress
+    # report has the count so far, the dispatcher's result the final one.
+    failure_count = max([m.failures for _, m in recording.of(Progress)]
+                        + [sum(f["stage"] == "plan" for f in failures)])
+    done = [m for _, m in recording.of(MissionDone) if m.ok and m.record]
+    if done:  # the dispatcher's own account, which also counts postponements as waiting
+        record = done[-1].record
+        busy, wait, failure_count = record["busy_s"], record["wait_s"], \
+            record["decision_failures"]
+    return {
+        "mission": {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
+                    "vehicles": info.vehicles, "seed": info.seed},
+        "starts": list(info.starts),
+        "end_time_s": max((t for _, _, t in stacks), default=0.0),
+        "all_parked_s": max((s["t_end"] for s in subtasks), default=0.0),
+        "decision_failures": failure_count,
+        "wait_s": wait,
+        "busy_s": busy,
+        "stacks_done": stacks,
+        "failures": failures,
+        "subtasks": subtasks,
+    }

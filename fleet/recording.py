@@ -1,0 +1,405 @@
+"""Recordings of runs as MCAP files (docs/recording.md): the one format analysis and plots
+read, written by the recorder process and by the in-process engine alike.
+
+Each zenoh key is a channel whose messages are the raw msgpack payloads as they travelled
+(message encoding `msgpack`, a JSON schema per message type); log time is when the message
+was received, publish time its simulation time. The run's description is a metadata record
+and the layout a TOML attachment, so a recording stands on its own. View channels under
+/view/ carry Foxglove scene messages (protobuf) for Foxglove to display.
+
+Small chunks flushed about once a second bound what a killed recorder loses; `read_recording`
+recovers every complete chunk of a truncated file and says where reading stopped.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import re
+import types
+import typing
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field, fields
+from pathlib import Path
+from typing import IO, Any
+
+from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from fleet import __version__
+from fleet.layout import Layout, layout_source, parse_layout
+from fleet.mission import Mission
+from fleet.protocol import (
+    Change,
+    ClockAck,
+    ClockTick,
+    DecisionFailure,
+    Envelope,
+    MissionDone,
+    MissionInfo,
+    Progress,
+    ProtocolError,
+    RecorderStatus,
+    StackDone,
+    SubtaskEvent,
+    VehicleState,
+    decode,
+)
+from fleet.protocol import Message as WireMessage
+
+PROFILE = "forklift-fleet"
+RUN_FILE = "run.mcap"  # a run directory's recording
+MCAP_MAGIC = b"\x89MCAP0\r\n"  # every MCAP file starts with it
+MESSAGE_ENCODING = "msgpack"
+VIEW_PREFIX = "/view/"
+CHUNK_BYTES = 64 * 1024  # small chunks: a crash loses at most the one being filled
+NS = 1_000_000_000
+
+# What each key under fleet/<run>/ carries and who may send it ({0}: the key's vehicle id).
+# The channel's schema is chosen by key, not by content, so a hostile payload is recorded on
+# the channel it arrived on, as it was; analysis believes a message only from its sender.
+KEY_TYPES: tuple[tuple[re.Pattern, type[WireMessage], str], ...] = tuple(
+    (re.compile(rf"fleet/[^/]+/{pattern}"), cls, sender) for pattern, cls, sender in (
+        (r"vehicle/(\d+)/state", VehicleState, "vehicle-{0}"),
+        (r"reservation/change", Change, "reservation"),
+        (r"clock", ClockTick, "clock"),
+        (r"clock/ack/(\d+)", ClockAck, "vehicle-{0}"),
+        (r"dispatch/progress", Progress, "dispatcher"),
+        (r"dispatch/done", MissionDone, "dispatcher"),
+        (r"dispatch/mission", MissionInfo, "dispatcher"),
+        (r"dispatch/subtask", SubtaskEvent, "dispatcher"),
+        (r"dispatch/stack", StackDone, "dispatcher"),
+        (r"dispatch/failure", DecisionFailure, "dispatcher"),
+        (r"recorder/status", RecorderStatus, "recorder"),
+    ))
+
+
+def message_type(key: str) -> type[WireMessage] | None:
+    found = _key_type(key)
+    return found[0] if found else None
+
+
+def expected_sender(key: str) -> str | None:
+    found = _key_type(key)
+    return found[1] if found else None
+
+
+@functools.lru_cache(maxsize=4096)
+def _key_type(key: str) -> tuple[type[WireMessage], str] | None:
+    for pattern, cls, sender in KEY_TYPES:
+        match = pattern.fullmatch(key)
+        if match:
+            return cls, sender.format(*match.groups())
+    return None
+
+
+def _json_type(hint: Any) -> dict:
+    origin = typing.get_origin(hint)
+    if origin in (types.UnionType, typing.Union):
+        return {"anyOf": [_json_type(h) for h in typing.get_args(hint)]}
+    if hint is type(None):
+        return {"type": "null"}
+    simple = {bool: "boolean", int: "integer", float: "number", str: "string", dict: "object"}
+    if hint in simple:
+        return {"type": simple[hint]}
+    if origin is list:
+        return {"type": "array", "items": _json_type(typing.get_args(hint)[0])}
+    if origin is tuple:
+        items = [_json_type(h) for h in typing.get_args(hint)]
+        return {"type": "array", "prefixItems": items, "minItems": len(items),
+                "maxItems": len(items)}
+    raise TypeError(f"no JSON schema for {hint!r}")  # pragma: no cover
+
+
+def json_schema(cls: type[WireMessage]) -> dict:
+    """The JSON schema of a message in its envelope (fleet/protocol.py), msgpack-encoded."""
+    hints = typing.get_type_hints(cls)
+    body = {"type": "object", "additionalProperties": False,
+            "properties": {f.name: _json_type(hints[f.name]) for f in fields(cls)},
+            "required": [f.name for f in fields(cls)
+                         if f.default is MISSING and f.default_factory is MISSING]}
+    return {"title": cls.TYPE, "type": "object",
+            "properties": {"v": {"const": 1}, "type": {"const": cls.TYPE},
+                           "sender": {"type": "string"}, "seq": {"type": "integer"},
+                           "t": {"type": "number"}, "body": body},
+            "required": ["v", "type", "sender", "seq", "t", "body"]}
+
+
+MAX_NS = 2**63 - 1  # MCAP times are unsigned 64-bit; Foxglove's are signed
+
+
+def _ns(seconds: float) -> int:
+    """Seconds as MCAP nanoseconds; a time that does not fit (a forged one) becomes 0."""
+    if not math.isfinite(seconds) or not 0 <= seconds <= MAX_NS / NS:
+        return 0
+    return round(seconds * NS)
+
+
+def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
+                 speed: float = 1.0, command: str = "") -> MissionInfo:
+    """What a recording says about its run (the dispatcher publishes it)."""
+    import platform
+    import sys
+
+    starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
+    versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
+                "mcap": _package_version("mcap")}
+    return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
+                       mission.strategy.value, vehicles, mission.seed, clock, speed,
+                       [str(p) for p in starts], command or " ".join(sys.argv), versions)
+
+
+def _package_version(name: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def run_metadata(info: MissionInfo) -> dict[str, str]:
+    """The run's description as MCAP metadata (strings only)."""
+    data = {"layout": info.layout, "mission": info.kind, "strategy": info.strategy,
+            "vehicles": str(info.vehicles), "seed": str(info.seed), "clock": info.clock,
+            "speed": repr(info.speed), "starts": " ".join(info.starts),
+            "command": info.command, "fleet_version": __version__}
+    data.update({f"version_{k}": str(v) for k, v in info.versions.items()})
+    return data
+
+
+class RecordingWriter:
+    """Writes one run's MCAP file. Not thread-safe: one thread writes."""
+
+    def __init__(self, path: Path, chunk_bytes: int = CHUNK_BYTES) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed by close()
+        self._writer = Writer(self._file, chunk_size=chunk_bytes,
+                              compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=f"forklift-fleet {__version__}")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.messages = 0
+        self.described = False
+
+    def _schema(self, name: str, encoding: str, data: Callable[[], bytes]) -> int:
+        if name not in self._schemas:
+            self._schemas[name] = self._writer.register_schema(name, encoding, data())
+        return self._schemas[name]
+
+    def _channel(self, topic: str, encoding: str, schema_id: Callable[[], int]) -> int:
+        if topic not in self._channels:
+            self._channels[topic] = self._writer.register_channel(topic, encoding,
+                                                                  schema_id())
+        return self._channels[topic]
+
+    def _raw_schema(self, key: str) -> int:
+        cls = message_type(key)
+        if cls is None:
+            return 0
+        return self._schema(cls.TYPE, "jsonschema", lambda: _dumps(json_schema(cls)))
+
+    def write(self, key: str, payload: bytes, log_ns: int, sim_time: float) -> None:
+        """One message as it travelled on `key`."""
+        channel = self._channel(key, MESSAGE_ENCODING, lambda: self._raw_schema(key))
+        self._writer.add_message(channel, log_time=log_ns, data=payload,
+                                 publish_time=_ns(sim_time), sequence=self.messages)
+        self.messages += 1
+
+    def write_view(self, topic: str, message: Any, log_ns: int) -> None:
+        """A Foxglove message (foxglove.messages.*) on a view channel."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            schema = message.get_schema()
+            channel = self._channel(topic, schema.encoding, lambda: self._schema(
+                schema.name, schema.encoding, lambda: bytes(schema.data)))
+        self._writer.add_message(channel, log_time=log_ns, data=message.encode(),
+                                 publish_time=log_ns)
+
+    def describe(self, info: MissionInfo) -> None:
+        """The run's metadata and its layout attachment, once."""
+        if self.described:
+            return
+        self._writer.add_metadata("run", run_metadata(info))
+        self._writer.add_attachment(0, 0, "layout.toml", "application/toml",
+                                    info.layout_toml.encode())
+        self.described = True
+
+    def flush(self) -> None:
+        """Close the chunk in progress and push everything to the file."""
+        self._writer.flush()
+
+    def close(self) -> None:
+        self._writer.finish()
+        self._file.close()
+
+
+def _dumps(data: dict) -> bytes:
+    return json.dumps(data, sort_keys=True).encode()
+
+
+# -------------------------------------------------------------------------------- reading
+
+
+@dataclass(frozen=True)
+class Recorded:
+    key: str
+    log_ns: int
+    publish_ns: int
+    envelope: Envelope | None  # None: the payload is not a valid message (see error)
+    error: str = ""
+
+    @property
+    def message(self) -> WireMessage | None:
+        return None if self.envelope is None else self.envelope.message
+
+    @property
+    def genuine(self) -> bool:
+        """A valid message of the type its key carries, from the one sender of that key."""
+        found = _key_type(self.key)
+        return (self.envelope is not None and found is not None
+                and type(self.envelope.message) is found[0]
+                and self.envelope.sender == found[1])
+
+
+@dataclass
+class Recording:
+    path: Path
+    messages: list[Recorded] = field(default_factory=list)  # msgpack channels, file order
+    views: dict[str, int] = field(default_factory=dict)  # view topic -> messages
+    view_schemas: dict[str, str] = field(default_factory=dict)  # view topic -> schema name
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, bytes] = field(default_factory=dict)
+    complete: bool = False  # the file ends with its footer
+    problem: str = ""  # why reading stopped before the footer
+
+    def of(self, cls: type[WireMessage]) -> list[tuple[Recorded, Any]]:
+        """Every genuine message of a type (from its key's sender, on its key), with where
+        and when it was recorded."""
+        return [(r, r.envelope.message) for r in self.messages
+                if r.genuine and isinstance(r.envelope.message, cls)]
+
+    @property
+    def foreign(self) -> list[Recorded]:
+        """Valid messages that are not genuine: another type or sender than the key's."""
+        return [r for r in self.messages if r.envelope is not None and not r.genuine]
+
+    @property
+    def info(self) -> MissionInfo | None:
+        found = self.of(MissionInfo)
+        return found[-1][1] if found else None
+
+    @property
+    def span_s(self) -> float:
+        """Receive-time span of the recorded messages (wall seconds)."""
+        if not self.messages:
+            return 0.0
+        times = [r.log_ns for r in self.messages]
+        return (max(times) - min(times)) / NS
+
+    @property
+    def last_sim_time(self) -> float:
+        """The latest simulation time a recorded message carries."""
+        return max((r.envelope.sim_time for r in self.messages if r.genuine
+                    and math.isfinite(r.envelope.sim_time)), default=0.0)
+
+    def layout(self) -> Layout:
+        data = self.attachments.get("layout.toml")
+        if data is None and self.info is not None:
+            data = self.info.layout_toml.encode()
+        if data is None:
+            raise RecordingError(f"{self.path}: the recording holds no layout (no "
+                                 f"layout.toml attachment and no mission message)")
+        return parse_layout(data.decode(), f"{self.path}: layout.toml")
+
+
+class RecordingError(ValueError):
+    """A file that is not a readable recording; the message says why."""
+
+
+def recording_file(path: Path) -> Path:
+    """The MCAP file a path names: the file itself, or DIR/run.mcap. The retired mission.json
+    and anything else that is not MCAP are refused, saying which it is."""
+    path = Path(path)
+    if path.is_dir():
+        if not (path / RUN_FILE).exists():
+            old = (" (it holds a mission.json: that format is retired, only MCAP recordings "
+                   "are read)") if (path / "mission.json").exists() else ""
+            raise RecordingError(f"{path}: no {RUN_FILE} in this directory{old}")
+        path = path / RUN_FILE
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(len(MCAP_MAGIC))
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    if head == MCAP_MAGIC:
+        return path
+    if path.suffix.lower() == ".json" or head.lstrip()[:1] in (b"{", b"["):
+        raise RecordingError(f"{path}: a JSON file, not an MCAP recording; mission.json "
+                             f"records are retired: give the run's recording ({RUN_FILE})")
+    raise RecordingError(f"{path}: not an MCAP recording (it does not start with the MCAP "
+                         f"magic)")
+
+
+def read_recording(path: Path) -> Recording:
+    """Everything a recording holds; a truncated file (a killed recorder) gives its complete
+    chunks, with `complete` False and `problem` saying where reading stopped."""
+    recording = Recording(Path(path))
+    channels: dict[int, Channel] = {}
+    schemas: dict[int, Schema] = {}
+    try:
+        stream = open(path, "rb")  # noqa: SIM115 - closed below
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    with stream:
+        records = StreamReader(stream, record_size_limit=1 << 30).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except Exception as exc:  # mcap raises its own, struct and decompression errors
+                if not channels and not recording.messages:
+                    raise RecordingError(f"{path}: not an MCAP recording "
+                                         f"({type(exc).__name__}: {exc})") from None
+                what = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                recording.problem = f"the file ends in a torn record ({what}) after " \
+                    f"{os.path.getsize(path)} bytes"
+                break
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                _add_message(recording, channels, schemas, record)
+            elif isinstance(record, Metadata):
+                recording.metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Attachment):
+                recording.attachments[record.name] = bytes(record.data)
+            elif isinstance(record, Footer):
+                recording.complete = True
+    if not recording.complete and not recording.problem:
+        recording.problem = "the file ends before its footer"
+    return recording
+
+
+def _add_message(recording: Recording, channels: dict[int, Channel],
+                 schemas: dict[int, Schema], record: Message) -> None:
+    channel = channels.get(record.channel_id)
+    if channel is None:
+        return  # a message whose channel was lost with a torn chunk
+    if channel.topic.startswith(VIEW_PREFIX):
+        recording.views[channel.topic] = recording.views.get(channel.topic, 0) + 1
+        schema = schemas.get(channel.schema_id)
+        recording.view_schemas[channel.topic] = schema.name if schema else ""
+        return
+    try:
+        envelope, error = decode(record.data), ""
+    except ProtocolError as exc:
+        envelope, error = None, str(exc)
+    recording.messages.append(Recorded(channel.topic, record.log_time, record.publish_time,
+                                       envelope, error))

@@ -1,0 +1,180 @@
+"""`fleet recorder` / `python -m recorder`: records everything under fleet/<run>/ to MCAP.
+
+A zenoh callback only stamps the receive time and enqueues; one writer thread decodes what
+it needs (the sim time, the run's description), writes each payload as it travelled, feeds
+the Foxglove views (into the file, and to a live WebSocket view with --foxglove) and flushes
+the file about once a second, so a killed recorder loses at most about a second. It publishes
+its status on fleet/<run>/recorder/status at every flush and once the mission's result is in
+the file (and answers queries there), so `fleet run` knows when it may stop the recorder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from fleet.bus import Keys, Stream, add_bus_arguments, bus_config, open_session, stop_on_signals
+from fleet.errors import UserError
+from fleet.layout import parse_layout
+from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
+from fleet.recording import Recorded, RecordingWriter
+
+log = logging.getLogger("fleet.recorder")
+SENDER = "recorder"
+FLUSH_PERIOD_S = 1.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_bus_arguments(p)
+    p.add_argument("--out", type=Path, default=Path("run.mcap"),
+                   help="MCAP file to write (default run.mcap)")
+    p.add_argument("--foxglove", type=int, metavar="PORT",
+                   help="also serve the live view over the Foxglove WebSocket protocol on "
+                   "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove)")
+
+
+class Recorder:
+    def __init__(self, session: zenoh.Session, keys: Keys, writer: RecordingWriter,
+                 live=None) -> None:
+        self.session = session
+        self.keys = keys
+        self.writer = writer
+        self.live = live
+        self.inbox: queue.Queue[tuple[str, bytes, int] | None] = queue.Queue()
+        self.views = None  # Foxglove scene views, once the run's description is known
+        self.done_seen = False
+        self.lock = threading.Lock()  # status answers read what the writer thread counts
+
+    def run(self) -> None:
+        subscriber = self.session.declare_subscriber(self.keys.everything, self._on_sample)
+        status = self.session.declare_queryable(self.keys.recorder_status, self._status)
+        self.status_pub = Stream(self.session, self.keys.recorder_status, SENDER, reliable=True)
+        token = self.session.liveliness().declare_token(self.keys.recorder_alive)
+        self._ask_for_mission()
+        log.info("recording %s to %s", self.keys.everything, self.writer.path)
+        next_flush = time.monotonic() + FLUSH_PERIOD_S
+        try:
+            while True:
+                try:
+                    item = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
+                except queue.Empty:
+                    item = ()  # time to flush
+                if item is None:
+                    break
+                if item:
+                    self._record(*item)
+                if time.monotonic() >= next_flush:
+                    self.writer.flush()
+                    self._announce()
+                    next_flush = time.monotonic() + FLUSH_PERIOD_S
+            while not self.inbox.empty():  # what arrived before the stop
+                if (item := self.inbox.get_nowait()) is not None:
+                    self._record(*item)
+        finally:
+            for declared in (token, status, self.status_pub, subscriber):
+                declared.undeclare()
+            self.writer.close()
+            if self.live is not None:
+                self.live.close()
+        log.info("wrote %d messages to %s", self.writer.messages, self.writer.path)
+
+    def stop(self) -> None:
+        # From a signal handler in the main thread, which may be inside inbox.get holding the
+        # queue's lock: put from another thread, or it could wait on itself.
+        threading.Thread(target=self.inbox.put, args=(None,), daemon=True).start()
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    def _ask_for_mission(self) -> None:
+        """A recorder started mid-run asks the dispatcher what the run is."""
+        def ask() -> None:
+            for reply in self.session.get(self.keys.dispatch_mission, timeout=5.0):
+                if reply.ok is not None:
+                    self.inbox.put((self.keys.dispatch_mission, reply.ok.payload.to_bytes(),
+                                    time.time_ns()))
+
+        threading.Thread(target=ask, daemon=True, name="ask-mission").start()
+
+    def _record(self, key: str, payload: bytes, log_ns: int) -> None:
+        """Write the message as it came; then what it tells (the run's description, the
+        views). Nothing a sender puts in a message stops the recording."""
+        try:
+            envelope = decode(payload)
+        except ProtocolError as exc:  # recorded as it came: the analyzer reports it
+            log.warning("recording a malformed message on %s: %s", key, exc)
+            envelope = None
+        sim_time = envelope.sim_time if envelope is not None else 0.0
+        with self.lock:
+            self.writer.write(key, payload, log_ns, sim_time)
+        recorded = Recorded(key, log_ns, 0, envelope)
+        if not recorded.genuine:
+            return
+        message = envelope.message
+        try:
+            if isinstance(message, MissionInfo) and not self.writer.described:
+                self._describe(message, log_ns)
+            if isinstance(message, MissionDone):
+                with self.lock:
+                    self.done_seen = True
+                self._announce()
+            if self.views is not None:
+                self._show(self.views.on_message(key, message, sim_time))
+        except Exception:  # a view or description failing must not lose the recording
+            log.exception("could not show the message on %s", key)
+
+    def _announce(self) -> None:
+        """Publish how far the recording is (fleet run waits for the mission's result)."""
+        self.status_pub.put(self._current_status(), 0.0)
+
+    def _current_status(self) -> RecorderStatus:
+        with self.lock:
+            return RecorderStatus(str(self.writer.path), self.writer.messages, self.done_seen)
+
+    def _describe(self, info: MissionInfo, log_ns: int) -> None:
+        from fleet.scene import SceneViews
+
+        self.writer.describe(info)
+        try:
+            layout = parse_layout(info.layout_toml, "the mission's layout")
+        except ValueError as exc:
+            log.warning("no Foxglove views: %s", exc)
+            return
+        self.views = SceneViews(layout, log_ns, kind=info.kind, vehicles=info.vehicles)
+        self._show(self.views.start())
+
+    def _show(self, messages) -> None:
+        for topic, message, log_ns in messages:
+            self.writer.write_view(topic, message, log_ns)
+            if self.live is not None:
+                self.live.publish(topic, message)
+
+    def _status(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, encode(self._current_status(), SENDER, 0, 0.0))
+
+
+def serve(args: argparse.Namespace) -> int:
+    if args.out.exists():
+        raise UserError(f"{args.out} exists: a recording is never overwritten; give another "
+                        f"--out")
+    live = None
+    if args.foxglove is not None:
+        from recorder.live import LiveView
+
+        live = LiveView(port=args.foxglove)
+        log.info("Foxglove live view on ws://127.0.0.1:%d", live.port)
+    writer = RecordingWriter(args.out)
+    session = open_session(bus_config(args))
+    recorder = Recorder(session, Keys(args.run), writer, live)
+    stop_on_signals(recorder.stop)
+    try:
+        recorder.run()
+    finally:
+        session.close()
+    return 0

@@ -1,0 +1,194 @@
+"""Plots, the animation and the comparison of recorded runs (MCAP), on small synthetic
+recordings written with RecordingWriter."""
+
+import json
+import math
+from collections import Counter
+from dataclasses import fields
+from importlib import resources
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from fleet.cli import main
+from fleet.errors import UserError
+from fleet.layout import Layout, parse_layout
+from fleet.mission_plots import animate, occupancy_seconds, pose_at
+from fleet.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
+from fleet.recording import RecordingWriter, expected_sender
+
+STATE_PERIOD_S = 0.5  # the fast clock's state grid (vehicle_agent/driving.py)
+
+
+def layout_source(name: str) -> str:
+    return resources.files("fleet.layouts").joinpath(f"{name}.toml").read_text()
+
+
+def small_record(end: float = 40.0, kind: str = "fill", strategy: str = "ann") -> dict:
+    """A record on `small` (record_io.record_to_dict format): forklift 1 drives two cells
+    west, waits, fills stack a#1 at `end`; forklift 2 never moves."""
+    steps = [["turn-right", "4,6,S", "3,5,W", 5.0, 10.0, 0, 1],
+             ["forward", "3,5,W", "2,5,W", 10.0, 11.25, 1, 1],
+             ["stop", "2,5,W", "2,5,W", 11.25, end - 5.0, 0, 0]]
+    intervals = [[2, 5, 10.0, math.inf], [3, 5, 5.0, 11.25], [4, 6, 5.0, 10.0]]
+    subtask = {"vehicle": 1, "kind": "deliver", "target": "a", "stack": 1, "t_i": 5.0,
+               "t_end": end - 5.0, "t_done": end, "postponed": False, "steps": steps,
+               "intervals": intervals}
+    return {"mission": {"layout": "small", "kind": kind, "strategy": strategy, "vehicles": 2,
+                        "seed": 0},
+            "starts": ["4,6,S", "5,6,S"], "stacks_done": [["a", 1, end]],
+            "subtasks": [subtask]}
+
+
+def write_recording(path: Path, record: dict, clock: str = "fast") -> Path:
+    """A recording of `record` as a run would leave it: the mission message, every subtask
+    and stack, and each forklift's state on the shared grid of sim times."""
+    m = record["mission"]
+    source = layout_source(m["layout"])
+    layout = parse_layout(source, m["layout"])
+    info = MissionInfo(layout=m["layout"], layout_toml=source, kind=m["kind"],
+                       strategy=m["strategy"], vehicles=m["vehicles"], seed=m["seed"],
+                       clock=clock, speed=1.0, starts=list(record["starts"]))
+    events: list[tuple[float, str, object]] = [(0.0, "dispatch/mission", info)]
+    names = {f.name for f in fields(SubtaskEvent)}
+    for s in record["subtasks"]:
+        body = {k: v for k, v in s.items() if k in names}
+        body["steps"] = [tuple(st) for st in s["steps"]]
+        body["intervals"] = [(c, r, t0, math.inf if t1 == "inf" else t1)
+                             for c, r, t0, t1 in s["intervals"]]
+        events.append((s["t_i"], "dispatch/subtask", SubtaskEvent(**body)))
+    for cluster, index, t in record["stacks_done"]:
+        events.append((t, "dispatch/stack", StackDone(cluster, index, 0, t)))
+    end = max([t for _, _, t in record["stacks_done"]] + [s["t_done"] for s in record["subtasks"]])
+    for k in range(int(end / STATE_PERIOD_S) + 1):
+        t = k * STATE_PERIOD_S
+        for v in range(1, m["vehicles"] + 1):
+            x, y, th = pose_at(record, v, t, layout)
+            state = VehicleState(v, "0,0,E", 0, "", False, x, y, th)
+            events.append((t, f"vehicle/{v}/state", state))
+    events.sort(key=lambda e: e[0])
+    writer = RecordingWriter(path)
+    writer.describe(info)
+    numbers: Counter = Counter()
+    for k, (t, key, message) in enumerate(events):
+        key = f"fleet/test/{key}"
+        numbers[key] += 1  # each key's one sender numbers its stream
+        writer.write(key, encode(message, expected_sender(key), numbers[key], t), k * 1000, t)
+    writer.close()
+    return path
+
+
+@pytest.fixture
+def small() -> Layout:
+    return parse_layout(layout_source("small"), "small")
+
+
+def test_a_forklift_standing_still_occupies_exactly_its_body_cells(small):
+    # Parked at 4,6 facing south (its start): the body covers 4,6 and 4,5 (front 1.8 m
+    # ahead of the rear axle point, rear 1 m behind on 2 m cells).
+    x, y = small.cell_center((4, 6))
+    still = VehicleState(1, "4,6,S", 0, "", False, x, y, -math.pi / 2)
+    states = [(k * 0.5, still) for k in range(21)]  # 0 to 10 s
+    seconds = occupancy_seconds(small, states)
+    assert set(seconds) == {(4, 6), (4, 5)}
+    assert seconds[4, 6] == pytest.approx(10.0) and seconds[4, 5] == pytest.approx(10.0)
+
+
+def test_occupancy_caps_gaps_and_counts_each_forklift(small):
+    x, y = small.cell_center((4, 6))
+    first = VehicleState(1, "4,6,S", 0, "", False, x, y, -math.pi / 2)
+    x2, y2 = small.cell_center((6, 2))
+    other = VehicleState(2, "6,2,E", 0, "", False, x2, y2, 0.0)
+    # Forklift 1: a state, then nothing for 60 s (a gap counts 2 s at most); forklift 2's
+    # states interleaved with it do not shorten forklift 1's intervals.
+    states = [(0.0, first), (0.0, other), (1.0, other), (60.0, first), (3.0, other)]
+    seconds = occupancy_seconds(small, states, cap_s=2.0)
+    assert seconds[4, 6] == pytest.approx(2.0)
+    assert seconds[6, 2] == pytest.approx(3.0)  # 1 s, then 2 s: states sorted per forklift
+    assert set(seconds) == {(4, 6), (4, 5), (6, 2), (7, 2)}  # facing east: front is east
+
+
+def test_plot_writes_the_pngs_and_a_gif_of_the_requested_frames(tmp_path, capsys):
+    run = write_recording(tmp_path / "run.mcap", small_record())
+    out = tmp_path / "plots"
+    assert main(["plot", str(tmp_path), "--out", str(out), "--at", "12", "--frames", "7"]) == 0
+    printed = capsys.readouterr().out
+    for name in ("filling.png", "gantt.png", "heatmap.png", "snapshot_00012.00.png"):
+        assert (out / name).read_bytes()[:4] == b"\x89PNG", name
+        assert f"wrote {out / name}" in printed
+    with Image.open(out / "run.gif") as gif:
+        assert gif.n_frames == 7
+    assert f"wrote {out / 'run.gif'}" in printed
+    # The file itself works as well as its directory, and --no-gif skips the animation.
+    assert main(["plot", str(run), "--out", str(tmp_path / "again"), "--no-gif"]) == 0
+    assert not (tmp_path / "again" / "run.gif").exists()
+    assert (tmp_path / "again" / "heatmap.png").exists()
+
+
+@pytest.mark.parametrize("content", ['{"mission": {}}', "not json at all"])
+def test_plot_of_a_json_file_is_refused_clearly(tmp_path, capsys, content):
+    old = tmp_path / "mission.json"
+    old.write_text(content)
+    assert main(["plot", str(old)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fleet plot: error: ")
+    assert "mission.json" in err and "MCAP" in err
+
+
+def test_plot_of_a_file_that_is_not_mcap_is_refused(tmp_path, capsys):
+    other = tmp_path / "run.mcap"
+    other.write_text("hello")
+    assert main(["plot", str(other)]) == 2
+    assert "not an MCAP recording" in capsys.readouterr().err
+    assert main(["plot", str(tmp_path / "missing")]) == 2
+    assert "no such file or directory" in capsys.readouterr().err.lower()
+
+
+def test_animation_formats_are_checked_before_drawing(tmp_path, small, monkeypatch):
+    from matplotlib import animation
+
+    monkeypatch.setattr(animation.FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+    with pytest.raises(UserError, match="an MP4 needs ffmpeg, which is not on the PATH"):
+        animate(str(tmp_path / "run.mp4"), small, small_record())
+    with pytest.raises(UserError, match=r"a \.gif or an \.mp4 file, not \.avi"):
+        animate(str(tmp_path / "run.avi"), small, small_record())
+    assert not any(tmp_path.iterdir())
+
+
+def test_compare_prints_both_runs_and_the_difference(tmp_path, capsys):
+    a = write_recording(tmp_path / "a.mcap", small_record(end=40.0))
+    b = write_recording(tmp_path / "b.mcap", small_record(end=50.0, strategy="greedy"))
+    assert main(["compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if ln.startswith("end time"))
+    assert line.split()[-4:] == ["40.00", "50.00", "+10.00", "1.250"]
+    strategy = next(ln for ln in out.splitlines() if ln.startswith("strategy"))
+    assert "ann" in strategy and "greedy" in strategy and "differs" in strategy
+    assert "forklift 1 busy" in out and str(a) in out and str(b) in out
+
+
+def test_compare_json_gives_both_runs_and_the_differences(tmp_path, capsys):
+    a = write_recording(tmp_path / "a.mcap", small_record(end=40.0))
+    b = write_recording(tmp_path / "b.mcap", small_record(end=50.0))
+    assert main(["compare", str(a), str(b), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["a"]["end_time_s"] == 40.0 and data["b"]["end_time_s"] == 50.0
+    assert data["diff"]["end_time_s"] == pytest.approx(10.0)
+    assert data["ratio"]["end_time_s"] == pytest.approx(1.25)
+    for key in ("mission", "strategy", "layout", "vehicles", "clock", "stacks_done",
+                "subtasks", "decision_failures", "wait_s", "mean_utilisation", "busy_s"):
+        assert key in data["a"] and key in data["b"], key
+    assert data["a"]["clock"] == "fast" and data["a"]["stacks_done"] == 1
+    # Forklift 1 waits 10 s longer in B (its stop lasts to end - 5); its busy time is equal.
+    assert data["diff"]["wait_s"] == pytest.approx(10.0)
+    assert data["diff"]["busy_s"]["1"] == pytest.approx(0.0)
+
+
+def test_plot_mp4_needs_ffmpeg_and_says_so(tmp_path, capsys, monkeypatch):
+    from matplotlib import animation
+
+    monkeypatch.setattr(animation.FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+    write_recording(tmp_path / "run.mcap", small_record())
+    assert main(["plot", str(tmp_path), "--mp4", "--frames", "3"]) == 2
+    assert "an MP4 needs ffmpeg" in capsys.readouterr().err
