@@ -163,7 +163,8 @@ def test_forklift_is_its_body_rectangle_at_the_pose(paper, theta):
                      for v in (-body.size.y / 2, body.size.y / 2))
     expected = sorted((round(px, 9), round(py, 9))
                       for px, py in body_corners(x, y, theta, dims))
-    assert corners == pytest.approx(expected)
+    assert [v for corner in corners for v in corner] == pytest.approx(
+        [v for corner in expected for v in corner])
     (arrow,) = forklift.arrows
     assert (arrow.pose.position.x, arrow.pose.position.y) == pytest.approx((x, y))
     assert same_angle(yaw(arrow.pose.orientation), theta)
