@@ -314,7 +314,12 @@ class Recording:
         if data is None:
             raise RecordingError(f"{self.path}: the recording holds no layout (no "
                                  f"layout.toml attachment and no mission message)")
-        return parse_layout(data.decode(), f"{self.path}: layout.toml")
+        try:
+            text = data.decode()
+        except UnicodeDecodeError as exc:
+            raise RecordingError(f"{self.path}: the layout.toml attachment is not UTF-8 text "
+                                 f"({exc.reason} at byte {exc.start})") from None
+        return parse_layout(text, f"{self.path}: layout.toml")
 
 
 class RecordingError(ValueError):

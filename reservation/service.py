@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
+import threading
 from pathlib import Path
 
 import zenoh
@@ -79,7 +80,9 @@ class ReservationService:
         return encode(message, SENDER, self.seq, 0.0)
 
     def stop(self) -> None:
-        self.inbox.put(None)
+        # From a signal handler in the main thread, which may be inside inbox.get holding the
+        # queue's lock: put from another thread, or it could wait on itself.
+        threading.Thread(target=self.inbox.put, args=(None,), daemon=True).start()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -7,23 +7,27 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from collections import Counter
 from pathlib import Path
 
 import mcap.reader
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from fleet.analysis import analyze
 from fleet.bus import Keys
 from fleet.cli import main
 from fleet.commands.run import engine_options
 from fleet.engine import Engine
+from fleet.errors import UserError
 from fleet.layout import load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.protocol import Change, MissionDone, Progress, StackDone, VehicleState, encode
 from fleet.record_inprocess import Outgoing, inprocess_stream, write_recording
 from fleet.record_io import digest_of, record_to_dict
-from fleet.recording import RecordingWriter, mission_info, read_recording
+from fleet.recording import RecordingError, RecordingWriter, mission_info, read_recording
 
 LAYOUT = "small"
 
@@ -247,3 +251,32 @@ def test_the_recorder_never_overwrites_a_recording(tmp_path, capsys):
     assert main(["recorder", "--out", str(old)]) == 2  # refused before it connects anywhere
     assert "never overwritten" in capsys.readouterr().err
     assert old.read_bytes() == b"an earlier run"
+
+
+@settings(max_examples=int(os.environ.get("FLEET_FUZZ_EXAMPLES", 60)), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_damaged_recording_reads_as_far_as_it_goes_or_is_refused(clean_stream, tmp_path,
+                                                                     data):
+    """Cut anywhere, bytes flipped anywhere: reading and analysing either work on what is
+    left or refuse the file with an error that names the problem (a RecordingError, or a
+    LayoutError for a damaged layout attachment); nothing else escapes."""
+    path = tmp_path / "whole.mcap"
+    if not path.exists():
+        write_recording(path, clean_stream, load_layout(LAYOUT))
+    whole = bytearray(path.read_bytes())
+    cut = data.draw(st.integers(0, len(whole)), label="cut")
+    damaged = whole[:cut]
+    for _ in range(data.draw(st.integers(0, 3), label="flips")):
+        if damaged:
+            k = data.draw(st.integers(0, len(damaged) - 1), label="at")
+            damaged[k] ^= data.draw(st.integers(1, 255), label="xor")
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(damaged))
+    try:
+        recording = read_recording(broken)
+        report = analyze(recording)
+    except (RecordingError, UserError):
+        return
+    assert len(recording.messages) <= len(clean_stream)
+    assert report.stacks_done <= 24
