@@ -118,9 +118,9 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     except RunFailed as exc:
         return RunOutcome(None, str(exc), endpoint, log_dir)
     finally:
-        launcher.stop_all()
         if session is not None:
-            session.close()
+            session.close()  # before the router is told to stop: it waits for its clients
+        launcher.stop_all()
 
 
 def _follow(inbox: queue.Queue, launcher: Launcher,

@@ -8,10 +8,13 @@ import argparse
 import logging
 import threading
 
+import zenoh
+
 from fleet.bus import BusConfig, open_session, stop_on_signals
 
 log = logging.getLogger("fleet.router")
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
+LAST_OUT_S = 5.0  # how long a stopping router waits for its clients to leave
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,14 +24,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="another router to connect to (repeatable)")
 
 
+class Clients:
+    """The sessions connected to this router, followed by zenoh's transport events."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.connected: set[str] = set()
+        self.lock = threading.Lock()
+        self.none = threading.Event()
+        self.none.set()
+        self.listener = session.info.declare_transport_events_listener(self._on_event,
+                                                                      history=True)
+
+    def _on_event(self, event) -> None:
+        with self.lock:
+            zid = str(event.transport.zid)
+            if event.kind == zenoh.SampleKind.PUT:
+                self.connected.add(zid)
+            else:
+                self.connected.discard(zid)
+            if self.connected:
+                self.none.clear()
+            else:
+                self.none.set()
+
+
 def serve(args: argparse.Namespace) -> int:
     listen = tuple(args.listen) or (DEFAULT_LISTEN,)
     stop = threading.Event()
     stop_on_signals(stop.set)
     session = open_session(BusConfig("router", tuple(args.connect), listen))
     try:
+        clients = Clients(session)
         log.info("routing on %s", ", ".join(listen))
         stop.wait()
+        # Told to stop, the router goes last: a process closing its session after its router
+        # is gone can hang, and when `fleet run` dies every child stops at once.
+        if not clients.none.wait(LAST_OUT_S):
+            log.warning("stopping with %d sessions still connected", len(clients.connected))
+        clients.listener.undeclare()
     finally:
         session.close()
     return 0
