@@ -15,11 +15,12 @@ from pathlib import Path
 
 from fleet.bus import Keys
 from fleet.dispatch import TaskKind
-from fleet.engine import MissionRecord
+from fleet.engine import Engine, EngineOptions, MissionRecord
 from fleet.layout import Layout
-from fleet.mission import MissionKind
-from fleet.protocol import Change, Message, MissionDone, MissionInfo, encode
-from fleet.recording import RecordingWriter
+from fleet.mission import Mission, MissionKind
+from fleet.protocol import Change, Message, MissionDone, MissionInfo, Progress, encode
+from fleet.record_io import digest_of, record_to_dict
+from fleet.recording import RecordingWriter, mission_info
 from reservation.store import change_time
 from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
 
@@ -63,6 +64,30 @@ def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
     stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
     stream.append(Outgoing(keys.dispatch_done, done, "dispatcher", record.end_time))
     return stream
+
+
+def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
+                 command: str = "") -> tuple[MissionDone, list[Outgoing]]:
+    """Run the mission in this process: its result, and everything a run of processes would
+    have published (options.progress still hears the progress)."""
+    events: list[tuple[Message, float]] = []
+    told = options.progress
+
+    def progress(done: int, total: int, t: float, failures: int) -> None:
+        events.append((Progress(done, total, t, failures), t))
+        if told is not None:
+            told(done, total, t, failures)
+
+    options.progress = progress
+    options.events = lambda message, t: events.append((message, t))
+    t0 = time.perf_counter()
+    engine = Engine(mission, options, layout)
+    record = engine.run()
+    as_dict = record_to_dict(record)
+    done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
+                       wall_s=time.perf_counter() - t0)
+    info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)
+    return done, inprocess_stream(info, record, layout, events, engine.executor.changes, done)
 
 
 def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:

@@ -17,11 +17,14 @@ import functools
 import json
 import math
 import os
+import platform
 import re
+import sys
 import types
 import typing
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
 
@@ -141,9 +144,6 @@ def _ns(seconds: float) -> int:
 def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
                  speed: float = 1.0, command: str = "") -> MissionInfo:
     """What a recording says about its run (the dispatcher publishes it)."""
-    import platform
-    import sys
-
     starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
     versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
                 "mcap": _package_version("mcap")}
@@ -153,8 +153,6 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
 
 
 def _package_version(name: str) -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         return version(name)
     except PackageNotFoundError:

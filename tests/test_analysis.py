@@ -20,14 +20,12 @@ from fleet.analysis import analyze
 from fleet.bus import Keys
 from fleet.cli import main
 from fleet.commands.run import engine_options
-from fleet.engine import Engine
 from fleet.errors import UserError
 from fleet.layout import load_layout
 from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Change, MissionDone, Progress, StackDone, VehicleState, encode
-from fleet.record_inprocess import Outgoing, inprocess_stream, write_recording
-from fleet.record_io import digest_of, record_to_dict
-from fleet.recording import RecordingError, RecordingWriter, mission_info, read_recording
+from fleet.protocol import Change, StackDone, VehicleState, encode
+from fleet.record_inprocess import Outgoing, recorded_run, write_recording
+from fleet.recording import RecordingError, RecordingWriter, read_recording
 
 LAYOUT = "small"
 
@@ -37,16 +35,7 @@ def clean_stream() -> list[Outgoing]:
     """What a fault-free fill of the small layout puts on the wire."""
     mission = Mission(LAYOUT, MissionKind.FILL, Strategy.GREEDY)
     layout = load_layout(LAYOUT)
-    events = []
-    options = engine_options(mission, layout, None, lambda done, total, t, failures:
-                             events.append((Progress(done, total, t, failures), t)))
-    options.events = lambda message, t: events.append((message, t))
-    engine = Engine(mission, options, layout)
-    record = engine.run()
-    as_dict = record_to_dict(record)
-    done = MissionDone(True, record=as_dict, digest=digest_of(as_dict))
-    info = mission_info(mission, layout, len(record.vehicles), "inprocess")
-    return inprocess_stream(info, record, layout, events, engine.executor.changes, done)
+    return recorded_run(mission, layout, engine_options(mission, layout, None))[1]
 
 
 def analyze_stream(tmp_path: Path, stream: list[Outgoing], *flags: str,

@@ -12,15 +12,14 @@ from typing import Any
 
 from fleet.bus import free_port
 from fleet.distributed import RunSpec, run_processes
-from fleet.engine import Engine, EngineOptions
+from fleet.engine import EngineOptions
 from fleet.errors import UserError
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import ProgressBar
-from fleet.protocol import Message, MissionDone, Progress
-from fleet.record_inprocess import inprocess_stream, write_recording
-from fleet.record_io import digest_of, record_to_dict
-from fleet.recording import mission_info, read_recording
+from fleet.record_inprocess import recorded_run, write_recording
+from fleet.record_io import digest_of
+from fleet.recording import read_recording
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -123,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         if args.inprocess:
-            record = _run_inprocess(mission, layout, n, args.weights, progress, out)
+            record = _run_inprocess(mission, layout, args.weights, progress, out)
         else:
             record = _run_processes(mission, n, args, progress, out)
     finally:
@@ -151,26 +150,13 @@ def _verdicts(path: Path) -> int:
     return 0 if report.passed else 1
 
 
-def _run_inprocess(mission: Mission, layout: Layout, n: int, weights: Path | None,
-                   progress, out: Path) -> dict[str, Any]:
-    events: list[tuple[Message, float]] = []
-
-    def on_progress(done: int, total: int, t: float, failures: int) -> None:
-        events.append((Progress(done, total, t, failures), t))
-        progress(done, t, failures)
-
-    options = engine_options(mission, layout, weights, on_progress)
-    options.events = lambda message, t: events.append((message, t))
-    t0 = time.perf_counter()
-    engine = Engine(mission, options, layout)
-    record = engine.run()
-    as_dict = record_to_dict(record)
-    done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
-                       wall_s=time.perf_counter() - t0)
-    info = mission_info(mission, layout, n, "inprocess", command=command_line())
-    stream = inprocess_stream(info, record, layout, events, engine.executor.changes, done)
+def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None, progress,
+                   out: Path) -> dict[str, Any]:
+    options = engine_options(mission, layout, weights,
+                             lambda done, total, t, failures: progress(done, t, failures))
+    done, stream = recorded_run(mission, layout, options, command_line())
     write_recording(out / "run.mcap", stream, layout)
-    return as_dict
+    return done.record
 
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
