@@ -3,7 +3,11 @@ fleet/<run>/clock. Both clocks are `Pacer`s of the engine (fleet/execution.py).
 
 Fast: discrete events. Before each decision the clock moves to the decision's instant and
 waits until every agent has acknowledged the tick (having published its states up to it), so
-a run is deterministic and every state stream is complete up to "now".
+a run is deterministic and every state stream is complete up to "now". With a fault scenario
+it also stops at every fault instant, waits for the injector's ack (the fault is applied) and
+then for the fault to be detected the way it would be anyway (a liveliness token gone or
+back, a forklift's own report): sim time stands still meanwhile, so a fault run is as
+reproducible as any other and detection costs no sim time (docs/faults.md).
 Real time: sim time = speed x wall time since the start; ticks carry the wall anchor so every
 process computes the same "now". The dispatcher decides a subtask a little ahead of the
 forklift's free time; a forklift whose free time has already passed waits until the next
@@ -19,24 +23,40 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.bus import RELIABLE, Keys, received
-from fleet.protocol import ClockAck, ClockTick, encode
+from fleet.faults import Scenario
+from fleet.protocol import ClockAck, ClockTick, VehicleFault, encode
+from fleet.recovery import Disruption, VehicleDown, VehicleUp, scheduled_at
 
 SENDER = "clock"
 ACK_TIMEOUT_S = 60.0
+INJECTOR = 0  # the fault injector acknowledges ticks as "vehicle" 0
+DETECT_TIMEOUT_S = 20.0  # a fault not seen by then was not detected: the run fails
+RECORDER_WAIT_S = 60.0
 
 
 class FastClock:
     def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
-                 liveness: Liveness, log) -> None:
+                 liveness: Liveness, log, scenario: Scenario | None = None,
+                 recorded: bool = False) -> None:
         self.vehicles = vehicles
+        self.recorded = recorded
         self.liveness = liveness
         self.log = log
+        self.scenario = scenario
+        self.pending = scenario.instants() if scenario else []
+        self.down: frozenset[int] = frozenset()
         self.tick = 0
         self.t = 0.0
         self.acked: dict[int, int] = {}
+        # (forklift, "broken" / "repaired") heard; guarded by liveness.changed
+        self.reports: set[tuple[int, str]] = set()
+        # Each fault seen: what, its sim instant, and the wall clock when it was detected and
+        # when the engine had recovered (asked the clock again): `fleet bench faults` reads it.
+        self.detected: list[dict] = []
         self.changed = threading.Condition()
         self.publisher = session.declare_publisher(keys.clock, congestion_control=RELIABLE)
-        self.subscriber = session.declare_subscriber(keys.clock_ack("*"), self._on_ack)
+        self.subscribers = [session.declare_subscriber(keys.clock_ack("*"), self._on_ack),
+                            session.declare_subscriber(keys.vehicle_fault("*"), self._on_fault)]
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
         message = received(sample, ClockAck, self.log)
@@ -46,20 +66,77 @@ class FastClock:
             self.acked[message.vehicle] = max(self.acked.get(message.vehicle, 0), message.tick)
             self.changed.notify_all()
 
+    def _on_fault(self, sample: zenoh.Sample) -> None:
+        message = received(sample, VehicleFault, self.log)
+        if message is not None and message.vehicle in self.vehicles:
+            with self.liveness.changed:  # what _detect waits on, with liveliness
+                self.reports.add((message.vehicle, message.state))
+                self.liveness.changed.notify_all()
+
+    @property
+    def awaited(self) -> list[int]:
+        """Who must acknowledge a tick: every forklift not down, and the injector."""
+        return [v for v in self.vehicles if v not in self.down] + \
+            ([INJECTOR] if self.scenario else [])
+
     def advance(self, t: float) -> None:
+        """Move to t and wait for the acks. A forklift whose token goes meanwhile is not
+        waited for: `disruptions` reports it."""
         self.tick += 1
         self.t = max(self.t, t)
-        self.publisher.put(encode(ClockTick(self.tick, "fast", self.t), SENDER, self.tick,
-                                  self.t))
+        self.publisher.put(encode(ClockTick(self.tick, "fast", self.t, down=sorted(self.down)),
+                                  SENDER, self.tick, self.t))
         deadline = time.monotonic() + ACK_TIMEOUT_S
         with self.changed:
-            while not all(self.acked.get(v, 0) >= self.tick for v in self.vehicles):
-                self.liveness.check(self.vehicles)
+            while late := [v for v in self.awaited if self.acked.get(v, 0) < self.tick and
+                           (v == INJECTOR or v in self.liveness.alive)]:
                 if time.monotonic() > deadline:
-                    late = [v for v in self.vehicles if self.acked.get(v, 0) < self.tick]
-                    raise ParticipantLost(f"forklifts {late} did not acknowledge tick "
+                    raise ParticipantLost(f"{_who(late)} did not acknowledge tick "
                                           f"{self.tick} (t={self.t}) within {ACK_TIMEOUT_S} s")
                 self.changed.wait(0.5)  # wakes on every ack; the timeout re-checks liveness
+        if self.recorded:  # sim time stands still while no recorder runs (a killed one)
+            self.liveness.wait_for_recorder(RECORDER_WAIT_S)
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        self.down = down
+        for seen in self.detected:
+            seen.setdefault("recovered_wall", time.time())
+        while self.pending and self.pending[0] <= t_next:
+            t = self.pending.pop(0)
+            self.advance(t)
+            found = [self._detect(d) for d in scheduled_at(self.scenario, t)]
+            if found:
+                return found
+        lost = sorted(v for v in self.vehicles
+                      if v not in down and v not in self.liveness.alive)
+        return [VehicleDown(v, self.t, "agent lost (its liveliness token is gone)")
+                for v in lost]
+
+    def _detect(self, expected: Disruption) -> Disruption:
+        """Wait until the fault is seen the way it would be without a schedule."""
+        started = time.monotonic()
+        if isinstance(expected, VehicleDown):
+            v = expected.vehicle
+            seen = (lambda: (v, "broken") in self.reports) if expected.cause == "breakdown" \
+                else (lambda: v not in self.liveness.alive)
+        elif isinstance(expected, VehicleUp):
+            v = expected.vehicle
+            seen = (lambda: (v, "repaired") in self.reports) if \
+                (v, "broken") in self.reports else (lambda: v in self.liveness.alive)
+        else:
+            return expected  # a zone closes by the schedule itself
+        with self.liveness.changed:  # liveliness and fault reports notify it
+            if not self.liveness.changed.wait_for(seen, DETECT_TIMEOUT_S):
+                raise ParticipantLost(f"{expected} was not detected within "
+                                      f"{DETECT_TIMEOUT_S:g} s")
+        if isinstance(expected, VehicleUp):
+            self.reports -= {(expected.vehicle, "broken"), (expected.vehicle, "repaired")}
+        self.detected.append({"what": repr(expected), "vehicle": expected.vehicle,
+                              "up": isinstance(expected, VehicleUp), "t": expected.t,
+                              "detected_wall": time.time()})
+        self.log.info("detected %s after %.3f s", expected, time.monotonic() - started)
+        return expected
+
 
     def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
         self.advance(t_next)
@@ -69,8 +146,14 @@ class FastClock:
         self.advance(t_end)
 
     def close(self) -> None:
-        self.subscriber.undeclare()
+        for subscriber in self.subscribers:
+            subscriber.undeclare()
         self.publisher.undeclare()
+
+
+def _who(late: list[int]) -> str:
+    names = ["the fault injector" if v == INJECTOR else f"forklift {v}" for v in late]
+    return ", ".join(names)
 
 
 class RealtimeClock:
@@ -118,6 +201,9 @@ class RealtimeClock:
 
     def finish(self, t_end: float) -> None:
         self.wait_until(t_end)
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        return []  # faults run on the fast clock for now (fleet run refuses the others)
 
     def close(self) -> None:
         self.stopping.set()

@@ -20,11 +20,14 @@ class Liveness:
         self.alive: set[int] = set()
         self.lost: set[int] = set()
         self.service_alive = False
+        self.recorder_alive = False
         self.changed = threading.Condition()
         self._vehicles = session.liveliness().declare_subscriber(
             keys.vehicle_alive("*"), self._on_vehicle, history=True)
         self._service = session.liveliness().declare_subscriber(
             keys.reservation_alive, self._on_service, history=True)
+        self._recorder = session.liveliness().declare_subscriber(
+            keys.recorder_alive, self._on_recorder, history=True)
 
     def _on_vehicle(self, sample: zenoh.Sample) -> None:
         vehicle = Keys.vehicle_of(str(sample.key_expr))
@@ -42,6 +45,16 @@ class Liveness:
         with self.changed:
             self.service_alive = sample.kind == zenoh.SampleKind.PUT
             self.changed.notify_all()
+
+    def _on_recorder(self, sample: zenoh.Sample) -> None:
+        with self.changed:
+            self.recorder_alive = sample.kind == zenoh.SampleKind.PUT
+            self.changed.notify_all()
+
+    def wait_for_recorder(self, timeout: float) -> None:
+        with self.changed:
+            if not self.changed.wait_for(lambda: self.recorder_alive, timeout):
+                raise ParticipantLost(f"no recorder has run for {timeout:g} s")
 
     def wait_for_service(self, timeout: float) -> None:
         with self.changed:
@@ -71,3 +84,4 @@ class Liveness:
     def close(self) -> None:
         self._vehicles.undeclare()
         self._service.undeclare()
+        self._recorder.undeclare()

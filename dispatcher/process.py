@@ -30,14 +30,19 @@ from fleet.bus import (
 )
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.engine import Engine, MissionStuck
+from fleet.faults import load_scenario
 from fleet.layout import load_layout
 from fleet.protocol import (
     DecisionFailure,
+    Halt,
     MissionDone,
     Progress,
     ProtocolError,
+    Resume,
     StackDone,
+    StackReopened,
     SubtaskEvent,
+    ZoneClosed,
     encode,
 )
 from fleet.record_io import digest_of, record_to_dict
@@ -58,6 +63,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--command", default="",
                    help="the command line that started the run, for its recording (default: "
                    "this process's)")
+    p.add_argument("--faults", help="fault scenario (docs/faults.md): the fast clock stops "
+                   "at its instants until each fault is detected")
+    p.add_argument("--recorded", action="store_true",
+                   help="fast clock: hold sim time while no recorder runs, so a recorder "
+                   "killed and restarted misses nothing that happened meanwhile")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit after publishing the result instead of waiting to be stopped")
 
@@ -94,7 +104,11 @@ def serve(args: argparse.Namespace) -> int:
                    for kind, key in ((Progress.TYPE, keys.dispatch_progress),
                                      (SubtaskEvent.TYPE, keys.dispatch_subtask),
                                      (StackDone.TYPE, keys.dispatch_stack),
-                                     (DecisionFailure.TYPE, keys.dispatch_failure))}
+                                     (DecisionFailure.TYPE, keys.dispatch_failure),
+                                     (Halt.TYPE, keys.dispatch_halt),
+                                     (Resume.TYPE, keys.dispatch_resume),
+                                     (StackReopened.TYPE, keys.dispatch_reopen),
+                                     (ZoneClosed.TYPE, keys.dispatch_zone))}
         done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
         try:
@@ -132,7 +146,8 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         liveness.wait_for(vehicles, args.startup_timeout)
         log.info("%d forklifts and the reservation service are up", len(vehicles))
         if args.clock == "fast":
-            clock = FastClock(session, keys, vehicles, liveness, log)
+            scenario = load_scenario(args.faults) if args.faults else None
+            clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded)
         else:
             clock = RealtimeClock(session, keys, args.speed, vehicles, liveness)
 
@@ -146,7 +161,8 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         changes.undeclare()
         as_dict = record_to_dict(record)
         return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
-                           wall_s=time.perf_counter() - t0, rejections=executor.rejections)
+                           wall_s=time.perf_counter() - t0, rejections=executor.rejections,
+                           detections=getattr(clock, "detected", []))
     except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError, Stopped) as exc:
         log.error("mission failed: %s", exc)
         return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

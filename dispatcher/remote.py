@@ -13,12 +13,22 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.bus import Keys, Requester, RequestFailed
-from fleet.execution import GOODS, Task
+from fleet.execution import GOODS, Task, VehicleLost, freeze_changes
+from fleet.geometry import Cell
 from fleet.maneuvers import body_cells_at_rest
-from fleet.protocol import CommitRequest, Reply, TaskResult
-from fleet.reservations import Interval, ReservationTable, ReservationView
+from fleet.protocol import (
+    CommitRequest,
+    HaltRequest,
+    Message,
+    ReleaseRequest,
+    Reply,
+    ResumeRequest,
+    TaskResult,
+)
+from fleet.recovery import Freeze
+from fleet.reservations import Interval, ReservationTable
 from fleet.trajectory import PlanFailure, Pose, Trajectory
-from fleet.wire import result_from_wire, task_to_wire
+from fleet.wire import result_from_wire, step_to_wire, task_to_wire
 from reservation.mirror import TableMirror
 from reservation.store import to_wire
 
@@ -40,7 +50,7 @@ class RemoteExecutor:
         self.rejections: list[str] = []  # commits the store refused before an agent replanned
 
     @property
-    def store(self) -> ReservationView:
+    def store(self) -> ReservationTable:
         # The table itself: only this dispatcher's own requests change it, and it waits for
         # each change to arrive before it reads again.
         return self.mirror.table
@@ -62,8 +72,7 @@ class RemoteExecutor:
                                                 task.t_i).message
         except RequestFailed as exc:
             self.liveness.wait_gone(task.vehicle, 2.0)  # a dead agent: say so, not "no reply"
-            self.liveness.check(self.vehicles)
-            raise ParticipantLost(f"forklift {task.vehicle}: {exc}") from None
+            raise VehicleLost(task.vehicle, f"forklift {task.vehicle}: {exc}") from None
         if not isinstance(reply, TaskResult) or reply.task_id != message.task_id:
             raise ParticipantLost(f"forklift {task.vehicle} answered task {message.task_id} "
                                   f"with {reply}")
@@ -80,6 +89,40 @@ class RemoteExecutor:
             raise ParticipantLost(f"the reservation service answered a {reply.TYPE}")
         if reply.ok:
             self._sync(reply.revision)
+
+    def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+               zone_until: float, moving: list[int]) -> None:
+        """Commit the freeze to the store change by change (releases first: each change is
+        valid on its own), then tell the forklifts that can move to stop."""
+        for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
+                                                                    zone_until):
+            request_id = self.store_requester.next_id()
+            request: Message = CommitRequest(request_id, owner, to_wire(intervals)) \
+                if intervals else ReleaseRequest(request_id, owner, release_from, cells or [])
+            reply = self.store_requester.request(self.keys.reservation_request, request,
+                                                 t).message
+            if not isinstance(reply, Reply) or not reply.ok:
+                raise ParticipantLost(f"the reservation service refused a freeze at t={t}: "
+                                      f"{getattr(reply, 'reason', reply)}")
+            self._sync(reply.revision)
+        for vehicle in moving:
+            self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t), t)
+
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+        step = step_to_wire(freeze.step) if freeze.step is not None else None
+        self._tell(vehicle, ResumeRequest(self.task_requester.next_id(), vehicle, freeze.t, t,
+                                          str(freeze.pose), loaded, step), t)
+
+    def _tell(self, vehicle: int, message: Message, t: float) -> None:
+        try:
+            reply = self.task_requester.request(self.keys.vehicle_task(vehicle), message,
+                                                t).message
+        except RequestFailed as exc:
+            raise ParticipantLost(f"forklift {vehicle} did not take {message.TYPE}: "
+                                  f"{exc}") from None
+        if not isinstance(reply, Reply) or not reply.ok:
+            raise ParticipantLost(f"forklift {vehicle} refused {message.TYPE}: "
+                                  f"{getattr(reply, 'reason', reply)}")
 
     def _sync(self, revision: int) -> None:
         if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):

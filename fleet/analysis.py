@@ -4,21 +4,42 @@ Safety (fleet/safety.py, independent of the planner and the table): no two forkl
 cell at one instant, no forklift outside its own reservation, no cell held by two owners at
 once. Work: every stack of the layout filled (or emptied) exactly once. Messages: every
 stream's sequence numbers are complete (a gap is a lost message).
+
+A run recorded in segments (a recorder killed and restarted) has windows in which no
+recorder ran: what was sent then is reported as not recorded, apart from what was lost in
+transit, and what the verdicts could not check there is listed as not verified.
 """
 
 from __future__ import annotations
 
+import bisect
 import functools
 import itertools
 import math
 from collections import Counter, defaultdict
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 from fleet.maneuvers import Manner, local_pose
-from fleet.protocol import Change, MissionDone, StackDone, VehicleState
+from fleet.protocol import (
+    Change,
+    Halt,
+    MissionDone,
+    Resume,
+    StackDone,
+    StackReopened,
+    VehicleState,
+)
 from fleet.recorded_mission import record_of
-from fleet.recording import Recording, RecordingError
+from fleet.recording import (
+    NS,
+    Recorded,
+    RecorderGap,
+    Recording,
+    RecordingError,
+    message_type,
+)
 from fleet.safety import (
     Body,
     Sample,
@@ -29,6 +50,10 @@ from fleet.safety import (
 )
 
 IDLE, WAITING, BUSY = "idle", "waiting", "busy"
+# A stream whose numbers fall this far below the highest seen is a restarted sender whose
+# first messages were not recorded (a stream shared by threads may swap a few neighbours).
+RESTART_DROP = 16
+GOODS_OWNER = 0  # the reservation table's owner of stacks with goods (fleet.execution.GOODS)
 
 
 @dataclass
@@ -47,6 +72,61 @@ class Gap:
     sender: str
     missing: int  # messages lost
     first_missing: int  # sequence number
+
+
+@dataclass(frozen=True)
+class NotRecorded:
+    """Messages of a stream sent while no recorder was running (between two segments)."""
+
+    key: str
+    sender: str
+    missing: int
+    first_missing: int  # sequence number
+    wall_from_s: float  # the window without a recorder they fell in (Unix seconds)
+    wall_to_s: float
+
+
+@dataclass(frozen=True)
+class SegmentRead:
+    """One file of the recording, as read."""
+
+    path: str
+    messages: int
+    complete: bool
+    problem: str
+    wall_from_s: float | None  # receive times of its first and last message (Unix seconds)
+    wall_to_s: float | None
+    duplicates: int  # messages an overlapping earlier segment already held
+
+
+@dataclass(frozen=True)
+class RecorderDown:
+    """A window in which no recorder was running, in wall and (estimated) sim time."""
+
+    after: str  # the segment that ended
+    before: str  # the segment that began
+    wall_from_s: float
+    wall_to_s: float
+    sim_from_s: float | None  # the latest state instant recorded before it
+    sim_to_s: float | None  # the earliest recorded after it
+
+    @property
+    def duration_s(self) -> float:
+        return self.wall_to_s - self.wall_from_s
+
+
+@dataclass(frozen=True)
+class Unverified:
+    """What the safety verdict could not check, and over which sim-time window: "states"
+    (a forklift's states were not recorded: it is in no check between the two instants) or
+    "reservations" (table changes were not recorded: the forklift's reservations then are not
+    known, so being outside them or double-booking is not judged)."""
+
+    check: str
+    vehicle: int  # the forklift (for reservations 0: the goods on the stacks)
+    sim_from_s: float  # exclusive for states: the last recorded instant before
+    sim_to_s: float  # inf: to the end of the recording
+    why: str
 
 
 @dataclass
@@ -76,6 +156,19 @@ class Report:
     overlaps: list = field(default_factory=list)
     outside_reservation: list = field(default_factory=list)
     double_bookings: list = field(default_factory=list)
+    # A run recorded in segments (docs/recording.md): the files, the windows without a
+    # recorder, what was sent then, and what the verdicts could not check because of it.
+    segments: list[SegmentRead] = field(default_factory=list)
+    recorder_gaps: list[RecorderDown] = field(default_factory=list)
+    not_recorded: list[NotRecorded] = field(default_factory=list)
+    messages_not_recorded: int = 0
+    unverified: list[Unverified] = field(default_factory=list)
+    # Findings set aside, not failed: inside a window whose reservations are not known.
+    outside_reservation_unverified: list = field(default_factory=list)
+    double_bookings_unverified: list = field(default_factory=list)
+    # Stacks counted done from the dispatcher's final record: their dispatch/stack message
+    # was sent while no recorder was running.
+    stacks_not_recorded: list[str] = field(default_factory=list)
 
     @property
     def safe(self) -> bool:
@@ -92,7 +185,8 @@ class Report:
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
-        for name in ("overlaps", "outside_reservation", "double_bookings"):
+        for name in ("overlaps", "outside_reservation", "double_bookings",
+                     "outside_reservation_unverified", "double_bookings_unverified"):
             data[name] = len(getattr(self, name))
             data[f"{name}_first"] = [_jsonable(asdict(x)) for x in getattr(self, name)[:20]]
         data.update(safe=self.safe, work_done=self.work_done, passed=self.passed)
@@ -102,16 +196,27 @@ class Report:
         def mark(ok: bool) -> str:
             return "pass" if ok else "FAIL"
 
+        unchecked = ""
+        if self.unverified:
+            set_aside = (len(self.outside_reservation_unverified)
+                         + len(self.double_bookings_unverified))
+            unchecked = (f"; {len(self.unverified)} windows not verified (no recorder "
+                         f"running)" + (f", {set_aside} findings in them not judged"
+                                        if set_aside else ""))
         return [
             f"safety             {mark(self.safe)}: {len(self.overlaps)} overlaps, "
             f"{len(self.outside_reservation)} moments outside a reservation, "
-            f"{len(self.double_bookings)} double-booked cells",
+            f"{len(self.double_bookings)} double-booked cells{unchecked}",
             f"work               {mark(self.work_done)}: {self.stacks_done} of "
             f"{self.stacks_expected} stacks, {len(self.stacks_duplicated)} twice, "
-            f"{len(self.stacks_lost)} lost",
+            f"{len(self.stacks_lost)} lost"
+            + (f" ({len(self.stacks_not_recorded)} known done from the dispatcher's record "
+               f"only)" if self.stacks_not_recorded else ""),
             f"messages           {mark(self.messages_lost == 0)}: "
             f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
-            f"{self.malformed} malformed, {self.foreign} foreign",
+            + (f"{self.messages_not_recorded} not recorded (no recorder running), "
+               if self.recorder_gaps else "")
+            + f"{self.malformed} malformed, {self.foreign} foreign",
         ]
 
     def lines(self) -> list[str]:
@@ -120,6 +225,15 @@ class Report:
         if not self.complete:
             out.append(f"  truncated: {self.problem}; recovered {self.recovered_span_s:.1f} s "
                        f"of messages, up to sim time {self.recovered_sim_s:.1f} s")
+        if len(self.segments) > 1:
+            out.append(f"  segments           {len(self.segments)}: " + ", ".join(
+                f"{Path(s.path).name} ({s.messages} messages"
+                + ("" if s.complete else ", torn") + ")" for s in self.segments))
+        for g in self.recorder_gaps:
+            sim = "" if g.sim_from_s is None or g.sim_to_s is None else \
+                f", sim time {g.sim_from_s:.2f} to {g.sim_to_s:.2f} s"
+            out.append(f"  no recorder        {g.duration_s:.2f} s between {Path(g.after).name} "
+                       f"and {Path(g.before).name}{sim}")
         out += [
             f"  mission            {m.get('kind')} on {m.get('layout')} with "
             f"{m.get('vehicles')} forklifts, strategy {m.get('strategy')}, clock "
@@ -140,7 +254,24 @@ class Report:
         for gap in self.gaps[:10]:
             out.append(f"  gap                {gap.missing} lost on {gap.key} from "
                        f"{gap.sender} at seq {gap.first_missing}")
+        for n in self.not_recorded[:10]:
+            out.append(f"  not recorded       {n.missing} on {n.key} from {n.sender} at seq "
+                       f"{n.first_missing} (no recorder running)")
+        if len(self.not_recorded) > 10:
+            out.append(f"  not recorded       ... {len(self.not_recorded) - 10} streams more")
         out += [f"  {line}" for line in self.verdict_lines()]
+        for u in self.unverified[:20]:
+            owner = "the goods'" if u.vehicle == GOODS_OWNER else f"forklift {u.vehicle}"
+            out.append(f"  not verified       {owner} {u.check} from sim time "
+                       f"{u.sim_from_s:.2f} to {u.sim_to_s:.2f} s: {u.why}")
+        if len(self.unverified) > 20:
+            out.append(f"  not verified       ... {len(self.unverified) - 20} windows more")
+        for o in self.outside_reservation_unverified[:10]:
+            out.append(f"  not judged         t={o.t:.2f} s forklift {o.vehicle} on "
+                       f"{list(o.cells)}: its reservations then are not known")
+        for d in self.double_bookings_unverified[:10]:
+            out.append(f"  not judged         cell {d.cell} by {d.vehicles} over "
+                       f"[{d.t0:.2f}, {d.t1:.2f}): the reservations then are not known")
         for o in self.overlaps[:10]:
             out.append(f"  overlap            t={o.t:.2f} s forklifts {o.vehicles} on "
                        f"{list(o.cells)}")
@@ -152,6 +283,9 @@ class Report:
                        f"[{d.t0:.2f}, {d.t1:.2f})")
         for name in self.stacks_duplicated[:10]:
             out.append(f"  done twice         {name}")
+        if self.stacks_not_recorded:
+            out.append(f"  done, not recorded {', '.join(self.stacks_not_recorded[:20])}"
+                       + (" ..." if len(self.stacks_not_recorded) > 20 else ""))
         if self.stacks_lost:
             out.append(f"  not done           {', '.join(self.stacks_lost[:20])}"
                        + (" ..." if len(self.stacks_lost) > 20 else ""))
@@ -182,11 +316,25 @@ def analyze(recording: Recording) -> Report:
     usable = [(t, m) for t, m in states
               if all(math.isfinite(v) for v in (t, m.x, m.y, m.theta))]
     samples = [Sample(m.vehicle, t, m.x, m.y, m.theta) for t, m in usable]
+    samples += standing_samples(recording, sorted({s.t for s in samples}))
     held = replay(_unique_revisions(recording))
     done = [m for _, m in recording.of(MissionDone)]
     stacks = Counter((m.cluster, m.index) for _, m in recording.of(StackDone))
+    stacks -= Counter((m.cluster, m.index) for _, m in recording.of(StackReopened))
     expected = {(s.cluster, s.index) for s in layout.stacks}
-    gaps = sequence_gaps(recording)
+    holes = sequence_holes(recording)
+    lost = [h for h in holes if not h.window]
+    unrecorded = [h for h in holes if h.window]
+    gaps = _stream_gaps(lost)
+    downs = {g: _recorder_down(recording, g) for g in recording.gaps}
+    unverified = unverified_windows(recording, unrecorded, downs)
+    outside = outside_reservation(samples, held, body)
+    bookings = double_bookings(held)
+    judged = [not _unknown(unverified, o.vehicle, o.t, o.t) for o in outside]
+    booked = [not any(_unknown(unverified, v, d.t0, d.t1) for v in d.vehicles)
+              for d in bookings]
+    seen = set(stacks) & expected
+    from_record = _stacks_not_recorded(done, unrecorded, expected - seen)
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
@@ -197,9 +345,9 @@ def analyze(recording: Recording) -> Report:
         mission_error=done[-1].error if done else "",
         end_time_s=record["end_time_s"],
         stacks_expected=len(expected),
-        stacks_done=len(set(stacks) & expected),
+        stacks_done=len(seen | from_record),
         stacks_duplicated=sorted(f"{c}#{i}" for (c, i), n in stacks.items() if n > 1),
-        stacks_lost=sorted(f"{c}#{i}" for c, i in expected - set(stacks)),
+        stacks_lost=sorted(f"{c}#{i}" for c, i in expected - seen - from_record),
         subtasks=len(record["subtasks"]),
         decision_failures=record["decision_failures"],
         commit_conflicts=len(done[-1].rejections) if done else 0,
@@ -211,36 +359,183 @@ def analyze(recording: Recording) -> Report:
         + len(states) - len(usable),
         foreign=len(recording.foreign),
         overlaps=overlaps(samples, body),
-        outside_reservation=outside_reservation(samples, held, body),
-        double_bookings=double_bookings(held),
+        outside_reservation=list(itertools.compress(outside, judged)),
+        double_bookings=list(itertools.compress(bookings, booked)),
+        segments=[SegmentRead(str(s.path), s.messages, s.complete, s.problem,
+                              None if s.first_log_ns is None else s.first_log_ns / NS,
+                              None if s.last_log_ns is None else s.last_log_ns / NS,
+                              s.duplicates) for s in recording.segments],
+        recorder_gaps=list(downs.values()),
+        not_recorded=[NotRecorded(h.key, h.sender, h.missing, h.first, h.window[0].start_ns / NS,
+                                  h.window[-1].end_ns / NS) for h in unrecorded],
+        messages_not_recorded=sum(h.missing for h in unrecorded),
+        unverified=unverified,
+        outside_reservation_unverified=[o for o, ok in zip(outside, judged, strict=True)
+                                        if not ok],
+        double_bookings_unverified=[d for d, ok in zip(bookings, booked, strict=True)
+                                    if not ok],
+        stacks_not_recorded=sorted(f"{c}#{i}" for c, i in from_record),
     )
 
 
-def _unique_revisions(recording: Recording) -> list[tuple[str, int, list, float | None]]:
+def standing_samples(recording: Recording, instants: list[float]) -> list[Sample]:
+    """Where a forklift that was down stood at each recorded instant until it moved again:
+    it says nothing then, the dispatcher's halt says where (so the check covers it too)."""
+    resumes = sorted((m.vehicle, m.t) for _, m in recording.of(Resume))
+    out = []
+    for _, halt in recording.of(Halt):
+        if halt.moving:
+            continue
+        until = min((t for v, t in resumes if v == halt.vehicle and t >= halt.t),
+                    default=math.inf)
+        first = bisect.bisect_left(instants, halt.t)
+        last = bisect.bisect_left(instants, until)
+        out += [Sample(halt.vehicle, t, halt.x, halt.y, halt.theta)
+                for t in instants[first:last]]
+    return out
+
+
+def _unique_revisions(recording: Recording) -> list[tuple]:
     """The table's changes in revision order, each once (a retried publish may repeat)."""
     by_revision: dict[int, Change] = {}
     for _, m in recording.of(Change):
         by_revision.setdefault(m.revision, m)
-    return [(m.op, m.vehicle, m.intervals, m.release_from)
+    return [(m.op, m.vehicle, m.intervals, m.release_from, m.release_cells)
             for _, m in sorted(by_revision.items())]
 
 
-def sequence_gaps(recording: Recording) -> list[Gap]:
-    """Messages missing from each stream of genuine messages: a (key, sender) stream numbers
-    its messages 1, 2, 3, ... (a reply to a question carries 0 and is no stream's)."""
-    seen: dict[tuple[str, str], set[int]] = defaultdict(set)
+@dataclass(frozen=True)
+class Hole:
+    """Messages missing from one incarnation of a stream: numbers first .. first+missing-1,
+    between two recorded messages (`left` is None before the incarnation's first message
+    when it is the stream's first incarnation; else the previous incarnation's last)."""
+
+    key: str
+    sender: str
+    first: int
+    missing: int
+    left: Recorded | None
+    right: Recorded
+    window: tuple[RecorderGap, ...]  # the windows without a recorder it spans; () = lost
+
+
+def sequence_holes(recording: Recording) -> list[Hole]:
+    """Every run of missing numbers in the streams of genuine messages: a (key, sender)
+    stream numbers its messages 1, 2, 3, ... (a reply to a question carries 0 and is no
+    stream's). A sender that starts again at 1 (or far below its highest number: its first
+    messages went unrecorded) is a restarted process, a new incarnation of the stream
+    numbered on its own. Messages missing on both sides of a window without a recorder
+    (between two segments) were not recorded rather than lost; which it was cannot be told
+    apart there."""
+    incarnations: dict[tuple[str, str], list[dict[int, Recorded]]] = defaultdict(list)
+    highest: dict[tuple[str, str], int] = {}
     for r in recording.messages:
-        if r.genuine and r.envelope.seq > 0:
-            seen[r.key, r.envelope.sender].add(r.envelope.seq)
-    gaps = []
-    for (key, sender), numbers in sorted(seen.items()):
-        ordered = sorted(numbers)
-        missing = ordered[0] - 1 + sum(b - a - 1 for a, b in itertools.pairwise(ordered))
-        if missing:
-            first = 1 if ordered[0] > 1 else next(
-                a + 1 for a, b in itertools.pairwise(ordered) if b > a + 1)
-            gaps.append(Gap(key, sender, missing, first))
-    return gaps
+        if not (r.genuine and r.envelope.seq > 0):
+            continue
+        stream, seq = (r.key, r.envelope.sender), r.envelope.seq
+        runs = incarnations[stream]
+        if not runs or seq == 1 or seq + RESTART_DROP < highest[stream]:
+            runs.append({})
+            highest[stream] = 0
+        runs[-1].setdefault(seq, r)
+        highest[stream] = max(highest[stream], seq)
+    gaps = recording.gaps
+    holes = []
+    for (key, sender), runs in sorted(incarnations.items()):
+        before: Recorded | None = None  # the previous incarnation's last message
+        for numbers in runs:
+            ordered = sorted(numbers)
+            for a, b in itertools.pairwise([0, *ordered]):
+                if b == a + 1:
+                    continue
+                left = numbers[a] if a else before
+                right = numbers[b]
+                window = tuple(g for g in gaps if g.end_ns <= right.log_ns
+                               and (left is None or left.log_ns <= g.start_ns))
+                if left is None:
+                    window = window[-1:]  # sent some time before: the last window before
+                holes.append(Hole(key, sender, a + 1, b - a - 1, left, right, window))
+            before = max(numbers.values(), key=lambda r: r.log_ns)
+    return holes
+
+
+def sequence_gaps(recording: Recording) -> list[Gap]:
+    """Messages lost in transit from each stream of genuine messages (see sequence_holes;
+    not counting those sent while no recorder was running)."""
+    return _stream_gaps([h for h in sequence_holes(recording) if not h.window])
+
+
+def _stream_gaps(holes: list[Hole]) -> list[Gap]:
+    by_stream: dict[tuple[str, str], list[Hole]] = defaultdict(list)
+    for h in holes:
+        by_stream[h.key, h.sender].append(h)
+    return [Gap(key, sender, sum(h.missing for h in found), found[0].first)
+            for (key, sender), found in sorted(by_stream.items())]
+
+
+def _recorder_down(recording: Recording, gap: RecorderGap) -> RecorderDown:
+    """A window without a recorder, with the sim times of the state instants around it."""
+    times = [(r.log_ns, r.envelope.sim_time) for r, _ in recording.of(VehicleState)
+             if math.isfinite(r.envelope.sim_time)]
+    return RecorderDown(str(gap.after), str(gap.before), gap.start_ns / NS, gap.end_ns / NS,
+                        max((t for log, t in times if log <= gap.start_ns), default=None),
+                        min((t for log, t in times if log >= gap.end_ns), default=None))
+
+
+def unverified_windows(recording: Recording, unrecorded: list[Hole],
+                       downs: dict[RecorderGap, RecorderDown]) -> list[Unverified]:
+    """What the safety checks cannot see for messages that were not recorded: a forklift's
+    missing states (between the recorded instants around them), and after table changes that
+    were not recorded, each forklift's reservations until its next recorded change that
+    releases all it holds from some instant (a commit of a new trajectory does)."""
+    found = []
+    table_holes = []
+    for h in unrecorded:
+        cls = message_type(h.key)
+        around = [downs[g].sim_from_s for g in h.window if downs[g].sim_from_s is not None]
+        start = h.left.envelope.sim_time if h.left is not None else min(around, default=0.0)
+        if cls is VehicleState:
+            found.append(Unverified("states", h.right.envelope.message.vehicle, start,
+                                    h.right.envelope.sim_time,
+                                    f"{h.missing} states not recorded"))
+        elif cls is Change:
+            table_holes.append((h, min([start, *around])))
+    if table_holes:
+        changes = recording.of(Change)
+        info = recording.info
+        owners = sorted({m.vehicle for _, m in changes}
+                        | set(range(1, (info.vehicles if info else 0) + 1)))
+        for h, start in table_holes:
+            for vehicle in owners:
+                until = next((m.release_from for r, m in changes if m.vehicle == vehicle
+                              and r.log_ns >= h.right.log_ns and m.release_from is not None
+                              and m.release_cells is None), math.inf)
+                if until > start:
+                    found.append(Unverified("reservations", vehicle, start, until,
+                                            f"{h.missing} table changes not recorded"))
+    return found
+
+
+def _unknown(unverified: list[Unverified], vehicle: int, t0: float, t1: float) -> bool:
+    """Whether the instant t0 = t1, or the span [t0, t1), meets a window in which the
+    forklift's reservations are not known."""
+    return any(u.check == "reservations" and u.vehicle == vehicle and t0 < u.sim_to_s
+               and (u.sim_from_s < t1 or u.sim_from_s == t0 == t1) for u in unverified)
+
+
+def _stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
+                         unseen: set[tuple[str, int]]) -> set[tuple[str, int]]:
+    """Stacks the dispatcher's final record lists as done whose dispatch/stack message was
+    not recorded (all of them, if no more than the messages not recorded; else none)."""
+    missing = sum(h.missing for h in unrecorded if message_type(h.key) is StackDone)
+    if not (missing and unseen and done and isinstance(done[-1].record, dict)):
+        return set()
+    entries = done[-1].record.get("stacks_done", [])
+    claimed = {(e[0], e[1]) for e in entries if isinstance(e, list | tuple) and len(e) >= 2
+               and isinstance(e[0], str) and isinstance(e[1], int)} \
+        if isinstance(entries, list) else set()
+    explained = claimed & unseen
+    return explained if len(explained) <= missing else set()
 
 
 def vehicle_stats(record: dict[str, Any], cell_size: float) -> list[VehicleStats]:

@@ -100,6 +100,29 @@ class Keys:
         return f"{self.root}/dispatch/failure"
 
     @property
+    def dispatch_halt(self) -> str:
+        return f"{self.root}/dispatch/halt"
+
+    @property
+    def dispatch_resume(self) -> str:
+        return f"{self.root}/dispatch/resume"
+
+    @property
+    def dispatch_reopen(self) -> str:
+        return f"{self.root}/dispatch/reopen"
+
+    @property
+    def dispatch_zone(self) -> str:
+        return f"{self.root}/dispatch/zone"
+
+    def vehicle_fault(self, vehicle: int | str) -> str:
+        return f"{self.root}/vehicle/{vehicle}/fault"
+
+    def vehicle_inject(self, vehicle: int) -> str:
+        """Where the fault injector reaches an agent (breakdown, slow planner)."""
+        return f"{self.root}/vehicle/{vehicle}/inject"
+
+    @property
     def recorder_alive(self) -> str:
         return f"{self.root}/recorder/alive"
 
@@ -241,6 +264,19 @@ def wait_alive(session: zenoh.Session, key: str, timeout: float) -> bool:
         return seen.wait(timeout)
     finally:
         subscriber.undeclare()
+
+
+def wait_gone(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Block until no liveliness token matches `key` (True) or the timeout passes. Asks the
+    network each time (a subscriber's history and a query can cross a token's deletion)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        replies = session.liveliness().get(key, timeout=1.0)
+        if not any(reply.ok is not None for reply in replies):
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)  # paces the poll
 
 
 def add_bus_arguments(p: argparse.ArgumentParser) -> None:

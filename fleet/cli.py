@@ -7,7 +7,18 @@ import sys
 from collections.abc import Sequence
 
 from fleet import __version__
-from fleet.commands import analyze, bench, compare, layout, plan, plot, run, services, train
+from fleet.commands import (
+    analyze,
+    bench,
+    compare,
+    faults,
+    layout,
+    plan,
+    plot,
+    run,
+    services,
+    train,
+)
 from fleet.errors import UserError
 
 
@@ -16,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts.")
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (run, analyze, plot, compare, plan, layout, train, bench, services):
+    for module in (run, analyze, plot, compare, faults, plan, layout, train, bench, services):
         module.register(sub)
     return parser
 

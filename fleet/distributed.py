@@ -16,9 +16,13 @@ from pathlib import Path
 import zenoh
 
 from fleet.bus import BusConfig, Keys, free_port, open_session, received, wait_alive
+from fleet.faults import FaultKind, Scenario
+from fleet.injector import Applied, Injector
 from fleet.launcher import Child, Launcher
+from fleet.linkproxy import LinkProxy
 from fleet.mission import Mission
-from fleet.protocol import MissionDone, Progress, RecorderStatus
+from fleet.protocol import MissionDone, Progress, RecorderStatus, decode
+from fleet.recording import next_segment
 
 ROUTER_TIMEOUT_MS = 30_000
 RECORDED_TIMEOUT_S = 10.0
@@ -39,6 +43,8 @@ class RunSpec:
     command: str = ""  # the user's command line, for the recording
     foxglove: int | None = None  # serve the live Foxglove view on this port
     record: bool = True  # start the recorder (benchmarks measure the run without it)
+    faults: Scenario | None = None  # applied by an injector in this process
+    faults_source: str = ""  # the scenario's name or file, for the dispatcher
 
     @property
     def recording(self) -> Path:
@@ -51,6 +57,7 @@ class RunOutcome:
     error: str
     endpoint: str
     log_dir: Path
+    injected: list[Applied] = field(default_factory=list)  # the faults' actions, when
 
 
 class RunFailed(RuntimeError):
@@ -66,6 +73,10 @@ def dispatcher_args(spec: RunSpec) -> list[str]:
         args += ["--command", spec.command]
     if spec.weights is not None:
         args += ["--weights", str(spec.weights)]
+    if spec.faults is not None:
+        args += ["--faults", spec.faults_source]
+    if spec.record:
+        args.append("--recorded")
     return args
 
 
@@ -80,30 +91,55 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     journal = spec.run_dir / "reservation.journal"
     journal.unlink(missing_ok=True)  # a new run starts from an empty table
     spec.recording.unlink(missing_ok=True)  # and a new recording
+    for segment in spec.run_dir.glob("run-*.mcap"):  # with no segments of an older one
+        segment.unlink()
     launcher = Launcher(log_dir)
     inbox: queue.Queue[tuple[str, object]] = queue.Queue()
     session = None
+    injector = None
+    port = int(endpoint.rsplit(":", 1)[1])
+    # A forklift whose link a fault cuts reaches the router through its own forwarder.
+    proxies = {f.vehicle: LinkProxy("127.0.0.1", port) for f in
+               (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
+    common = ["--run", spec.run, "--connect", endpoint]
+    live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
+
+    def args_of(kind: str) -> list[str]:
+        """How to start each kind of process (again, after a fault killed it)."""
+        if kind == "recorder":
+            out = next_segment(spec.run_dir)  # run.mcap, then run-2.mcap after a restart
+            return ["recorder", *common, "--out", str(out), *live,
+                    *spec.extra.get("recorder", [])]
+        if kind == "reservation":
+            return ["reservation", *common, "--journal", str(journal),
+                    *spec.extra.get("reservation", [])]
+        if kind.startswith("agent-"):
+            v = int(kind.split("-")[1])
+            connect = ["--connect", f"tcp/127.0.0.1:{proxies[v].port}"] if v in proxies \
+                else ["--connect", endpoint]
+            return ["agent", "--run", spec.run, *connect, "--id", str(v), "--layout",
+                    spec.mission.layout, *spec.extra.get("agent", [])]
+        raise RunFailed(f"cannot restart a {kind} process")
+
     try:
         launcher.start("router", ["router", "--listen", endpoint])
+        for proxy in proxies.values():
+            proxy.start()
         session = open_session(BusConfig("client", (endpoint,),
                                          connect_timeout_ms=ROUTER_TIMEOUT_MS))
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
-        common = ["--run", spec.run, "--connect", endpoint]
         recorded = threading.Event()  # the recorder holds the mission's result
         if spec.record:
             subscribers.append(session.declare_subscriber(
                 keys.recorder_status, lambda sample: _on_status(sample, recorded)))
-            live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
-            recorder = launcher.start("recorder", ["recorder", *common, "--out",
-                                                   str(spec.recording), *live,
-                                                   *spec.extra.get("recorder", [])])
+            recorder = launcher.start("recorder", args_of("recorder"))
             _wait_started(session, keys.recorder_alive, launcher, recorder)
-        launcher.start("reservation", ["reservation", *common, "--journal", str(journal),
-                                       *spec.extra.get("reservation", [])])
+        launcher.start("reservation", args_of("reservation"))
         for v in range(1, spec.vehicles + 1):
-            launcher.start(f"agent-{v}", ["agent", *common, "--id", str(v), "--layout",
-                                          spec.mission.layout, *spec.extra.get("agent", [])])
+            launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
+        if spec.faults is not None:
+            injector = Injector(spec.faults, session, keys, launcher, args_of, proxies)
         launcher.start("dispatcher", ["dispatcher", *common, *dispatcher_args(spec),
                                       *spec.extra.get("dispatcher", [])])
         if on_ready is not None:
@@ -114,13 +150,18 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                         RECORDED_TIMEOUT_S)
         for subscriber in subscribers:
             subscriber.undeclare()
-        return RunOutcome(done, "" if done.ok else done.error, endpoint, log_dir)
+        return RunOutcome(done, "" if done.ok else done.error, endpoint, log_dir,
+                          injector.applied if injector else [])
     except RunFailed as exc:
         return RunOutcome(None, str(exc), endpoint, log_dir)
     finally:
+        if injector is not None:
+            injector.close()
         if session is not None:
             session.close()  # before the router is told to stop: it waits for its clients
         launcher.stop_all()
+        for proxy in proxies.values():
+            proxy.close()
 
 
 def _follow(inbox: queue.Queue, launcher: Launcher,
@@ -129,7 +170,9 @@ def _follow(inbox: queue.Queue, launcher: Launcher,
         try:
             _, sample = inbox.get(timeout=0.5)  # the timeout only paces the liveness check
         except queue.Empty:
-            dead = launcher.exited()
+            # A forklift's death is the dispatcher's to recover from (docs/faults.md); any
+            # other process's ends the run.
+            dead = [c for c in launcher.exited() if not c.name.startswith("agent-")]
             if dead:
                 done = _last_word(inbox)
                 if done is not None:
@@ -139,7 +182,7 @@ def _follow(inbox: queue.Queue, launcher: Launcher,
                                 f"before the mission ended; the end of {child.log}:\n"
                                 f"{launcher.tail(child)}") from None
             continue
-        message = received(sample, (MissionDone, Progress), log)
+        message = _from_dispatcher(sample)
         if isinstance(message, MissionDone):
             return message
         if isinstance(message, Progress) and on_progress is not None:
@@ -170,7 +213,22 @@ def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:
             _, sample = inbox.get(timeout=left)
         except queue.Empty:
             return None
-        message = received(sample, (MissionDone, Progress), log)
+        message = _from_dispatcher(sample)
         if isinstance(message, MissionDone):
             return message
     return None
+
+
+def _from_dispatcher(sample: zenoh.Sample) -> MissionDone | Progress | None:
+    """The dispatcher's progress or result, believed only on its own key from its own name
+    (anyone on the network could put a forged result)."""
+    message = received(sample, (MissionDone, Progress), log)
+    if message is None:
+        return None
+    key, sender = str(sample.key_expr), decode(sample.payload.to_bytes()).sender
+    wanted = "dispatch/done" if isinstance(message, MissionDone) else "dispatch/progress"
+    if sender != "dispatcher" or not key.endswith(wanted):
+        log.warning("ignored a %s on %s from %r: only the dispatcher's on %s counts",
+                    message.TYPE, key, sender, wanted)
+        return None
+    return message

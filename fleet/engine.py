@@ -11,6 +11,7 @@ record, bit for bit. The distributed runtime must reproduce it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -18,14 +19,31 @@ from dataclasses import dataclass, field
 
 from fleet.dispatch import Decision, Dispatcher, Target, TaskKind, VehicleView
 from fleet.errors import UserError
-from fleet.execution import Executor, LocalExecutor, NoPacer, Pacer, Task
+from fleet.execution import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.geometry import Cell
 from fleet.layout import Layout, load_layout
-from fleet.maneuvers import Manner
+from fleet.maneuvers import Manner, world_pose
 from fleet.mission import Mission, MissionKind
 from fleet.params import DispatchParams
 from fleet.planner import HybridAStar, PlannerCache
-from fleet.protocol import DecisionFailure, Message, StackDone, SubtaskEvent
+from fleet.protocol import (
+    DecisionFailure,
+    Halt,
+    Message,
+    Resume,
+    StackDone,
+    StackReopened,
+    SubtaskEvent,
+    ZoneClosed,
+)
+from fleet.recovery import (
+    Disruption,
+    Freeze,
+    Motion,
+    VehicleDown,
+    VehicleUp,
+    cascade,
+)
 from fleet.reservations import Interval, ReservationTable
 from fleet.trajectory import PlanFailure, Pose, Trajectory
 
@@ -98,6 +116,9 @@ class MissionRecord:
     busy_s: dict[int, float] = field(default_factory=dict)
     wait_s: dict[int, float] = field(default_factory=dict)
     training_samples: list[tuple[tuple[float, ...], int, float]] = field(default_factory=list)
+    halts: list[tuple[int, float, str]] = field(default_factory=list)  # vehicle, t, cause
+    resumes: list[tuple[int, float]] = field(default_factory=list)
+    cut_subtasks: list[int] = field(default_factory=list)  # indices of subtasks cut short
 
     @property
     def total_wait_s(self) -> float:
@@ -166,6 +187,13 @@ class Engine:
         self.record = MissionRecord(mission, self.layout.name, tuple(self.vehicles),
                                     tuple(self.starts))
         self.trip_times: list[float] = []
+        self.down: dict[int, Freeze] = {}  # forklifts that cannot move, and where they stopped
+        self.before: list[VehicleState] = []  # the forklift's state before each subtask
+        self.driven: dict[int, list[Trajectory]] = {v: [] for v in self.vehicles}
+        self.now = 0.0  # the instant the clock was last moved to
+        # What each forklift's agent was told, in order: ("add", trajectory, loaded),
+        # ("cut", t), ("stop", t), ("resume", t): an in-process run drives its states from it.
+        self.drive_log: dict[int, list[tuple]] = {v: [] for v in self.vehicles}
         self.dispatcher = Dispatcher(
             grid_for=lambda: self.layout.grid_map(self.present),
             store=self.executor.store, strategy=mission.strategy, params=self.options.params,
@@ -218,8 +246,8 @@ class Engine:
     def active(self) -> list[VehicleState]:
         """Vehicles with something left to do: any return, or a delivery while stacks wait."""
         work_left = any(self.queue.values())
-        return [v for v in self.vehicles.values()
-                if v.next_task is TaskKind.RETURN or work_left]
+        return [v for v in self.vehicles.values() if v.vehicle not in self.down and
+                (v.next_task is TaskKind.RETURN or work_left)]
 
     # -- the run -------------------------------------------------------------------------------
     def run(self) -> MissionRecord:
@@ -229,10 +257,18 @@ class Engine:
         p = self.options.params
         while True:
             active = self.active()
-            if not active:
+            if not active and not self.down:
                 break
-            paced = self.pacer.before_decision(min(v.t_free for v in active),
-                                               {v.vehicle: v.t_free for v in active})
+            t_next = min((v.t_free for v in active), default=math.inf)
+            disruptions = self.pacer.disruptions(t_next, frozenset(self.down))
+            if disruptions:
+                for disruption in disruptions:
+                    self.disrupt(disruption)
+                continue
+            if not active:
+                break  # the forklifts left are down for good
+            self.now = t_next
+            paced = self.pacer.before_decision(t_next, {v.vehicle: v.t_free for v in active})
             for v in active:
                 v.wait_s += paced[v.vehicle] - v.t_free
                 v.t_free = paced[v.vehicle]
@@ -252,7 +288,12 @@ class Engine:
                     f"no solid decision within iter_dispatch={p.iter_dispatch}"))
                 streak += 1
             else:
-                result = self._plan(decision)
+                try:
+                    result = self._plan(decision)
+                except VehicleLost as exc:  # gone without a scheduled fault: recover all the same
+                    self.disrupt(VehicleDown(exc.vehicle, self.now, f"agent lost: {exc}"))
+                    failed = [v for v in failed if v != exc.vehicle]
+                    continue
                 if isinstance(result, Trajectory):
                     self._apply(decision, result, fill, remaining)
                     failed, streak = [], 0
@@ -318,6 +359,7 @@ class Engine:
             self.record.end_time = max(self.record.end_time, t_done)
             if self.options.collect_training:
                 self._collect(decision, traj, remaining)
+        self.before.append(dataclasses.replace(v))
         stops = sum(s.t1 - s.t0 for s in traj.steps if s.manner is Manner.STOP)
         v.busy_s += traj.t_end - traj.t_start - stops
         v.wait_s += stops
@@ -329,6 +371,8 @@ class Engine:
         else:
             v.linked_kind = TaskKind.RETURN if v.linked_cluster else None
         self.trip_times.append(traj.t_end - decision.t_i)
+        self.driven[v.vehicle].append(traj)
+        self.drive_log[v.vehicle].append(("add", traj, deliver == fill))
         subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,
                           target.stack_cell, decision.t_i, traj.t_end, t_done, traj,
                           decision.postponed)
@@ -337,6 +381,122 @@ class Engine:
         if self.options.progress:
             self.options.progress(len(self.record.stacks_done), self.total, traj.t_end,
                                   self.record.decision_failures)
+
+    # -- faults: freeze, cancel, resume (fleet/recovery.py, docs/faults.md) --------------------
+    def disrupt(self, disruption: Disruption) -> None:
+        """Apply what the clock reports: a forklift down or back, a zone closed."""
+        if isinstance(disruption, VehicleUp):
+            self._resume(disruption)
+            return
+        if isinstance(disruption, VehicleDown):
+            if disruption.vehicle in self.down:
+                return
+            first, zone, until = {disruption.vehicle}, frozenset(), disruption.t
+            cause = disruption.cause
+        else:
+            first, zone, until = set(), disruption.cells, disruption.until
+            cause = "zone closed"
+        t = disruption.t
+        motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]))
+                   for v in self.vehicles if v not in self.down}
+        result = cascade(self.executor.store, t, motions, first, self._goods_pending(t), zone,
+                         until)
+        goods: list[Cell] = []
+        for vehicle, freeze in sorted(result.freezes.items()):
+            goods += self._freeze(freeze)
+            down = vehicle in first
+            if down:
+                self.down[vehicle] = freeze
+            why = cause if down or zone else "its plan crossed a stopped forklift's cells"
+            self.record.halts.append((vehicle, t, why))
+            self.drive_log[vehicle].append(("stop" if down else "cut", t))
+            self._emit(self._halt_event(freeze, why, moving=not down), t)
+        if zone:
+            self._emit(ZoneClosed(sorted(result.zone), t, until), t)
+        self.executor.freeze(t, list(result.freezes.values()), goods, result.zone, until,
+                             moving=[v for v in result.freezes if v not in self.down])
+
+    def _goods_pending(self, t: float) -> Callable[[Cell], int | None]:
+        """Which forklift's delivery, not yet arrived at t, reserved goods on a cell."""
+        cut = set(self.record.cut_subtasks)
+        pending = {s.stack_cell: s.vehicle for i, s in enumerate(self.record.subtasks)
+                   if i not in cut and s.kind is TaskKind.DELIVER and s.t_end > t and
+                   s.stack_cell is not None}
+        return pending.get
+
+    def _freeze(self, freeze: Freeze) -> list[Cell]:
+        """Cut the forklift's plan after the maneuver in progress at freeze.t: its subtasks
+        not yet arrived are cancelled (a delivery's stack goes back to the queue). Returns
+        the stack cells whose goods reservations go with them."""
+        t, vehicle = freeze.t, freeze.vehicle
+        v = self.vehicles[vehicle]
+        cut = set(self.record.cut_subtasks)
+        undone = [i for i, s in enumerate(self.record.subtasks)
+                  if s.vehicle == vehicle and i not in cut and s.t_end > t]
+        goods = []
+        if undone:
+            before = self.before[undone[0]]
+            v.next_task, v.linked_cluster, v.linked_kind = \
+                before.next_task, before.linked_cluster, before.linked_kind
+            v.busy_s, v.wait_s = before.busy_s, before.wait_s
+            v.t_free = freeze.t_stand
+        else:
+            v.t_free = max(v.t_free, freeze.t_stand)
+        for i in undone:
+            self.record.cut_subtasks.append(i)
+            s = self.record.subtasks[i]
+            if s.kind is TaskKind.DELIVER and s.stack_index is not None:
+                goods.append(self._reopen(s, t))
+        v.pose = freeze.pose
+        self.driven[vehicle] = [c for c in (_truncated(traj, freeze)
+                                            for traj in self.driven[vehicle]) if c is not None]
+        return goods
+
+    def _reopen(self, s: Subtask, t: float) -> Cell:
+        stack = next(st for st in self.layout.stacks
+                     if st.cluster == s.target and st.index == s.stack_index)
+        fill = self.mission.kind is MissionKind.FILL
+        queue = self.queue[s.target]
+        queue.append(stack)
+        queue.sort(key=lambda st: st.index if fill else -st.index)
+        self.present.discard(stack.cell)
+        self.record.stacks_done.remove((s.target, stack.index, s.t_done))
+        self.record.end_time = max((d[2] for d in self.record.stacks_done), default=0.0)
+        self._emit(StackReopened(s.target, stack.index, s.vehicle, t), t)
+        return stack.cell
+
+    def _resume(self, up: VehicleUp) -> None:
+        freeze = self.down.pop(up.vehicle, None)
+        if freeze is None:
+            return
+        v = self.vehicles[up.vehicle]
+        shift = up.t - freeze.t
+        t_stand = up.t
+        if freeze.step is not None:  # the rest of the maneuver, from where it stood
+            step = dataclasses.replace(freeze.step, t0=freeze.step.t0 + shift,
+                                       t1=freeze.step.t1 + shift)
+            t_stand = step.t1
+            self.driven[up.vehicle].append(Trajectory(up.vehicle, step.start, step.end,
+                                                      step.t0, (step,), (), 0))
+        v.t_free = max(v.t_free, t_stand)
+        fill = self.mission.kind is MissionKind.FILL
+        self.executor.resume(up.vehicle, freeze, up.t,
+                             loaded=(v.next_task is TaskKind.DELIVER) == fill)
+        self.record.resumes.append((up.vehicle, up.t))
+        self.drive_log[up.vehicle].append(("resume", up.t))
+        self._emit(Resume(up.vehicle, up.t, t_stand), up.t)
+
+    def _halt_event(self, freeze: Freeze, cause: str, moving: bool) -> Halt:
+        step = freeze.step
+        if step is None:
+            at, heading, manner, s = freeze.pose.cell, freeze.pose.heading, Manner.STOP, 0.0
+        else:
+            at, heading, manner, s = step.start.cell, step.start.heading, step.manner, \
+                freeze.fraction
+        x, y, theta = world_pose(at, heading, manner, s, self.layout.cell_size)
+        ox, oy = self.layout.origin
+        return Halt(freeze.vehicle, freeze.t, cause, moving, str(freeze.pose), freeze.t_stand,
+                    sorted(freeze.cells), x + ox, y + oy, theta)
 
     def _collect(self, decision: Decision, traj: Trajectory | None,
                  remaining: dict[str, int]) -> None:
@@ -397,3 +557,15 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
         else:
             present.discard(stack.cell)
     return total / vehicles
+
+
+def _truncated(traj: Trajectory, freeze: Freeze) -> Trajectory | None:
+    """The part of a trajectory driven up to the end of the maneuver in progress at the
+    freeze (None if none of it is)."""
+    kept = tuple(s for s in traj.steps if s.t0 < freeze.t)
+    if not kept:
+        return None
+    if len(kept) == len(traj.steps):
+        return traj
+    return Trajectory(traj.vehicle, traj.start, kept[-1].end, traj.t_start, kept, (),
+                      traj.expansions)

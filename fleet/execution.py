@@ -19,12 +19,22 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from fleet.dispatch import TaskKind
+from fleet.errors import UserError
 from fleet.geometry import Cell
 from fleet.maneuvers import body_cells_at_rest
 from fleet.planner import PlannerCache
 from fleet.protocol import Change
-from fleet.reservations import Interval, ReservationTable, ReservationView
+from fleet.recovery import Disruption, Freeze
+from fleet.reservations import Interval, ReservationTable
 from fleet.trajectory import PlanFailure, Pose, Trajectory
+
+
+class VehicleLost(UserError):
+    """A forklift went away in the middle of a request (its agent's liveliness is gone)."""
+
+    def __init__(self, vehicle: int, message: str) -> None:
+        super().__init__(message)
+        self.vehicle = vehicle
 
 
 @dataclass(frozen=True)
@@ -43,7 +53,7 @@ class Task:
 
 class Executor(Protocol):
     @property
-    def store(self) -> ReservationView:
+    def store(self) -> ReservationTable:
         """The reservation table as the dispatcher sees it (current after every call below)."""
 
     def park(self, vehicle: int, pose: Pose) -> None:
@@ -57,6 +67,16 @@ class Executor(Protocol):
         """Reserve stack cells for the goods on them (owner GOODS); refused silently where a
         vehicle holds the cell, exactly as the table refuses a conflicting commit."""
 
+    def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+               zone_until: float, moving: list[int]) -> None:
+        """Make the table say what the freezes say: each frozen forklift holds its cells from
+        t to infinity and nothing else after t, the goods of cancelled deliveries go, the zone
+        is held by ZONE until `zone_until`; the `moving` forklifts are told to stop after
+        their maneuver in progress."""
+
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+        """A forklift that was down moves again from t, completing its interrupted maneuver."""
+
 
 class Pacer(Protocol):
     def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
@@ -67,8 +87,14 @@ class Pacer(Protocol):
     def finish(self, t_end: float) -> None:
         """The mission is over at sim time t_end."""
 
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        """Hold the clock at each fault instant up to t_next and say what happened to the
+        schedule there (forklifts down or back, zones closed; [] if nothing did). `down` are
+        the forklifts the engine holds as down: nobody waits for them."""
+
 
 GOODS = 0  # owner id of stacks with goods on them, in the reservation table
+ZONE = -1  # owner id of closed zones
 
 
 class LocalExecutor:
@@ -80,13 +106,15 @@ class LocalExecutor:
         self.changes: list[Change] = []  # what a reservation service would have published
 
     def _log(self, vehicle: int, intervals: Sequence[Interval],
-             release_from: float | None) -> None:
-        self.changes.append(Change(self.table.revision, "commit", vehicle,
+             release_from: float | None, cells: Sequence[Cell] | None = None) -> None:
+        op = "commit" if intervals else "release"
+        self.changes.append(Change(self.table.revision, op, vehicle,
                                    [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals],
-                                   release_from))
+                                   release_from,
+                                   release_cells=None if cells is None else list(cells)))
 
     @property
-    def store(self) -> ReservationView:
+    def store(self) -> ReservationTable:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
@@ -112,6 +140,39 @@ class LocalExecutor:
         if self.table.commit(GOODS, intervals) is None:
             self._log(GOODS, intervals, None)
 
+    def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+               zone_until: float, moving: list[int]) -> None:
+        for change in freeze_changes(t, freezes, goods, zone, zone_until):
+            owner, intervals, release_from, cells = change
+            if intervals:
+                conflict = self.table.commit(owner, intervals)
+                if conflict is not None:  # the cascade left nothing in the way
+                    raise AssertionError(f"freeze at t={t} conflicts: {conflict}")
+            else:
+                self.table.release(owner, release_from, cells)
+            self._log(owner, intervals, release_from, cells)
+
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+        pass  # the table already holds the forklift's cells to infinity
+
+
+FreezeChange = tuple[int, list[Interval], float | None, list[Cell] | None]
+
+
+def freeze_changes(t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+                   zone_until: float) -> list[FreezeChange]:
+    """The table changes of a freeze, in an order each is valid in: first every release
+    (the frozen forklifts' plans after t, the cancelled goods), then the frozen cells to
+    infinity, then the zone. (owner, intervals to add, release from, only these cells)."""
+    out: list[FreezeChange] = [(f.vehicle, [], t, None) for f in freezes]
+    if goods:
+        out.append((GOODS, [], t, sorted(goods)))
+    out += [(f.vehicle, [Interval(c, t, math.inf) for c in sorted(f.cells)], None, None)
+            for f in freezes]
+    if zone:
+        out.append((ZONE, [Interval(c, t, zone_until) for c in sorted(zone)], None, None))
+    return out
+
 
 class NoPacer:
     """The in-process reference: no clock to wait for."""
@@ -121,3 +182,6 @@ class NoPacer:
 
     def finish(self, t_end: float) -> None:
         pass
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        return []

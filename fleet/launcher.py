@@ -21,6 +21,7 @@ class Child:
     name: str
     proc: subprocess.Popen
     log: Path
+    killed: bool = False  # on purpose (a fault): its exit is no failure of the run
 
 
 class Launcher:
@@ -44,18 +45,40 @@ class Launcher:
         return child
 
     def exited(self) -> list[Child]:
-        return [c for c in self.children if c.proc.poll() is not None]
+        """Children that exited without being killed on purpose."""
+        return [c for c in self.children if c.proc.poll() is not None and not c.killed]
+
+    def running(self, name: str) -> Child:
+        """The live child started as `name` or as a restart of it (`name-2`, ...)."""
+        for child in reversed(self.children):
+            if (child.name == name or child.name.startswith(f"{name}-")) and \
+                    child.proc.poll() is None:
+                return child
+        raise RuntimeError(f"no {name} process is running")
+
+    def kill(self, name: str) -> None:
+        """SIGKILL (a fault: no chance to clean up) and reap it."""
+        child = self.running(name)
+        child.killed = True
+        child.proc.kill()
+        child.proc.wait()
+
+    def signal(self, name: str, sig: signal.Signals) -> None:
+        self.running(name).proc.send_signal(sig)
 
     def stop_all(self) -> None:
         """SIGTERM to the workers, wait, then the recorder (it records them leaving), then
         the router: a process closing its zenoh session while its router is already gone can
         hang. What does not stop in time gets SIGUSR1 (its stacks go to its log), then
         SIGKILL."""
-        waves = [[c for c in self.children if c.name not in STOPPED_LAST]]
-        waves += [[c for c in self.children if c.name == name] for name in STOPPED_LAST]
+        last = [[c for c in self.children if c.name.split("-")[0] == name]
+                 for name in STOPPED_LAST]
+        waves = [[c for c in self.children if c.name.split("-")[0] not in STOPPED_LAST]]
+        waves += last
         for group in waves:
             for child in group:
                 if child.proc.poll() is None:
+                    child.proc.send_signal(signal.SIGCONT)  # a stalled child could not stop
                     child.proc.send_signal(signal.SIGTERM)
             for child in group:
                 self._reap(child)

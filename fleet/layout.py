@@ -8,6 +8,7 @@ pose graph and lives in `fleet.layout_check`.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from fleet.trajectory import Pose
 VEHICLE_KINDS = ("forklift", "agv", "lifting-agv")
 FREE, PASSAGE, NOTCH, STATION = ".", ":", "n", "P"
 RESERVED_SYMBOLS = {FREE, PASSAGE, NOTCH, STATION, "#", " "}
+MAX_MAP_CELLS = 1_000_000  # far beyond any warehouse here; bounds what a hostile file costs
 
 
 class LayoutError(UserError):
@@ -217,17 +219,21 @@ def layout_source(name_or_path: str | Path) -> str:
 def parse_layout(source: str, where: str) -> Layout:
     try:
         data = tomllib.loads(source)
-    except tomllib.TOMLDecodeError as exc:
+    except ValueError as exc:  # TOMLDecodeError, or an integer literal too long to convert
         raise LayoutError(f"{where}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise LayoutError(f"{where}: not valid TOML: arrays or tables nested too deep") from None
     return _Builder(data, where).build()
 
 
-def parse_cells(text: str, where: str) -> list[Cell]:
+def parse_cells(text: str, where: str, within: tuple[int, int] | None = None) -> list[Cell]:
     """'c,r' is one cell; 'c0,r0..c1,r1' every cell of the rectangle, listed from the first
-    corner towards the second (row by row)."""
+    corner towards the second (row by row). With `within` (cols, rows), a cell or corner off
+    that map is refused before the rectangle is listed."""
     try:
         if ".." not in text:
             c, r = (int(v) for v in text.split(","))
+            _on_map((c, r), within, where)
             return [(c, r)]
         first, last = text.split("..")
         c0, r0 = (int(v) for v in first.split(","))
@@ -235,9 +241,30 @@ def parse_cells(text: str, where: str) -> list[Cell]:
     except ValueError:
         raise LayoutError(f"{where}: {text!r} is not a cell 'col,row' or a range "
                           f"'col,row..col,row'") from None
+    _on_map((c0, r0), within, where)
+    _on_map((c1, r1), within, where)
+    count = (abs(c1 - c0) + 1) * (abs(r1 - r0) + 1)
+    if count > MAX_MAP_CELLS:
+        raise LayoutError(f"{where}: range {text!r} covers {count} cells, more than a map "
+                          f"may have ({MAX_MAP_CELLS})")
     dc = 1 if c1 >= c0 else -1
     dr = 1 if r1 >= r0 else -1
     return [(c, r) for r in range(r0, r1 + dr, dr) for c in range(c0, c1 + dc, dc)]
+
+
+def _on_map(cell: Cell, within: tuple[int, int] | None, where: str) -> None:
+    if within is not None and not (0 <= cell[0] < within[0] and 0 <= cell[1] < within[1]):
+        raise LayoutError(f"{where}: cell {cell} is off the {within[0]} x {within[1]} map")
+
+
+def _finite(value: object) -> bool:
+    """A real number (not a bool) that fits a float and is neither infinite nor NaN."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer too large for a float
+        return False
 
 
 _TOP_KEYS = {"name", "description", "cell_size", "bounds", "vehicle", "cluster", "station",
@@ -267,8 +294,11 @@ class _Builder:
                 raise self.fail(f"{element}: missing {key!r}")
             return default
         value = table[key]
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
+        if kind is float:
+            if not _finite(value):
+                raise self.fail(f"{element}: {key!r} must be a float (a finite number), "
+                                f"not {value!r}")
+            return float(value)
         if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
             raise self.fail(f"{element}: {key!r} must be a {kind.__name__}, not {value!r}")
         return value
@@ -282,11 +312,7 @@ class _Builder:
         for text in texts:
             if not isinstance(text, str):
                 raise self.fail(f"{element}: cell {text!r} must be a string 'col,row'")
-            for cell in parse_cells(text, f"{self.where}: {element}"):
-                if not (0 <= cell[0] < self.cols and 0 <= cell[1] < self.rows):
-                    raise self.fail(f"{element}: cell {cell} is off the {self.cols} x "
-                                    f"{self.rows} map")
-                found.append(cell)
+            found += parse_cells(text, f"{self.where}: {element}", (self.cols, self.rows))
         return found
 
     def claim(self, cells: Iterable[Cell], element: str) -> None:
@@ -323,14 +349,20 @@ class _Builder:
         for axis in ("x", "y"):
             span = bounds.get(axis)
             if (not isinstance(span, list) or len(span) != 2
-                    or not all(isinstance(v, int | float) for v in span) or span[1] <= span[0]):
+                    or not all(_finite(v) for v in span) or span[1] <= span[0]):
                 raise self.fail(f"bounds: {axis} must be [min, max] in metres with min < max")
-            cells = (span[1] - span[0]) / cell_size
-            if abs(cells - round(cells)) > 1e-9:
+            cells = (float(span[1]) - float(span[0])) / cell_size
+            if not cells <= MAX_MAP_CELLS:
+                raise self.fail(f"bounds: {axis} spans {cells:g} cells of {cell_size:g} m, "
+                                f"more than a map may have ({MAX_MAP_CELLS})")
+            if abs(cells - round(cells)) > 1e-9 or round(cells) < 1:
                 raise self.fail(f"bounds: {axis} span {span[1] - span[0]:g} m is not a whole "
                                 f"number of {cell_size:g} m cells")
             spans.append((float(span[0]), round(cells)))
         (x0, self.cols), (y0, self.rows) = spans
+        if self.cols * self.rows > MAX_MAP_CELLS:
+            raise self.fail(f"bounds: the map of {self.cols} x {self.rows} cells has more than "
+                            f"{MAX_MAP_CELLS} cells")
         origin = (x0 + cell_size / 2, y0 + cell_size / 2)
 
         vehicle = self.vehicle(data.get("vehicle", {}))
@@ -410,6 +442,8 @@ class _Builder:
         element = self.element(table, "cluster", i)
         self.keys(table, {"name", "symbol", "fill", "notches"}, element)
         name = self.get(table, "name", str, element)
+        if not name:
+            raise self.fail(f"{element}: 'name' must not be empty")
         element = f"cluster {name}"
         symbol = self.symbol(table, element, name[-1])
         runs = table.get("fill")
@@ -449,7 +483,7 @@ class _Builder:
     def element(table: dict, kind: str, i: int) -> str:
         """How errors name a table: by its name when it has one, else by its position."""
         name = table.get("name")
-        return f"{kind} {name}" if isinstance(name, str) else f"{kind}[{i}]"
+        return f"{kind} {name}" if isinstance(name, str) and name else f"{kind}[{i}]"
 
     def symbol(self, table: dict, element: str, default: str) -> str:
         symbol = self.get(table, "symbol", str, element, default)

@@ -31,6 +31,16 @@ class WeightsError(UserError):
     """A weights file that cannot be used; the message says why."""
 
 
+def _finite(value: object) -> bool:
+    """A number that fits a float and is neither infinite nor NaN."""
+    if not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer too large for a float
+        return False
+
+
 def make_net(inputs: int, hidden: int = HIDDEN) -> torch.nn.Sequential:
     return torch.nn.Sequential(torch.nn.Linear(inputs, hidden), torch.nn.Tanh(),
                                torch.nn.Linear(hidden, 1)).double()
@@ -169,11 +179,11 @@ class ClusterMLPs:
         for key in ("target_mean", "target_scale"):
             values = data.get(key)
             if not isinstance(values, list) or len(values) != n or not all(
-                    isinstance(v, int | float) and math.isfinite(v) for v in values):
+                    _finite(v) for v in values):
                 raise bad(f"'{key}' must be {n} finite numbers")
             numbers[key] = [float(v) for v in values]
         scale = data.get("input_scale")
-        if not isinstance(scale, int | float) or not scale > 0:
+        if not _finite(scale) or not scale > 0:
             raise bad("'input_scale' must be a positive number")
         if data.get("hidden") != HIDDEN:
             raise bad(f"'hidden' must be {HIDDEN}")
@@ -188,7 +198,7 @@ class ClusterMLPs:
                 raise bad(f"network {d} ({clusters[d]}) must have {sorted(expected)}")
             try:
                 tensors = {k: torch.tensor(v, dtype=torch.float64) for k, v in state.items()}
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError, RuntimeError) as exc:
                 raise bad(f"network {d} ({clusters[d]}): {exc}") from None
             for k, t in tensors.items():
                 if tuple(t.shape) != expected[k] or not bool(torch.isfinite(t).all()):
@@ -196,9 +206,14 @@ class ClusterMLPs:
                               f"shape {list(expected[k])}")
             net.load_state_dict(tensors)
             nets.append(net)
+        layout = data.get("layout", "")
+        if not isinstance(layout, str):
+            raise bad("'layout' must be a layout name")
+        trained_on = data.get("trained_on", 0)
+        if not isinstance(trained_on, int) or isinstance(trained_on, bool) or trained_on < 0:
+            raise bad("'trained_on' must be a whole number of samples")
         return cls(tuple(clusters), float(scale), nets, numbers["target_mean"],
-                   numbers["target_scale"], str(data.get("layout", "")),
-                   int(data.get("trained_on", 0)))
+                   numbers["target_scale"], layout, trained_on)
 
     @classmethod
     def load(cls, path: Path) -> ClusterMLPs:
@@ -206,6 +221,8 @@ class ClusterMLPs:
             data = json.loads(path.read_text())
         except (OSError, UnicodeDecodeError) as exc:
             raise WeightsError(f"{path}: cannot read: {exc}") from None
-        except json.JSONDecodeError as exc:
+        except ValueError as exc:  # JSONDecodeError, or an integer literal too long
             raise WeightsError(f"{path}: not valid JSON: {exc}") from None
+        except RecursionError:
+            raise WeightsError(f"{path}: not valid JSON: nested too deep") from None
         return cls.from_json(data, str(path))

@@ -62,6 +62,7 @@ class ReleaseRequest(Message):
     request_id: str
     vehicle: int
     from_t: float
+    cells: list[tuple[int, int]] = field(default_factory=list)  # only these (empty: all)
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,7 @@ class Change(Message):
     intervals: list[WireInterval] = field(default_factory=list)
     release_from: float | None = None
     request_id: str = ""
+    release_cells: list[tuple[int, int]] | None = None  # release only these (None: all)
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,7 @@ class Snapshot(Message):
     revision: int
     reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
     changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
+    diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
 
 
 # (manner label, start pose, end pose, t0, t1, v0, v1, swept cells): one maneuver.
@@ -155,6 +158,7 @@ class ClockTick(Message):
     t: float
     speed: float = 1.0
     wall: float = 0.0  # Unix time at which sim time was t (real time only)
+    down: list[int] = field(default_factory=list)  # forklifts the dispatcher holds as down
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,7 @@ class MissionDone(Message):
     digest: str = ""
     wall_s: float = 0.0
     rejections: list[str] = field(default_factory=list)  # commits refused before a replan
+    detections: list[dict] = field(default_factory=list)  # faults seen (dispatcher/clock.py)
 
 
 # (manner label, start pose, end pose, t0, t1, v0, v1): one maneuver of a recorded subtask.
@@ -247,6 +252,105 @@ class DecisionFailure(Message):
 
 
 @dataclass(frozen=True)
+class HaltRequest(Message):
+    """The dispatcher freezes a forklift at t (docs/faults.md): it completes the maneuver in
+    progress and drives nothing it committed after it."""
+
+    TYPE: ClassVar[str] = "dispatch.halt_request"
+    request_id: str
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class ResumeRequest(Message):
+    """A forklift that was down moves again from t_resume: it stood since t_stop part-way
+    through `step` (or at rest at `pose`, without one), and completes that maneuver first."""
+
+    TYPE: ClassVar[str] = "dispatch.resume_request"
+    request_id: str
+    vehicle: int
+    t_stop: float
+    t_resume: float
+    pose: str  # where it stands once the maneuver is over
+    loaded: bool
+    step: WireStep | None = None
+
+
+@dataclass(frozen=True)
+class Halt(Message):
+    """A forklift frozen at t: it holds `cells` from t to infinity. A moving one completes
+    its maneuver and stands at `pose` from t_stand; one that is down stands at (x, y, theta)
+    (world, as in VehicleState) until it resumes."""
+
+    TYPE: ClassVar[str] = "dispatch.halt"
+    vehicle: int
+    t: float
+    cause: str
+    moving: bool
+    pose: str
+    t_stand: float
+    cells: list[tuple[int, int]]
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True)
+class Resume(Message):
+    """A forklift that was down moves again from t (it stands at its pose from t_stand)."""
+
+    TYPE: ClassVar[str] = "dispatch.resume"
+    vehicle: int
+    t: float
+    t_stand: float
+
+
+@dataclass(frozen=True)
+class StackReopened(Message):
+    """A delivery cut short: the stack is not done after all and goes back to the queue."""
+
+    TYPE: ClassVar[str] = "dispatch.reopen"
+    cluster: str
+    index: int
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class ZoneClosed(Message):
+    """Cells unusable over [t0, t1) (a spill), held by owner ZONE."""
+
+    TYPE: ClassVar[str] = "dispatch.zone"
+    cells: list[tuple[int, int]]
+    t0: float
+    t1: float
+
+
+@dataclass(frozen=True)
+class VehicleFault(Message):
+    """A forklift reports a fault of its own ("broken") and its end ("repaired")."""
+
+    TYPE: ClassVar[str] = "vehicle.fault"
+    vehicle: int
+    t: float
+    state: str
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class InjectFault(Message):
+    """The fault injector to an agent: "breakdown", "repair", or "slow_planner" (planning
+    takes `factor` times longer; 1 restores it)."""
+
+    TYPE: ClassVar[str] = "inject.fault"
+    request_id: str
+    vehicle: int
+    kind: str
+    factor: float = 1.0
+
+
+@dataclass(frozen=True)
 class RecorderStatus(Message):
     """The recorder's answer on fleet/<run>/recorder/status: how much it holds."""
 
@@ -268,7 +372,9 @@ TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
                               SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
-                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus)
+                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
+                              HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
+                              ZoneClosed, VehicleFault, InjectFault)
 }
 
 

@@ -8,6 +8,7 @@ the fast-mode grid, exactly as each agent would publish them.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -16,11 +17,13 @@ from pathlib import Path
 from fleet.bus import Keys
 from fleet.dispatch import TaskKind
 from fleet.engine import Engine, EngineOptions, MissionRecord
+from fleet.faults import Scenario
 from fleet.layout import Layout
 from fleet.mission import Mission, MissionKind
 from fleet.protocol import Change, Message, MissionDone, MissionInfo, Progress, encode
 from fleet.record_io import digest_of, record_to_dict
 from fleet.recording import RecordingWriter, mission_info
+from fleet.recovery import ScheduledPacer
 from reservation.store import change_time
 from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
 
@@ -33,43 +36,64 @@ class Outgoing:
     sim_time: float
 
 
-def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys) -> list[Outgoing]:
-    """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick."""
-    fill = record.mission.kind is MissionKind.FILL
+def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
+                   drive_log: dict[int, list[tuple]] | None = None) -> list[Outgoing]:
+    """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick,
+    driven as its agent was told to (`Engine.drive_log`; without one, every subtask of the
+    record); a forklift that is down says nothing until it moves again."""
     until = max(record.end_time, record.all_parked_time)
+    fill = record.mission.kind is MissionKind.FILL
     out = []
     for vehicle, start in zip(record.vehicles, record.starts, strict=True):
         drive = Drive(vehicle, start, layout)
-        for s in record.subtasks:
-            if s.vehicle == vehicle:
-                drive.add(s.trajectory, loaded=(s.kind is TaskKind.DELIVER) == fill)
+        silent: list[tuple[float, float]] = []
+        ops = drive_log[vehicle] if drive_log is not None else [
+            ("add", s.trajectory, (s.kind is TaskKind.DELIVER) == fill)
+            for s in record.subtasks if s.vehicle == vehicle]
+        for op, *args in ops:
+            if op == "add":
+                drive.add(*args)
+            elif op == "cut":
+                drive.cut(args[0])
+            elif op == "stop":
+                drive.stop(args[0])
+                silent.append((args[0], math.inf))
+            elif op == "resume":
+                drive.resume(args[0])
+                silent[-1] = (silent[-1][0], args[0])
         out += [Outgoing(keys.vehicle_state(vehicle), drive.state_at(t), f"vehicle-{vehicle}",
-                         t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)]
+                         t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
+                if not any(t0 <= t < t1 for t0, t1 in silent)]
     return out
 
 
 def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
                      events: list[tuple[Message, float]], changes: list[Change],
-                     done: MissionDone, keys: Keys | None = None) -> list[Outgoing]:
+                     done: MissionDone, drive_log: dict[int, list[tuple]],
+                     keys: Keys | None = None) -> list[Outgoing]:
     """Everything a run of processes would have published, in sim-time order."""
     keys = keys or Keys()
     key_of = {"dispatch.subtask": keys.dispatch_subtask, "dispatch.stack": keys.dispatch_stack,
               "dispatch.failure": keys.dispatch_failure,
-              "dispatch.progress": keys.dispatch_progress}
+              "dispatch.progress": keys.dispatch_progress, "dispatch.halt": keys.dispatch_halt,
+              "dispatch.resume": keys.dispatch_resume, "dispatch.reopen": keys.dispatch_reopen,
+              "dispatch.zone": keys.dispatch_zone}
     stream = [Outgoing(keys.dispatch_mission, info, "dispatcher", 0.0)]
     stream += [Outgoing(keys.reservation_change, c, "reservation", change_time(c))
                for c in changes]
     stream += [Outgoing(key_of[m.TYPE], m, "dispatcher", t) for m, t in events]
-    stream += vehicle_states(record, layout, keys)
+    stream += vehicle_states(record, layout, keys, drive_log)
     stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
     stream.append(Outgoing(keys.dispatch_done, done, "dispatcher", record.end_time))
     return stream
 
 
 def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
-                 command: str = "") -> tuple[MissionDone, list[Outgoing]]:
-    """Run the mission in this process: its result, and everything a run of processes would
-    have published (options.progress still hears the progress)."""
+                 command: str = "", scenario: Scenario | None = None
+                 ) -> tuple[MissionDone, list[Outgoing]]:
+    """Run the mission in this process (with the scenario's faults at their instants): its
+    result, and everything a run of processes would have published (options.progress still
+    hears the progress)."""
     events: list[tuple[Message, float]] = []
     told = options.progress
 
@@ -81,13 +105,15 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
     options.progress = progress
     options.events = lambda message, t: events.append((message, t))
     t0 = time.perf_counter()
-    engine = Engine(mission, options, layout)
+    pacer = ScheduledPacer(scenario) if scenario is not None else None
+    engine = Engine(mission, options, layout, pacer=pacer)
     record = engine.run()
     as_dict = record_to_dict(record)
     done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                        wall_s=time.perf_counter() - t0)
     info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)
-    return done, inprocess_stream(info, record, layout, events, engine.executor.changes, done)
+    return done, inprocess_stream(info, record, layout, events, engine.executor.changes, done,
+                                  engine.drive_log)
 
 
 def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:

@@ -31,7 +31,17 @@ def record_to_dict(rec: MissionRecord) -> dict[str, Any]:
         "failures": [{"t": f.t, "vehicle": f.vehicle, "stage": f.stage, "reason": f.reason}
                      for f in rec.failures],
         "subtasks": [subtask_dict(subtask_event(s)) for s in rec.subtasks],
+        **_faults(rec),
     }
+
+
+def _faults(rec: MissionRecord) -> dict[str, Any]:
+    """What faults did to the mission (nothing at all in a run without faults, so its record
+    and digest are those of a run before faults existed)."""
+    if not (rec.halts or rec.resumes):
+        return {}
+    return {"halts": [list(h) for h in rec.halts], "resumes": [list(r) for r in rec.resumes],
+            "cut_subtasks": list(rec.cut_subtasks)}
 
 
 def subtask_dict(event: SubtaskEvent) -> dict[str, Any]:

@@ -8,12 +8,16 @@ and the layout a TOML attachment, so a recording stands on its own. View channel
 /view/ carry Foxglove scene messages (protobuf) for Foxglove to display.
 
 Small chunks flushed about once a second bound what a killed recorder loses; `read_recording`
-recovers every complete chunk of a truncated file and says where reading stopped.
+recovers every complete chunk of a truncated file and says where reading stopped. A recorder
+restarted during a run writes a new segment of the same run (run-2.mcap, run-3.mcap, ...);
+`read_recording` of the run reads every segment as one recording and says where no recorder
+was running.
 """
 
 from __future__ import annotations
 
 import functools
+import heapq
 import json
 import math
 import os
@@ -22,8 +26,9 @@ import re
 import sys
 import types
 import typing
+from collections import Counter
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields, replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import IO, Any
@@ -41,20 +46,26 @@ from fleet.protocol import (
     ClockTick,
     DecisionFailure,
     Envelope,
+    Halt,
     MissionDone,
     MissionInfo,
     Progress,
     ProtocolError,
     RecorderStatus,
+    Resume,
     StackDone,
+    StackReopened,
     SubtaskEvent,
+    VehicleFault,
     VehicleState,
+    ZoneClosed,
     decode,
 )
 from fleet.protocol import Message as WireMessage
 
 PROFILE = "forklift-fleet"
-RUN_FILE = "run.mcap"  # a run directory's recording
+RUN_FILE = "run.mcap"  # a run directory's recording (its first segment)
+SEGMENT_FILE = re.compile(r"run-([2-9]|[1-9]\d+)\.mcap")  # later segments: run-2.mcap, ...
 MCAP_MAGIC = b"\x89MCAP0\r\n"  # every MCAP file starts with it
 MESSAGE_ENCODING = "msgpack"
 VIEW_PREFIX = "/view/"
@@ -77,6 +88,12 @@ KEY_TYPES: tuple[tuple[re.Pattern, type[WireMessage], str], ...] = tuple(
         (r"dispatch/stack", StackDone, "dispatcher"),
         (r"dispatch/failure", DecisionFailure, "dispatcher"),
         (r"recorder/status", RecorderStatus, "recorder"),
+        (r"dispatch/halt", Halt, "dispatcher"),
+        (r"dispatch/resume", Resume, "dispatcher"),
+        (r"dispatch/reopen", StackReopened, "dispatcher"),
+        (r"dispatch/zone", ZoneClosed, "dispatcher"),
+        (r"vehicle/(\d+)/fault", VehicleFault, "vehicle-{0}"),
+        (r"clock/ack/injector", ClockAck, "injector"),
     ))
 
 
@@ -264,16 +281,61 @@ class Recorded:
                 and self.envelope.sender == found[1])
 
 
+@dataclass(frozen=True)
+class Segment:
+    """One file of a recording: a recorder's output from its start to its end (or its kill)."""
+
+    path: Path
+    messages: int = 0  # msgpack records read from it
+    first_log_ns: int | None = None  # receive times of its first and last message records
+    last_log_ns: int | None = None
+    complete: bool = False  # it ends with its footer
+    problem: str = ""  # why reading it stopped before its footer
+    duplicates: int = 0  # records an overlapping earlier segment already holds (dropped)
+
+
+@dataclass(frozen=True)
+class RecorderGap:
+    """A window in which no recorder was running: from the last record of one segment to the
+    first record of the next (receive times, Unix nanoseconds)."""
+
+    after: Path  # the segment that ended
+    before: Path  # the segment that began
+    start_ns: int
+    end_ns: int
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / NS
+
+
 @dataclass
 class Recording:
-    path: Path
+    path: Path  # the (first) file read; its directory is the run's
     messages: list[Recorded] = field(default_factory=list)  # msgpack channels, file order
+    # (the segments of a run merged by log time)
     views: dict[str, int] = field(default_factory=dict)  # view topic -> messages
     view_schemas: dict[str, str] = field(default_factory=dict)  # view topic -> schema name
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
-    complete: bool = False  # the file ends with its footer
-    problem: str = ""  # why reading stopped before the footer
+    complete: bool = False  # every file ends with its footer
+    problem: str = ""  # why reading stopped before a footer (each segment's, named)
+    segments: list[Segment] = field(default_factory=list)  # the files read, in order
+
+    @property
+    def gaps(self) -> list[RecorderGap]:
+        """The windows between segments in which no recorder was running."""
+        found: list[RecorderGap] = []
+        last: Segment | None = None  # the segment with the latest record so far
+        for segment in self.segments:
+            if segment.first_log_ns is None or segment.last_log_ns is None:
+                continue  # nothing read from it: it says nothing about when it ran
+            if last is not None and segment.first_log_ns > last.last_log_ns:
+                found.append(RecorderGap(last.path, segment.path, last.last_log_ns,
+                                         segment.first_log_ns))
+            if last is None or segment.last_log_ns > last.last_log_ns:
+                last = segment
+        return found
 
     def of(self, cls: type[WireMessage]) -> list[tuple[Recorded, Any]]:
         """Every genuine message of a type (from its key's sender, on its key), with where
@@ -324,23 +386,72 @@ class RecordingError(ValueError):
     """A file that is not a readable recording; the message says why."""
 
 
-def recording_file(path: Path) -> Path:
-    """The MCAP file a path names: the file itself, or DIR/run.mcap. The retired mission.json
-    and anything else that is not MCAP are refused, saying which it is."""
+def segment_number(path: Path) -> int | None:
+    """1 for run.mcap, N for run-N.mcap, None for any other name."""
+    if path.name == RUN_FILE:
+        return 1
+    match = SEGMENT_FILE.fullmatch(path.name)
+    return int(match[1]) if match else None
+
+
+def segment_paths(path: Path) -> list[Path]:
+    """Every segment of a run, in order (run.mcap, run-2.mcap, ..., run-10.mcap), given its
+    directory or its run.mcap; any other file is a recording of its own. A directory with
+    no segment gives an empty list."""
     path = Path(path)
     if path.is_dir():
-        if not (path / RUN_FILE).exists():
-            old = (" (it holds a mission.json: that format is retired, only MCAP recordings "
-                   "are read)") if (path / "mission.json").exists() else ""
-            raise RecordingError(f"{path}: no {RUN_FILE} in this directory{old}")
-        path = path / RUN_FILE
+        folder = path
+    elif path.name == RUN_FILE:
+        folder = path.parent
+    else:
+        return [path]
+    try:
+        names = [entry for entry in folder.iterdir() if SEGMENT_FILE.fullmatch(entry.name)]
+    except OSError:
+        names = []
+    first = [folder / RUN_FILE] if path.name == RUN_FILE or (folder / RUN_FILE).exists() else []
+    return first + sorted(names, key=segment_number)
+
+
+def next_segment(run_dir: Path) -> Path:
+    """Where a recorder (re)started for the run in `run_dir` writes: run.mcap in a directory
+    without segments, else run-N.mcap after the last one (never an existing file, never a
+    number before one already written)."""
+    run_dir = Path(run_dir)
+    existing = segment_paths(run_dir) if run_dir.is_dir() else []
+    if not existing:
+        return run_dir / RUN_FILE
+    return run_dir / f"run-{max(segment_number(p) or 1 for p in existing) + 1}.mcap"
+
+
+def recording_file(path: Path) -> Path:
+    """The MCAP file a path names: the file itself, or DIR's first segment (DIR/run.mcap).
+    The retired mission.json and anything else that is not MCAP are refused, saying which it
+    is; of a run in segments, one readable segment is enough."""
+    path = Path(path)
+    segments = segment_paths(path)
+    if not segments:
+        old = (" (it holds a mission.json: that format is retired, only MCAP recordings "
+               "are read)") if (path / "mission.json").exists() else ""
+        raise RecordingError(f"{path}: no {RUN_FILE} in this directory{old}")
+    errors = []
+    for segment in segments:
+        try:
+            _check_magic(segment)
+            return segments[0]
+        except RecordingError as exc:
+            errors.append(exc)
+    raise errors[0]
+
+
+def _check_magic(path: Path) -> None:
     try:
         with open(path, "rb") as stream:
             head = stream.read(len(MCAP_MAGIC))
     except OSError as exc:
         raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
     if head == MCAP_MAGIC:
-        return path
+        return
     if path.suffix.lower() == ".json" or head.lstrip()[:1] in (b"{", b"["):
         raise RecordingError(f"{path}: a JSON file, not an MCAP recording; mission.json "
                              f"records are retired: give the run's recording ({RUN_FILE})")
@@ -348,10 +459,77 @@ def recording_file(path: Path) -> Path:
                          f"magic)")
 
 
+OVERLAP_SLACK_NS = NS  # two recorders stamp one message within this of each other
+
+
 def read_recording(path: Path) -> Recording:
-    """Everything a recording holds; a truncated file (a killed recorder) gives its complete
-    chunks, with `complete` False and `problem` saying where reading stopped."""
+    """Everything a recording holds: of a file, or of every segment of a run (its directory
+    or its run.mcap) merged in log-time order. A truncated file (a killed recorder) gives its
+    complete chunks, with `complete` False and `problem` saying where reading stopped; a
+    segment that cannot be read at all is skipped (named in `problem`) if another can."""
+    paths = segment_paths(path)
+    if not paths:
+        raise RecordingError(f"{path}: no {RUN_FILE} in this directory")
+    if len(paths) == 1:
+        return _read_segment(paths[0])[0]
+    parts: list[tuple[Recording, list[int]]] = []
+    errors: list[RecordingError] = []
+    for segment_path in paths:
+        try:
+            parts.append(_read_segment(segment_path))
+        except RecordingError as exc:
+            errors.append(exc)
+            parts.append((Recording(segment_path, segments=[Segment(
+                segment_path, problem=f"not read: {exc}")]), []))
+    if len(errors) == len(paths):
+        raise errors[0]
+    return _merge(parts)
+
+
+def _merge(parts: list[tuple[Recording, list[int]]]) -> Recording:
+    """One recording of a run's segments: messages merged by log time (a message that two
+    overlapping recorders both recorded, once), metadata and attachments from the first
+    segment that has them."""
+    merged = Recording(parts[0][0].path, complete=True)
+    streams: list[list[Recorded]] = []
+    earlier: list[tuple[Recorded, int]] = []  # every kept record so far, with its payload hash
+    for part, digests in parts:
+        (segment,) = part.segments
+        kept = list(zip(part.messages, digests, strict=True))
+        last = max((r.log_ns for r, _ in earlier), default=None)
+        if kept and last is not None and segment.first_log_ns <= last + OVERLAP_SLACK_NS:
+            seen = Counter((r.key, d) for r, d in earlier
+                           if r.log_ns >= segment.first_log_ns - OVERLAP_SLACK_NS)
+            unique = []
+            for r, d in kept:
+                if r.log_ns <= last + OVERLAP_SLACK_NS and seen[r.key, d] > 0:
+                    seen[r.key, d] -= 1
+                else:
+                    unique.append((r, d))
+            segment = replace(segment, duplicates=len(kept) - len(unique))
+            kept = unique
+        earlier += kept
+        streams.append([r for r, _ in kept])
+        merged.segments.append(segment)
+        for topic, n in part.views.items():
+            merged.views[topic] = merged.views.get(topic, 0) + n
+        for target, source in ((merged.view_schemas, part.view_schemas),
+                               (merged.metadata, part.metadata),
+                               (merged.attachments, part.attachments)):
+            for name, value in source.items():
+                target.setdefault(name, value)
+        merged.complete = merged.complete and part.complete
+    merged.messages = list(heapq.merge(*streams, key=lambda r: r.log_ns))
+    merged.problem = "; ".join(f"{s.path.name}: {s.problem}" for s in merged.segments
+                               if not s.complete)
+    return merged
+
+
+def _read_segment(path: Path) -> tuple[Recording, list[int]]:
+    """One file, and a hash of each message record's payload (to tell a message two
+    recorders both recorded)."""
     recording = Recording(Path(path))
+    digests: list[int] = []
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
     try:
@@ -378,7 +556,8 @@ def read_recording(path: Path) -> Recording:
             elif isinstance(record, Channel):
                 channels[record.id] = record
             elif isinstance(record, Message):
-                _add_message(recording, channels, schemas, record)
+                if _add_message(recording, channels, schemas, record):
+                    digests.append(hash(record.data))
             elif isinstance(record, Metadata):
                 recording.metadata[record.name] = dict(record.metadata)
             elif isinstance(record, Attachment):
@@ -387,22 +566,28 @@ def read_recording(path: Path) -> Recording:
                 recording.complete = True
     if not recording.complete and not recording.problem:
         recording.problem = "the file ends before its footer"
-    return recording
+    times = [r.log_ns for r in recording.messages]
+    recording.segments = [Segment(recording.path, len(times), min(times, default=None),
+                                  max(times, default=None), recording.complete,
+                                  recording.problem)]
+    return recording, digests
 
 
 def _add_message(recording: Recording, channels: dict[int, Channel],
-                 schemas: dict[int, Schema], record: Message) -> None:
+                 schemas: dict[int, Schema], record: Message) -> bool:
+    """Add a record; True if it is a message of a msgpack channel."""
     channel = channels.get(record.channel_id)
     if channel is None:
-        return  # a message whose channel was lost with a torn chunk
+        return False  # a message whose channel was lost with a torn chunk
     if channel.topic.startswith(VIEW_PREFIX):
         recording.views[channel.topic] = recording.views.get(channel.topic, 0) + 1
         schema = schemas.get(channel.schema_id)
         recording.view_schemas[channel.topic] = schema.name if schema else ""
-        return
+        return False
     try:
         envelope, error = decode(record.data), ""
     except ProtocolError as exc:
         envelope, error = None, str(exc)
     recording.messages.append(Recorded(channel.topic, record.log_time, record.publish_time,
                                        envelope, error))
+    return True

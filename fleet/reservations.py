@@ -63,6 +63,7 @@ class Change:
     vehicle: int
     release_from: float | None
     intervals: tuple[Interval, ...] = ()
+    release_cells: frozenset[Cell] | None = None  # release only these cells (None: all)
 
 
 @dataclass(frozen=True)
@@ -152,9 +153,12 @@ class ReservationTable:
         self._apply(Change(self.revision + 1, vehicle, release_from, intervals))
         return None
 
-    def release(self, vehicle: int, from_t: float = -INF) -> None:
-        """Drop everything the vehicle holds from `from_t` on (intervals straddling it are cut)."""
-        self._apply(Change(self.revision + 1, vehicle, from_t, ()))
+    def release(self, vehicle: int, from_t: float = -INF,
+                cells: Iterable[Cell] | None = None) -> None:
+        """Drop what the vehicle holds from `from_t` on (intervals straddling it are cut), on
+        `cells` only when given."""
+        self._apply(Change(self.revision + 1, vehicle, from_t, (),
+                           None if cells is None else frozenset(cells)))
 
     def park(self, vehicle: int, cells: Iterable[Cell], t0: float) -> Conflict | None:
         """Reserve cells from t0 to infinity."""
@@ -169,14 +173,16 @@ class ReservationTable:
 
     def _apply(self, change: Change) -> None:
         if change.release_from is not None:
-            self._release(change.vehicle, change.release_from)
+            self._release(change.vehicle, change.release_from, change.release_cells)
         for iv in change.intervals:
             self._insert(change.vehicle, iv)
         self.revision = change.revision
         self.changes.append(change)
 
-    def _release(self, vehicle: int, from_t: float) -> None:
+    def _release(self, vehicle: int, from_t: float, only: frozenset[Cell] | None) -> None:
         for cell in list(self._cells_of.get(vehicle, ())):
+            if only is not None and cell not in only:
+                continue
             line = self._cells[cell]
             keep = [(s, e, o) for s, e, o in zip(line.starts, line.ends, line.owners, strict=True)
                     if o != vehicle or s < from_t]

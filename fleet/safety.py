@@ -74,15 +74,19 @@ class DoubleBooking:
     t1: float
 
 
-def replay(changes: list[tuple[str, int, list, float | None]]) -> list[Held]:
-    """Apply (op, vehicle, intervals, release_from) changes in order: a release (or a commit
-    with release_from) gives up the vehicle's cells from that instant on; a commit adds."""
+def replay(changes: list[tuple]) -> list[Held]:
+    """Apply (op, vehicle, intervals, release_from[, release_cells]) changes in order: a
+    release (or a commit with release_from) gives up the vehicle's cells (those listed, if
+    any are) from that instant on; a commit adds."""
     held: dict[int, list[Held]] = defaultdict(list)
-    for op, vehicle, intervals, release_from in changes:
+    for op, vehicle, intervals, release_from, *rest in changes:
+        only = {tuple(c) for c in rest[0]} if rest and rest[0] is not None else None
         if release_from is not None:
             kept = []
             for h in held[vehicle]:
-                if h.t0 < release_from:
+                if only is not None and h.cell not in only:
+                    kept.append(h)
+                elif h.t0 < release_from:
                     kept.append(Held(vehicle, h.cell, h.t0, min(h.t1, release_from)))
             held[vehicle] = kept
         if op == "commit":

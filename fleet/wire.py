@@ -7,7 +7,7 @@ from __future__ import annotations
 from fleet.dispatch import TaskKind
 from fleet.execution import Task
 from fleet.maneuvers import Manner
-from fleet.protocol import ProtocolError, TaskRequest, TaskResult
+from fleet.protocol import ProtocolError, TaskRequest, TaskResult, WireStep
 from fleet.reservations import Interval
 from fleet.trajectory import FailureReason, PlanFailure, Pose, Step, Trajectory
 from fleet.velocity import Speed
@@ -44,8 +44,7 @@ def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure,
         return TaskResult(task_id, vehicle, False, revision, failure=result.reason.value,
                           detail=result.detail, expansions=result.expansions,
                           rejections=rejections)
-    steps = [(s.manner.label, str(s.start), str(s.end), s.t0, s.t1, int(s.v0), int(s.v1),
-              sorted(s.cells)) for s in result.steps]
+    steps = [step_to_wire(s) for s in result.steps]
     intervals = [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in result.intervals]
     return TaskResult(task_id, vehicle, True, revision, str(result.start), str(result.goal),
                       result.t_start, steps, intervals, result.expansions,
@@ -60,15 +59,8 @@ def result_from_wire(message: TaskResult) -> Trajectory | PlanFailure:
         except ValueError:
             raise ProtocolError(f"{where}.failure: unknown reason {message.failure!r}") from None
         return PlanFailure(reason, message.detail, message.expansions)
-    steps = []
-    for i, (label, start, end, t0, t1, v0, v1, cells) in enumerate(message.steps):
-        try:
-            manner, s0, s1 = Manner.from_label(label), Speed(v0), Speed(v1)
-        except ValueError as exc:
-            raise ProtocolError(f"{where}.steps[{i}]: {exc}") from None
-        steps.append(Step(manner, _pose(start, f"{where}.steps[{i}]"),
-                          _pose(end, f"{where}.steps[{i}]"), t0, t1, s0, s1,
-                          frozenset(cells)))
+    steps = [step_from_wire(step, f"{where}.steps[{i}]")
+             for i, step in enumerate(message.steps)]
     try:
         intervals = tuple(Interval((c, r), t0, t1) for c, r, t0, t1 in message.intervals)
     except ValueError as exc:
@@ -76,3 +68,20 @@ def result_from_wire(message: TaskResult) -> Trajectory | PlanFailure:
     return Trajectory(message.vehicle, _pose(message.start, f"{where}.start"),
                       _pose(message.goal, f"{where}.goal"), message.t_start, tuple(steps),
                       intervals, message.expansions)
+
+
+def step_to_wire(s: Step) -> WireStep:
+    return (s.manner.label, str(s.start), str(s.end), s.t0, s.t1, int(s.v0), int(s.v1),
+            sorted(s.cells))
+
+
+def step_from_wire(step: WireStep, where: str) -> Step:
+    label, start, end, t0, t1, v0, v1, cells = step
+    try:
+        manner, s0, s1 = Manner.from_label(label), Speed(v0), Speed(v1)
+    except ValueError as exc:
+        raise ProtocolError(f"{where}: {exc}") from None
+    if not t0 < t1:
+        raise ProtocolError(f"{where}: a maneuver must end after it starts, not [{t0}, {t1})")
+    return Step(manner, _pose(start, where), _pose(end, where), t0, t1, s0, s1,
+                frozenset((c, r) for c, r in cells))

@@ -6,6 +6,9 @@ the Foxglove views (into the file, and to a live WebSocket view with --foxglove)
 the file about once a second, so a killed recorder loses at most about a second. It publishes
 its status on fleet/<run>/recorder/status at every flush and once the mission's result is in
 the file (and answers queries there), so `fleet run` knows when it may stop the recorder.
+A recorder started mid-run (a restarted one writes the run's next segment, run-N.mcap:
+fleet.recording.next_segment) asks the dispatcher what the run is, so its file is described
+too.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ FLUSH_PERIOD_S = 1.0
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
     p.add_argument("--out", type=Path, default=Path("run.mcap"),
-                   help="MCAP file to write (default run.mcap)")
+                   help="MCAP file to write (default run.mcap; never overwritten: a recorder "
+                   "restarted for a run writes its next segment, RUN_DIR/run-2.mcap, ...)")
     p.add_argument("--foxglove", type=int, metavar="PORT",
                    help="also serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove)")

@@ -3,7 +3,8 @@
 msgpack is self-delimiting, so the file is a plain stream of records. A process killed in the
 middle of a write leaves a torn last record; `replay` keeps every complete record before it,
 reports the torn tail, and cuts it off so new records follow good ones. Bytes that are not
-msgpack at all are an error naming the record.
+msgpack at all are an error naming the record, and so is an unfinished record with complete
+records after it (damage in the middle is never cut off as if it were a torn tail).
 """
 
 from __future__ import annotations
@@ -60,6 +61,11 @@ class Journal:
                                f"not msgpack: {exc}") from None
         torn = len(data) - good
         if torn:
+            later = _next_record(data, good)
+            if later is not None:  # damage in the middle, not a write cut short at the end
+                raise JournalError(f"{self.path}: record {len(changes) + 1} at byte {good} is "
+                                   f"not a complete record, yet a complete record follows at "
+                                   f"byte {later}")
             with open(self.path, "r+b") as f:
                 f.truncate(good)
         return Replayed(changes, torn)
@@ -76,3 +82,25 @@ class Journal:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+MAX_PROBE = 1 << 20  # a record longer than this is not looked for after a torn one
+
+
+def _next_record(data: bytes, start: int) -> int | None:
+    """Where a complete, valid record starts after `start`, if one does. A crash tears only
+    the last record, so an unfinished record with whole records after it is damage (a length
+    prefix that claims the rest of the file), which must not be cut off as a torn tail."""
+    for at in range(start + 1, len(data)):
+        if not (0x80 <= data[at] <= 0x8F or data[at] in (0xDE, 0xDF)):  # a record is a map
+            continue
+        unpacker = msgpack.Unpacker(raw=False, strict_map_key=True)
+        unpacker.feed(data[at:at + MAX_PROBE])
+        try:
+            raw = unpacker.unpack()
+            if isinstance(raw, dict):
+                build_message(Change, raw)
+                return at
+        except Exception:  # msgpack raises several types; not a record here: probe on
+            continue
+    return None

@@ -18,10 +18,9 @@ import zenoh
 
 from fleet.bus import Keys, Requester, received
 from fleet.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
-from fleet.reservations import Change as TableChange
 from fleet.reservations import Reservation, ReservationTable
 from fleet.reservations import Snapshot as TableSnapshot
-from reservation.store import to_intervals
+from reservation.store import table_change
 
 MAX_BUFFERED = 10_000
 log = logging.getLogger("fleet.mirror")
@@ -54,7 +53,7 @@ class TableMirror:
     def load(self, snapshot: Snapshot) -> None:
         """A whole snapshot, or a diff (`changes`) on top of the current copy."""
         with self._changed:
-            if snapshot.changes:
+            if snapshot.diff:  # an empty diff is "nothing new", not an empty table
                 for body in snapshot.changes:
                     change = build_message(Change, body)
                     assert isinstance(change, Change)
@@ -97,8 +96,7 @@ class TableMirror:
         for old in [r for r in self._pending if r <= self.table.revision]:
             del self._pending[old]
         while (change := self._pending.pop(self.table.revision + 1, None)) is not None:
-            self.table.apply(TableChange(change.revision, change.vehicle, change.release_from,
-                                         to_intervals(change.intervals)))
+            self.table.apply(table_change(change))
         self.needs_resync = bool(self._pending)  # a gap the buffer cannot fill yet
         self._changed.notify_all()
 

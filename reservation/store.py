@@ -33,6 +33,14 @@ def to_wire(intervals) -> list[WireInterval]:
     return [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals]
 
 
+def table_change(change: Change) -> TableChange:
+    """A published change as the table applies it."""
+    cells = None if change.release_cells is None else \
+        frozenset((c, r) for c, r in change.release_cells)
+    return TableChange(change.revision, change.vehicle, change.release_from,
+                       to_intervals(change.intervals), cells)
+
+
 def change_time(change: Change) -> float:
     """The sim time a change is about (its publish time in a recording): where it releases
     from, else where its first interval starts."""
@@ -73,7 +81,8 @@ class ReservationStore:
             return self._commit(message)
         if isinstance(message, ReleaseRequest):
             change = Change(self.revision + 1, "release", message.vehicle, [],
-                            message.from_t, message.request_id)
+                            message.from_t, message.request_id,
+                            [tuple(c) for c in message.cells] or None)
             return self._accept(change)
         if isinstance(message, SnapshotRequest):
             return Outcome(self.snapshot(message.since_revision))
@@ -105,8 +114,7 @@ class ReservationStore:
                        Reply("", True, self.revision), [change])
 
     def _apply(self, change: Change) -> None:
-        self.table.apply(TableChange(change.revision, change.vehicle, change.release_from,
-                                     to_intervals(change.intervals)))
+        self.table.apply(table_change(change))
         self.log.append(change)
         if change.request_id:
             self._remember(Reply(change.request_id, True, change.revision))
@@ -118,7 +126,8 @@ class ReservationStore:
 
     def snapshot(self, since: int = -1) -> Snapshot:
         if 0 <= since <= self.revision:  # the log holds every change since revision 0
-            return Snapshot(self.revision, [], [body_of(c) for c in self.log[since:]])
+            return Snapshot(self.revision, [], [body_of(c) for c in self.log[since:]],
+                            diff=True)
         rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1)
                 for r in self.table.reservations()]
         return Snapshot(self.revision, rows)

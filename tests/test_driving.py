@@ -112,3 +112,52 @@ def test_real_time_ticks_need_a_positive_speed_and_keep_it():
 def test_real_time_states_are_never_coarser_than_fast_mode():
     assert realtime_period(1.0) == pytest.approx(0.1)  # 10 Hz of wall time
     assert realtime_period(40.0) == 0.5  # not 4 s of sim time apart
+
+
+# -- faults: cut, stop, resume, restart ---------------------------------------------------------
+
+def test_a_cut_forklift_completes_its_maneuver_and_drives_nothing_after():
+    layout, traj = small_trip()
+    step = traj.steps[2]
+    t = (step.t0 + step.t1) / 2
+    drive = Drive(1, traj.start, layout)
+    drive.add(traj, loaded=True)
+    _, later = small_trip(t_start=traj.t_end + 5)  # a leg committed for later goes too
+    drive.add(later, loaded=False)
+    drive.cut(t)
+    assert drive.pose == step.end and len(drive.legs) == 1
+    assert drive.state_at(step.t1 + 100).pose == str(step.end)
+
+
+def test_a_stopped_forklift_stands_still_until_it_resumes_then_completes_its_maneuver():
+    layout, traj = small_trip()
+    step = traj.steps[2]
+    t_stop = step.t0 + 0.25 * (step.t1 - step.t0)
+    reference = Drive(1, traj.start, layout)
+    reference.add(traj, loaded=True)
+    drive = Drive(1, traj.start, layout)
+    drive.add(traj, loaded=True)
+    drive.stop(t_stop)
+    frozen = reference.state_at(t_stop)
+    assert drive.state_at(t_stop + 50) == frozen  # down: where it was at t_stop
+    drive.resume(t_stop + 100)
+    assert drive.state_at(t_stop + 100) == frozen
+    halfway = t_stop + 100 + 0.25 * (step.t1 - step.t0)  # as far in as it was at t0 + half
+    assert drive.state_at(halfway) == reference.state_at((step.t0 + step.t1) / 2)
+    assert drive.state_at(step.t1 + 100 + 1).pose == str(step.end)
+    assert drive.pose == step.end
+
+
+def test_a_restarted_agent_becomes_what_the_dispatcher_says_and_skips_the_silence():
+    layout, traj = small_trip()
+    step = traj.steps[2]
+    t_stop = (step.t0 + step.t1) / 2
+    reference = Drive(1, traj.start, layout)
+    reference.add(traj, loaded=True)
+    drive = Drive(1, layout.vehicle_starts[1], layout)  # knows nothing of itself
+    drive.restart(step.end, True, step, t_stop, t_stop + 40)
+    drive.skip_to(t_stop + 40, 0.5)
+    assert drive.state_at(t_stop + 20) == reference.state_at(t_stop)
+    assert drive.pose == step.end
+    due = drive.due(t_stop + 42, 0.5)
+    assert due[0] >= t_stop + 40 and due[0] - 0.5 < t_stop + 40

@@ -111,3 +111,15 @@ def test_a_frozen_mirror_holds_changes_back_until_thawed():
         assert mirror.revision == 2  # a planner reading now sees one consistent table
     assert mirror.revision == 5 and mirror.table is table
     assert mirror.table.reservations() == store.table.reservations()
+
+
+def test_an_empty_diff_keeps_the_copy():
+    """Resyncing a copy that is already current asks for the changes since its revision:
+    none. That is nothing new, not an empty table (a resumed forklift once planned on one)."""
+    store = ReservationStore()
+    commits(store, 4)
+    mirror = TableMirror()
+    mirror.load(store.snapshot())
+    before = mirror.table.reservations()
+    mirror.load(store.snapshot(mirror.revision))
+    assert mirror.revision == 4 and mirror.table.reservations() == before != []

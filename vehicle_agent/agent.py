@@ -32,16 +32,20 @@ from fleet.protocol import (
     ClockAck,
     ClockTick,
     CommitRequest,
+    HaltRequest,
+    InjectFault,
     Message,
     ProtocolError,
     Reply,
+    ResumeRequest,
     TaskRequest,
     TaskResult,
+    VehicleFault,
     decode,
     encode,
 )
 from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire import result_to_wire, task_from_wire
+from fleet.wire import result_to_wire, step_from_wire, task_from_wire
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
 from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
@@ -106,7 +110,7 @@ class Stopped(Exception):
 
 @dataclass
 class _Inbox:
-    kind: str  # "task" or "tick"
+    kind: str  # "task", "tick" or "inject"
     item: object = None
 
 
@@ -128,6 +132,11 @@ class Agent:
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
         self.seq = itertools.count(1)  # of task replies (each stream counts its own)
         self.stopping = threading.Event()
+        # Down: stalled, cut off, broken down or restarted, until the dispatcher says where
+        # the forklift stands and that it moves again (ResumeRequest). Says nothing meanwhile.
+        self.down = False
+        self.slow = 1.0  # planning takes this many times longer (an injected fault)
+        self.fault_pub: Stream | None = None
 
     # -- the process ---------------------------------------------------------------------------
     def run(self, service_timeout_s: float = 60.0) -> None:
@@ -135,7 +144,15 @@ class Agent:
             raise RuntimeError(f"no reservation service on {self.keys.root} within "
                                f"{service_timeout_s:g} s")
         changes = follow(self.session, self.keys, self.mirror, self.requester)
-        self._park()
+        if self.mirror.table.reservations(self.vehicle):
+            # The table holds cells of ours: this is a restart. Where the forklift stands is
+            # what the store holds and the dispatcher says; wait for its ResumeRequest.
+            self.down = True
+            log.info("vehicle %d restarted: waiting for the dispatcher", self.vehicle)
+        else:
+            self._park()
+        self.fault_pub = Stream(self.session, self.keys.vehicle_fault(self.vehicle),
+                                self.sender, reliable=True)
         # States are reliable too: a recording must hold every one (the recorder only
         # enqueues, so it does not hold us up); acks pace the clock.
         state_pub = Stream(self.session, self.keys.vehicle_state(self.vehicle), self.sender,
@@ -146,6 +163,8 @@ class Agent:
             self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
         clock_sub = self.session.declare_subscriber(
             self.keys.clock, lambda s: self.inbox.put(_Inbox("tick", s)))
+        injector = self.session.declare_queryable(
+            self.keys.vehicle_inject(self.vehicle), lambda q: self.inbox.put(_Inbox("inject", q)))
         token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
         ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
         ticker.start()
@@ -157,12 +176,15 @@ class Agent:
                     self._answer(entry.item)
                 elif entry.kind == "tick":
                     self._on_tick(entry.item, state_pub, ack_pub)
+                elif entry.kind == "inject":
+                    self._on_inject(entry.item)
                 if self.mirror.needs_resync:
                     resync(self.mirror, self.keys, self.requester)
         finally:
             self.stopping.set()
             ticker.join()
-            for declared in (token, clock_sub, queryable, ack_pub, state_pub, changes):
+            for declared in (token, injector, clock_sub, queryable, ack_pub, state_pub,
+                             self.fault_pub, changes):
                 declared.undeclare()
 
     def stop(self) -> None:
@@ -186,9 +208,15 @@ class Agent:
         try:
             try:
                 message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       TaskRequest, str(query.key_expr))
+                                       (TaskRequest, HaltRequest, ResumeRequest),
+                                       str(query.key_expr))
             except ProtocolError as exc:
                 query.reply_err(f"rejected: {exc}".encode())
+                return
+            if not isinstance(message, TaskRequest):
+                reply = self._halt(message) if isinstance(message, HaltRequest) else \
+                    self._resume(message)
+                query.reply(query.key_expr, self._encode(reply, self.clock.now()))
                 return
             answer = self.answers.get(message.task_id)
             if answer is None:
@@ -239,9 +267,76 @@ class Agent:
 
     def _plan(self, task: Task) -> Trajectory | PlanFailure:
         planner = self.planners.get(task.filled)
+        started = time.perf_counter()
         with self.mirror.frozen():
-            return planner.plan(self.vehicle, task.start, task.t_i, task.goals,
-                                self.mirror.table)
+            result = planner.plan(self.vehicle, task.start, task.t_i, task.goals,
+                                  self.mirror.table)
+        if self.slow > 1:  # an injected slow planner: as if the search ran on a slower CPU
+            time.sleep((self.slow - 1) * (time.perf_counter() - started))
+        return result
+
+    # -- faults (docs/faults.md) ---------------------------------------------------------------
+    def _halt(self, message: HaltRequest) -> Reply:
+        """The dispatcher froze us at t: complete the maneuver in progress, nothing after."""
+        if message.vehicle != self.vehicle:
+            return Reply(message.request_id, False, self.mirror.revision,
+                         reason=f"halt for vehicle {message.vehicle} sent to {self.vehicle}")
+        with self.drive_lock:
+            self.drive.cut(message.t)
+        log.info("halted at t=%.2f: standing at %s after the maneuver in progress", message.t,
+                 self.drive.pose)
+        return Reply(message.request_id, True, self.mirror.revision)
+
+    def _resume(self, message: ResumeRequest) -> Reply:
+        """Back from being down: take the store's table afresh and the dispatcher's word for
+        where we stand, then move again from t_resume."""
+        if message.vehicle != self.vehicle:
+            return Reply(message.request_id, False, self.mirror.revision,
+                         reason=f"resume for vehicle {message.vehicle} sent to {self.vehicle}")
+        try:
+            pose = Pose.parse(message.pose)
+            step = step_from_wire(message.step, "dispatch.resume_request.step") \
+                if message.step is not None else None
+        except (ValueError, ProtocolError) as exc:
+            return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
+        resync(self.mirror, self.keys, self.requester)
+        period = FAST_STATE_PERIOD_S if not self.clock.realtime else \
+            realtime_period(self.clock.tick.speed)
+        with self.drive_lock:
+            self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
+            self.drive.skip_to(message.t_resume, period)
+        self.down = False
+        log.info("resumed at t=%.2f from %s (table at revision %d)", message.t_resume,
+                 step.start if step else pose, self.mirror.revision)
+        return Reply(message.request_id, True, self.mirror.revision)
+
+    def _on_inject(self, query: zenoh.Query) -> None:
+        """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
+        try:
+            try:
+                message = self._decode(query.payload.to_bytes() if query.payload else b"",
+                                       InjectFault, str(query.key_expr))
+            except ProtocolError as exc:
+                query.reply_err(f"rejected: {exc}".encode())
+                return
+            t = self.clock.now()
+            if message.kind == "slow_planner":
+                self.slow = message.factor
+            elif message.kind == "breakdown":
+                with self.drive_lock:
+                    self.drive.stop(t)
+                self.down = True
+                self.fault_pub.put(VehicleFault(self.vehicle, t, "broken"), t)
+            elif message.kind == "repair":
+                self.fault_pub.put(VehicleFault(self.vehicle, t, "repaired"), t)
+            else:
+                query.reply_err(f"rejected: unknown fault {message.kind!r}".encode())
+                return
+            log.warning("fault injected at t=%.2f: %s", t, message.kind)
+            query.reply(query.key_expr, self._encode(
+                Reply(message.request_id, True, self.mirror.revision), t))
+        finally:
+            query.drop()
 
     def _failed(self, message: TaskRequest, reason: FailureReason, detail: str,
                 rejections: list[str] | None = None) -> TaskResult:
@@ -272,7 +367,9 @@ class Agent:
             log.warning("ignored tick %d on %s: %s", tick.tick, sample.key_expr, problem)
             return
         self.clock.tick = tick
-        if tick.mode != "fast":
+        if self.vehicle in tick.down:
+            self.down = True  # the dispatcher holds us as down: we were cut off or stalled
+        if tick.mode != "fast" or self.down:
             return
         self._publish_states(state_pub, tick.t, FAST_STATE_PERIOD_S, before=True)
         ack_pub.put(ClockAck(tick.tick, self.vehicle), tick.t)
@@ -283,7 +380,7 @@ class Agent:
         while not self.stopping.wait(wait):
             wait = STATE_PERIOD_S
             tick = self.clock.tick
-            if tick is None or tick.mode != "realtime":
+            if tick is None or tick.mode != "realtime" or self.down:
                 continue
             period = realtime_period(tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)
@@ -305,11 +402,11 @@ class Agent:
     def _encode(self, message: Message, t: float) -> bytes:
         return encode(message, self.sender, next(self.seq), t)
 
-    def _decode(self, payload: bytes, expected: type, key: str):
+    def _decode(self, payload: bytes, expected: type | tuple[type, ...], key: str):
         try:
             message = decode(payload).message
             if not isinstance(message, expected):
-                raise ProtocolError(f"expected {expected.TYPE}, got {message.TYPE}")
+                raise ProtocolError(f"a {message.TYPE} does not belong on {key}")
         except ProtocolError as exc:
             log.warning("rejected a message on %s: %s", key, exc)
             raise

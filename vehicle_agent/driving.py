@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from fleet.layout import Layout
 from fleet.maneuvers import Manner, world_pose
 from fleet.protocol import VehicleState
-from fleet.trajectory import Pose, Trajectory
+from fleet.trajectory import Pose, Step, Trajectory
 
 FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
 
@@ -28,6 +28,22 @@ FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
 class Leg:
     trajectory: Trajectory
     loaded: bool
+    # A forklift that went down stands still over [pause_from, pause_to) part-way through
+    # its maneuver, then completes it: the leg runs that much later.
+    pause_from: float = math.inf
+    pause_to: float = math.inf
+
+    @property
+    def t_end(self) -> float:
+        if self.pause_from >= self.trajectory.t_end:
+            return self.trajectory.t_end
+        return self.trajectory.t_end + (self.pause_to - self.pause_from)
+
+    def local(self, t: float) -> float:
+        """The trajectory's own time at t (time stands still while paused)."""
+        if t < self.pause_from:
+            return t
+        return self.pause_from if t < self.pause_to else t - (self.pause_to - self.pause_from)
 
 
 class Drive:
@@ -47,10 +63,54 @@ class Drive:
     def add(self, trajectory: Trajectory, loaded: bool) -> None:
         self.legs.append(Leg(trajectory, loaded))
 
+    def cut(self, t: float) -> None:
+        """Drive nothing committed after the maneuver in progress at t (legs not started by
+        t go; the one in progress ends with that maneuver)."""
+        kept = []
+        for leg in self.legs:
+            if leg.trajectory.t_start >= t:
+                continue
+            steps = tuple(s for s in leg.trajectory.steps if s.t0 < leg.local(t))
+            if steps and len(steps) < len(leg.trajectory.steps):
+                traj = leg.trajectory
+                leg = Leg(Trajectory(traj.vehicle, traj.start, steps[-1].end, traj.t_start,
+                                     steps, (), traj.expansions), leg.loaded,
+                          leg.pause_from, leg.pause_to)
+            kept.append(leg)
+        self.legs = kept
+
+    def stop(self, t: float) -> None:
+        """Stand still from t where the forklift is (it is down), until `resume`."""
+        self.cut(t)
+        if self.legs and self.legs[-1].t_end > t:
+            self.legs[-1].pause_from, self.legs[-1].pause_to = t, math.inf
+
+    def resume(self, t: float) -> None:
+        """Move again from t: the maneuver stopped part-way is completed first."""
+        for leg in self.legs:
+            if leg.pause_to == math.inf and leg.pause_from <= t:
+                leg.pause_to = t
+
+    def restart(self, rest: Pose, loaded: bool, step: Step | None, t_stop: float,
+                t_resume: float) -> None:
+        """Become what the dispatcher says (a restarted agent knows nothing of itself): at
+        rest at `rest`, or stopped part-way through `step` since t_stop, moving from
+        t_resume. States before t_resume are not published again."""
+        self.legs = []
+        self.rest_pose, self.loaded = rest, loaded
+        if step is not None:
+            self.rest_pose = step.start
+            traj = Trajectory(self.vehicle, step.start, step.end, step.t0, (step,), (), 0)
+            self.legs = [Leg(traj, loaded, t_stop, t_resume)]
+
+    def skip_to(self, t: float, period: float) -> None:
+        """Publish no state for instants before t (the forklift was down: nothing was said)."""
+        self.next_k = max(self.next_k, math.ceil(t / period - 1e-9))
+
     def forget_before(self, t: float) -> None:
         """Drop legs that ended before t (their goal becomes the rest pose, their load what it
         carries); the last leg stays."""
-        while len(self.legs) > 1 and self.legs[0].trajectory.t_end < t:
+        while len(self.legs) > 1 and self.legs[0].t_end < t:
             leg = self.legs.pop(0)
             self.rest_pose, self.loaded = leg.trajectory.goal, leg.loaded
 
@@ -61,12 +121,13 @@ class Drive:
             if t < traj.t_start:
                 break
             loaded = leg.loaded
-            if t >= traj.t_end:
+            if t >= leg.t_end:
                 pose = traj.goal
                 continue
+            tau = leg.local(t)
             for step in traj.steps:
-                if step.t0 <= t < step.t1:
-                    s = (t - step.t0) / (step.t1 - step.t0)
+                if step.t0 <= tau < step.t1:
+                    s = (tau - step.t0) / (step.t1 - step.t0)
                     speed = int(max(step.v0, step.v1)) if step.manner is not Manner.STOP else 0
                     return self._state(step.start, step.manner, s, speed, loaded,
                                        step.manner.label)

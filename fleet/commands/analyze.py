@@ -1,4 +1,5 @@
-"""`fleet analyze RUN.mcap`: the run's numbers and its safety, work and message verdicts."""
+"""`fleet analyze RUN.mcap|DIR`: the run's numbers and its safety, work and message verdicts
+(a run directory: every segment its recorders wrote, read as one recording)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "exactly once) and messages (none lost). Exit status 1 when a verdict "
                        "fails.")
     p.add_argument("recording", type=Path, help="an MCAP file, or a run directory holding "
-                   "run.mcap")
+                   "run.mcap (and run-2.mcap, ... of a restarted recorder: read as one)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=run)
 
@@ -25,7 +26,8 @@ def run(args: argparse.Namespace) -> int:
     from fleet.analysis import analyze
     from fleet.recording import read_recording, recording_file
 
-    report = analyze(read_recording(recording_file(args.recording)))
+    recording_file(args.recording)  # refuses what is no recording, saying why
+    report = analyze(read_recording(args.recording))
     if args.json:
         print(json.dumps(report.to_json()))
     else:

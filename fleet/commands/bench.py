@@ -57,6 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="layout of the fills (default paper)")
     recorder.add_argument("--json", action="store_true", help="print one JSON object")
     recorder.set_defaults(handler=run_recorder)
+    faults = which.add_parser("faults", help="every shipped fault scenario beside the "
+                              "fault-free run: detection, recovery, extra mission time, verdicts "
+                              "(docs/reliability.md)")
+    faults.add_argument("--scenarios", help="comma-separated shipped scenarios (default all)")
+    faults.add_argument("--json", action="store_true", help="print one JSON object keyed by "
+                        "scenario (a kind's own scenario is named after the kind)")
+    faults.set_defaults(handler=run_faults)
 
 
 def emitted_json(result: dict, as_json: bool) -> bool:
@@ -169,4 +176,23 @@ def run_recorder(args: argparse.Namespace) -> int:
     result = recorder.run(rates, args.seconds, args.publishers, args.repeats, args.layout, say)
     if not emitted_json(result, args.json):
         print(recorder.table(result))
+    return 0
+
+
+def run_faults(args: argparse.Namespace) -> int:
+    from bench import faults
+    from fleet.faults import builtin_scenarios
+
+    names = args.scenarios.split(",") if args.scenarios else None
+    unknown = sorted(set(names or []) - set(builtin_scenarios()))
+    if unknown:
+        raise ValueError(f"--scenarios: {unknown[0]!r} is not a shipped scenario "
+                         f"({', '.join(builtin_scenarios())})")
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result = faults.run(names, say)
+    if not emitted_json(result, args.json):
+        print(faults.table(result))
     return 0

@@ -53,6 +53,7 @@ FIELDS: tuple[Field, ...] = (
     Field("vehicles", "forklifts", "d", ratio=False),
     Field("clock", "clock"),
     Field("complete", "recording complete"),
+    Field("segments", "recording segments", "d", ratio=False),
     Field("end_time_s", "end time [s]", ".2f"),
     Field("all_parked_s", "all parked [s]", ".2f"),
     Field("stacks_done", "stacks done", "d"),
@@ -65,6 +66,7 @@ FIELDS: tuple[Field, ...] = (
     Field("stacks_duplicated", "stacks done twice", "d", ratio=False),
     Field("stacks_lost", "stacks lost", "d", ratio=False),
     Field("messages_lost", "messages lost", "d", ratio=False),
+    Field("messages_not_recorded", "messages not recorded", "d", ratio=False),
     Field("passed", "verdicts pass"),
 )
 
@@ -79,6 +81,7 @@ def summarize(recording: Recording, record: dict) -> dict[str, Any]:
     return {
         "path": str(recording.path),
         "complete": recording.complete,
+        "segments": len(recording.segments),
         "mission": m["kind"],
         "strategy": m["strategy"],
         "layout": m["layout"],
@@ -98,6 +101,7 @@ def summarize(recording: Recording, record: dict) -> dict[str, Any]:
         "stacks_duplicated": len(report.stacks_duplicated),
         "stacks_lost": len(report.stacks_lost),
         "messages_lost": report.messages_lost,
+        "messages_not_recorded": report.messages_not_recorded,
         "passed": report.passed,
     }
 

@@ -18,7 +18,8 @@ FPS = 10
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plot", help="draw a recorded run (its MCAP recording)")
     p.add_argument("recording", type=Path,
-                   help=f"the run's MCAP recording, or the directory holding {RUN_FILE}")
+                   help=f"the run's MCAP recording, or the directory holding {RUN_FILE} (and "
+                   f"the later segments of a restarted recorder: read as one)")
     p.add_argument("--out", type=Path, help="directory for the files (default: beside the "
                    "recording)")
     p.add_argument("--at", type=float, action="append", default=[],
@@ -38,19 +39,23 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def read_run(path: Path) -> tuple[Recording, dict]:
-    """A run's recording and its mission record (fleet.recorded_mission.record_of). A
-    truncated recording (a killed recorder) is read as far as it goes, with a note."""
+    """A run's recording (every segment of it) and its mission record
+    (fleet.recorded_mission.record_of). A truncated recording (a killed recorder) is read as
+    far as it goes, and windows without a recorder are skipped, each with a note."""
     from fleet.recorded_mission import record_of
 
     try:
         file = recording_file(path)
-        recording = read_recording(file)
+        recording = read_recording(path)
         record = record_of(recording)
     except RecordingError as exc:
         raise UserError(str(exc)) from None
     if not recording.complete:
-        print(f"note: {file} is incomplete ({recording.problem}); using what it holds",
-              file=sys.stderr)
+        print(f"note: {file if len(recording.segments) < 2 else path} is incomplete "
+              f"({recording.problem}); using what it holds", file=sys.stderr)
+    for gap in recording.gaps:
+        print(f"note: no recorder ran for {gap.duration_s:.1f} s between {gap.after.name} and "
+              f"{gap.before.name}; what happened then is missing", file=sys.stderr)
     return recording, record
 
 

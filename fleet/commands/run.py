@@ -14,6 +14,7 @@ from fleet.bus import free_port
 from fleet.distributed import RunSpec, run_processes
 from fleet.engine import EngineOptions
 from fleet.errors import UserError
+from fleet.faults import Scenario, check_against, load_scenario
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import ProgressBar
@@ -44,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--foxglove", type=int, metavar="PORT", nargs="?", const=8765,
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
+    p.add_argument("--faults", metavar="SCENARIO",
+                   help="inject the faults of a scenario: a shipped one by name (see fleet "
+                   "faults list) or a TOML file (docs/faults.md)")
     p.set_defaults(handler=run)
 
 
@@ -111,6 +115,8 @@ def run(args: argparse.Namespace) -> int:
     if args.inprocess and (args.clock != "fast" or args.foxglove is not None):
         raise UserError("--inprocess runs the fast clock without processes: it takes neither "
                         "--clock realtime nor --foxglove")
+    scenario = fault_scenario(args.faults, mission, layout, n, args.clock) \
+        if args.faults else None
     out = args.out or Path("runs") / (f"{time.strftime('%Y%m%d-%H%M%S')}-{layout.name}-"
                                       f"{mission.strategy.value}")
     out.mkdir(parents=True, exist_ok=True)
@@ -122,9 +128,9 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         if args.inprocess:
-            record = _run_inprocess(mission, layout, args.weights, progress, out)
+            record = _run_inprocess(mission, layout, args.weights, progress, out, scenario)
         else:
-            record = _run_processes(mission, n, args, progress, out)
+            record = _run_processes(mission, n, args, progress, out, scenario)
     finally:
         bar.close()
     if record is None:
@@ -150,17 +156,32 @@ def _verdicts(path: Path) -> int:
     return 0 if report.passed else 1
 
 
+def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int,
+                   clock: str) -> Scenario:
+    """The scenario of --faults, checked against the run before anything starts."""
+    scenario = load_scenario(source)
+    check_against(scenario, layout, vehicles)
+    if mission.kind is not MissionKind.FILL:
+        raise UserError("--faults: fault scenarios run on fill missions for now (cancelling "
+                        "a claim from a stack is not modelled yet)")
+    if clock != "fast":
+        raise UserError("--faults: fault scenarios run on the fast clock for now")
+    if any(f.service == "dispatcher" for f in scenario.faults):
+        raise UserError(f"--faults {source}: killing the dispatcher is not supported yet")
+    return scenario
+
+
 def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None, progress,
-                   out: Path) -> dict[str, Any]:
+                   out: Path, scenario: Scenario | None) -> dict[str, Any]:
     options = engine_options(mission, layout, weights,
                              lambda done, total, t, failures: progress(done, t, failures))
-    done, stream = recorded_run(mission, layout, options, command_line())
+    done, stream = recorded_run(mission, layout, options, command_line(), scenario)
     write_recording(out / "run.mcap", stream, layout)
     return done.record
 
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
-                   progress, out: Path) -> dict[str, Any] | None:
+                   progress, out: Path, scenario: Scenario | None) -> dict[str, Any] | None:
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
@@ -172,7 +193,8 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
         print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
               file=sys.stderr)
     spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
-                   foxglove=args.foxglove, command=command_line())
+                   foxglove=args.foxglove, command=command_line(), faults=scenario,
+                   faults_source=args.faults or "")
     outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
     if outcome.done is None or not outcome.done.ok:
         print(f"fleet run: the mission failed: {outcome.error}", file=sys.stderr)

@@ -1,0 +1,125 @@
+"""`fleet bench faults`: every shipped fault scenario on paper with four forklifts, as real
+processes on the fast clock, beside the fault-free run: how fast each fault is detected and
+recovered from (wall clock), what it costs the mission (sim time), and what the recording's
+verdicts say (docs/reliability.md).
+
+Detection: from the injector applying the fault (its wall clock) to the dispatcher seeing it
+(a liveliness token gone, a forklift's report). Recovery: from there to the engine asking the
+clock again, with the freeze committed to the store and the forklifts told. Rejoin: from the
+fault's end (restart, SIGCONT, link restored, repair) to the dispatcher seeing the forklift
+back. Both processes read the same machine's clock.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from fleet.analysis import analyze
+from fleet.distributed import RunOutcome, RunSpec, run_processes
+from fleet.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
+from fleet.mission import Mission, MissionKind, Strategy
+from fleet.recording import read_recording
+
+MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
+
+
+def run(names: list[str] | None = None, say: Callable[[str], None] = print) -> dict:
+    """One row per scenario (a kind's own scenario is named after the kind), and the
+    fault-free run's as "fault_free"."""
+    names = names or builtin_scenarios()
+    with tempfile.TemporaryDirectory() as tmp:
+        say("fault-free run ...")
+        base = _run(Path(tmp) / "none", None)
+        base_end = base["end_time_s"]
+        base["extra_s"] = 0.0
+        rows = {"fault_free": base}
+        for name in names:
+            say(f"{name} ...")
+            row = _run(Path(tmp) / name, name)
+            row["extra_s"] = round(row["end_time_s"] - base_end, 2) \
+                if row["end_time_s"] is not None else None
+            rows[name] = row
+            say(f"  {_line(name, row)}")
+    return rows
+
+
+def _run(out: Path, name: str | None) -> dict:
+    scenario = load_scenario(name) if name else None
+    outcome = run_processes(RunSpec(MISSION, 4, out, faults=scenario,
+                                    faults_source=name or ""))
+    report = analyze(read_recording(out))
+    detect, recover, rejoin = _timings(outcome)
+    return {
+        "completed": outcome.done is not None and outcome.done.ok,
+        "error": outcome.error,
+        "end_time_s": report.end_time_s,
+        "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
+        "detect_s": _median(detect), "detect_max_s": max(detect, default=None),
+        "recover_s": _median(recover), "rejoin_s": _median(rejoin),
+        "overlaps": len(report.overlaps),
+        "outside_reservation": len(report.outside_reservation),
+        "stacks_lost": len(report.stacks_lost),
+        "stacks_duplicated": len(report.stacks_duplicated),
+        "messages_lost": report.messages_lost,
+        "messages_not_recorded": report.messages_not_recorded,
+        "verdicts_pass": report.passed,
+    }
+
+
+def _timings(outcome: RunOutcome) -> tuple[list[float], list[float], list[float]]:
+    """Pair the injector's actions with the dispatcher's detections (same forklift, same
+    sim instant)."""
+    seen = outcome.done.detections if outcome.done else []
+    detect, recover, rejoin = [], [], []
+    for applied in outcome.injected:
+        fault = applied.fault
+        if fault.kind not in VEHICLE_KINDS or fault.kind.value == "slow_planner":
+            continue
+        t = fault.until if applied.ends else fault.at
+        match = [d for d in seen if d["vehicle"] == fault.vehicle and d["up"] == applied.ends
+                 and d["t"] == t]
+        if not match:
+            continue
+        found = match[0]
+        latency = max(0.0, found["detected_wall"] - applied.wall)
+        (rejoin if applied.ends else detect).append(round(latency, 3))
+        if not applied.ends and "recovered_wall" in found:
+            recover.append(round(found["recovered_wall"] - found["detected_wall"], 3))
+    return detect, recover, rejoin
+
+
+def _median(values: list[float]) -> float | None:
+    return round(statistics.median(values), 3) if values else None
+
+
+def _fmt(value, unit: str = "") -> str:
+    return "-" if value is None else f"{value:g}{unit}"
+
+
+def _line(name: str, row: dict) -> str:
+    return (f"{name:<18} detect {_fmt(row['detect_s'], ' s'):>8}  recover "
+            f"{_fmt(row['recover_s'], ' s'):>8}  rejoin {_fmt(row['rejoin_s'], ' s'):>8}  "
+            f"extra {_fmt(row['extra_s'], ' s'):>9}  overlaps {row['overlaps']}  outside "
+            f"{row['outside_reservation']}  stacks lost {row['stacks_lost']} twice "
+            f"{row['stacks_duplicated']}  messages lost {row['messages_lost']} (not recorded "
+            f"{row['messages_not_recorded']})  {'pass' if row['verdicts_pass'] else 'FAIL'}")
+
+
+def table(result: dict) -> str:
+    """The markdown table of docs/reliability.md."""
+    lines = ["| scenario | detect | recover | rejoin | extra mission time | overlaps | "
+             "outside reservation | stacks lost / twice | messages lost (not recorded) | "
+             "verdicts |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, row in result.items():
+        if not isinstance(row, dict):
+            continue  # the machine's stamp
+        lines.append(
+            f"| {name} | {_fmt(row['detect_s'], ' s')} | {_fmt(row['recover_s'], ' s')} | "
+            f"{_fmt(row['rejoin_s'], ' s')} | {_fmt(row['extra_s'], ' s')} | "
+            f"{row['overlaps']} | {row['outside_reservation']} | {row['stacks_lost']} / "
+            f"{row['stacks_duplicated']} | {row['messages_lost']} "
+            f"({row['messages_not_recorded']}) | {'pass' if row['verdicts_pass'] else 'FAIL'} |")
+    return "\n".join(lines)

@@ -1,0 +1,51 @@
+"""`fleet faults list|show|check`: the fault kinds, the shipped scenarios, and a scenario
+file's check before a run (docs/faults.md)."""
+
+from __future__ import annotations
+
+import argparse
+from importlib import resources
+
+from fleet.faults import KINDS, builtin_scenarios, check_against, load_scenario
+from fleet.layout import load_layout
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("faults", help="fault kinds and scenarios for fleet run --faults",
+                       description="Fault scenarios (docs/faults.md): TOML files listing "
+                       "faults at simulation times, applied by fleet run --faults.")
+    actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    actions.add_parser("list", help="the fault kinds and the shipped scenarios")
+    show = actions.add_parser("show", help="print a shipped scenario (a start for your own)")
+    show.add_argument("scenario", choices=builtin_scenarios())
+    check = actions.add_parser("check", help="check a scenario against a layout and fleet")
+    check.add_argument("scenario", help="a shipped scenario's name or a TOML file")
+    check.add_argument("--layout", default="paper")
+    check.add_argument("--vehicles", type=int, help="fleet size (default: every start pose)")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action == "list":
+        print("fault kinds (fields besides `kind` and `at`, sim seconds unless said):")
+        for kind, spec in KINDS.items():
+            fields = ", ".join([*spec.required, *(f"[{o}]" for o in spec.optional)])
+            print(f"  {kind.value:<18} {fields}")
+            print(f"  {'':<18} {spec.summary}")
+        print("shipped scenarios (fleet run --faults NAME; fleet faults show NAME):")
+        for name in builtin_scenarios():
+            print(f"  {name:<18} {load_scenario(name).description}")
+        return 0
+    if args.action == "show":
+        print(resources.files("fleet.scenarios").joinpath(f"{args.scenario}.toml")
+              .read_text(), end="")
+        return 0
+    scenario = load_scenario(args.scenario)
+    layout = load_layout(args.layout)
+    vehicles = args.vehicles or len(layout.vehicle_starts)
+    check_against(scenario, layout, vehicles)
+    print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
+          f"with {vehicles} forklifts")
+    for fault in sorted(scenario.faults, key=lambda f: f.at):
+        print(f"  {fault.describe()}")
+    return 0

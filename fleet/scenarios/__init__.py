@@ -1,0 +1,1 @@
+"""Fault scenarios shipped with fleet (docs/faults.md)."""
