@@ -21,7 +21,8 @@ from fleet.analysis import analyze
 from fleet.distributed import RunOutcome, RunSpec, run_processes
 from fleet.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
 from fleet.mission import Mission, MissionKind, Strategy
-from fleet.recording import read_recording
+from fleet.protocol import Halt, Resume
+from fleet.recording import Recording, read_recording
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
 
@@ -50,8 +51,9 @@ def _run(out: Path, name: str | None) -> dict:
     scenario = load_scenario(name) if name else None
     outcome = run_processes(RunSpec(MISSION, 4, out, faults=scenario,
                                     faults_source=name or ""))
-    report = analyze(read_recording(out))
-    detect, recover, rejoin = _timings(outcome)
+    recording = read_recording(out)
+    report = analyze(recording)
+    detect, recover, rejoin = _timings(outcome, recording)
     return {
         "completed": outcome.done is not None and outcome.done.ok,
         "error": outcome.error,
@@ -69,10 +71,19 @@ def _run(out: Path, name: str | None) -> dict:
     }
 
 
-def _timings(outcome: RunOutcome) -> tuple[list[float], list[float], list[float]]:
+def _timings(outcome: RunOutcome, recording: Recording
+             ) -> tuple[list[float], list[float], list[float]]:
     """Pair the injector's actions with the dispatcher's detections (same forklift, same
-    sim instant)."""
-    seen = outcome.done.detections if outcome.done else []
+    sim instant). A dispatcher that was restarted took its detections with it: those come
+    from the recording instead, as the instant the recorder heard the halt or the resume
+    (detection plus recovery, a few milliseconds more)."""
+    seen = list(outcome.done.detections if outcome.done else [])
+    for kind, up in ((Halt, False), (Resume, True)):
+        for r, m in recording.of(kind):
+            if not any(d["vehicle"] == m.vehicle and d["t"] == m.t and d["up"] == up
+                       for d in seen):
+                seen.append({"vehicle": m.vehicle, "t": m.t, "up": up,
+                             "detected_wall": r.log_ns / 1e9})
     detect, recover, rejoin = [], [], []
     for applied in outcome.injected:
         fault = applied.fault

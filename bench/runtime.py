@@ -57,7 +57,7 @@ def run(commits: int = 2000, seed: int = 2026,
                 msg = CommitRequest(requester.next_id(), vehicle,
                                     _trajectory(rng, vehicle, t0), t0)
                 start = time.perf_counter()
-                reply = requester.request(keys.reservation_request, msg).message
+                reply = requester.request(keys.reservation_request(requester.sender), msg).message
                 times_ms.append((time.perf_counter() - start) * 1000)
                 refused += not reply.ok
                 if progress:

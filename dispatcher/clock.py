@@ -37,16 +37,18 @@ RECORDER_WAIT_S = 60.0
 class FastClock:
     def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
                  liveness: Liveness, log, scenario: Scenario | None = None,
-                 recorded: bool = False) -> None:
+                 recorded: bool = False, tick: int = 0, t: float = 0.0) -> None:
+        """`tick` and `t`: where a restarted dispatcher's clock goes on from (the forklifts
+        refuse a tick that is not after the last one they heard)."""
         self.vehicles = vehicles
         self.recorded = recorded
         self.liveness = liveness
         self.log = log
         self.scenario = scenario
-        self.pending = scenario.instants() if scenario else []
+        self.pending = [i for i in scenario.instants() if i > t] if scenario else []
         self.down: frozenset[int] = frozenset()
-        self.tick = 0
-        self.t = 0.0
+        self.tick = tick
+        self.t = t
         self.acked: dict[int, int] = {}
         # (forklift, "broken" / "repaired") heard; guarded by liveness.changed
         self.reports: set[tuple[int, str]] = set()

@@ -17,6 +17,7 @@ import time
 
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.recovery import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
 from fleet.bus import (
     Keys,
@@ -68,6 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--recorded", action="store_true",
                    help="fast clock: hold sim time while no recorder runs, so a recorder "
                    "killed and restarted misses nothing that happened meanwhile")
+    p.add_argument("--recover", action="store_true",
+                   help="a restarted dispatcher: pick the mission up from what the "
+                   "reservation service and the forklifts hold (fill missions, fast clock)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit after publishing the result instead of waiting to be stopped")
 
@@ -145,9 +149,16 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         changes = follow(session, keys, mirror, Requester(session, SENDER))
         liveness.wait_for(vehicles, args.startup_timeout)
         log.info("%d forklifts and the reservation service are up", len(vehicles))
+        executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
+        recovered, tick = None, 0
+        if args.recover:
+            recovered, tick = pick_up(executor, layout, vehicles, options.params)
+            log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
+                     len(recovered.done) + len(recovered.undelivered))
         if args.clock == "fast":
             scenario = load_scenario(args.faults) if args.faults else None
-            clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded)
+            clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded,
+                              tick, recovered.t if recovered else 0.0)
         else:
             clock = RealtimeClock(session, keys, args.speed, vehicles, liveness)
 
@@ -156,8 +167,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
 
         options.progress = progress
         options.events = publish
-        executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
-        record = Engine(mission, options, layout, executor, clock).run()
+        record = Engine(mission, options, layout, executor, clock, recovered).run()
         changes.undeclare()
         as_dict = record_to_dict(record)
         return MissionDone(True, record=as_dict, digest=digest_of(as_dict),

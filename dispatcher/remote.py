@@ -23,7 +23,9 @@ from fleet.protocol import (
     ReleaseRequest,
     Reply,
     ResumeRequest,
+    StatusRequest,
     TaskResult,
+    VehicleStatus,
 )
 from fleet.recovery import Freeze
 from fleet.reservations import Interval, ReservationTable
@@ -84,7 +86,7 @@ class RemoteExecutor:
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
         request = CommitRequest(self.store_requester.next_id(), GOODS, to_wire(intervals))
-        reply = self.store_requester.request(self.keys.reservation_request, request).message
+        reply = self.store_requester.request(self.keys.reservation_request(SENDER), request).message
         if not isinstance(reply, Reply):
             raise ParticipantLost(f"the reservation service answered a {reply.TYPE}")
         if reply.ok:
@@ -99,7 +101,7 @@ class RemoteExecutor:
             request_id = self.store_requester.next_id()
             request: Message = CommitRequest(request_id, owner, to_wire(intervals)) \
                 if intervals else ReleaseRequest(request_id, owner, release_from, cells or [])
-            reply = self.store_requester.request(self.keys.reservation_request, request,
+            reply = self.store_requester.request(self.keys.reservation_request(SENDER), request,
                                                  t).message
             if not isinstance(reply, Reply) or not reply.ok:
                 raise ParticipantLost(f"the reservation service refused a freeze at t={t}: "
@@ -112,6 +114,19 @@ class RemoteExecutor:
         step = step_to_wire(freeze.step) if freeze.step is not None else None
         self._tell(vehicle, ResumeRequest(self.task_requester.next_id(), vehicle, freeze.t, t,
                                           str(freeze.pose), loaded, step), t)
+
+    def status(self, vehicle: int) -> VehicleStatus:
+        """What a forklift holds (a restarted dispatcher asks)."""
+        try:
+            reply = self.task_requester.request(
+                self.keys.vehicle_task(vehicle),
+                StatusRequest(self.task_requester.next_id(), vehicle)).message
+        except RequestFailed as exc:
+            raise ParticipantLost(f"forklift {vehicle} did not say what it holds: "
+                                  f"{exc}") from None
+        if not isinstance(reply, VehicleStatus) or reply.vehicle != vehicle:
+            raise ParticipantLost(f"forklift {vehicle} answered its status with {reply}")
+        return reply
 
     def _tell(self, vehicle: int, message: Message, t: float) -> None:
         try:

@@ -44,8 +44,14 @@ class Keys:
         return f"{self.root}/**"
 
     @property
-    def reservation_request(self) -> str:
-        return f"{self.root}/reservation/request"
+    def reservation_requests(self) -> str:
+        """Where the reservation service answers: every principal's request key."""
+        return f"{self.root}/reservation/request/*"
+
+    def reservation_request(self, sender: str) -> str:
+        """Where `sender` sends its requests: the key names who asks, so access control
+        can let a forklift ask only under its own name (docs/protocol.md)."""
+        return f"{self.root}/reservation/request/{sender}"
 
     @property
     def reservation_change(self) -> str:
@@ -201,10 +207,13 @@ class Requester:
         self.retry_s = retry_s
         self.seq = 0  # of messages sent
         self.ids = 0  # of request ids handed out
+        # Ids must not repeat across a restart of the sender: the store answers a known id
+        # with its old reply (idempotent retries), and an agent a known task id likewise.
+        self.incarnation = f"{time.time_ns():x}"
 
     def next_id(self) -> str:
         self.ids += 1
-        return f"{self.sender}:{self.ids}"
+        return f"{self.sender}:{self.incarnation}:{self.ids}"
 
     def request(self, key: str, message: Message, sim_time: float = 0.0) -> Envelope:
         self.seq += 1

@@ -119,6 +119,9 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                 else ["--connect", endpoint]
             return ["agent", "--run", spec.run, *connect, "--id", str(v), "--layout",
                     spec.mission.layout, *spec.extra.get("agent", [])]
+        if kind == "dispatcher":  # a restart picks the mission up where it was
+            return ["dispatcher", *common, *dispatcher_args(spec), "--recover",
+                    *spec.extra.get("dispatcher", [])]
         raise RunFailed(f"cannot restart a {kind} process")
 
     try:

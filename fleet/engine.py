@@ -40,6 +40,7 @@ from fleet.recovery import (
     Disruption,
     Freeze,
     Motion,
+    Recovered,
     VehicleDown,
     VehicleUp,
     cascade,
@@ -155,7 +156,7 @@ class Engine:
 
     def __init__(self, mission: Mission, options: EngineOptions | None = None,
                  layout: Layout | None = None, executor: Executor | None = None,
-                 pacer: Pacer | None = None) -> None:
+                 pacer: Pacer | None = None, recovered: Recovered | None = None) -> None:
         self.mission = mission
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
@@ -173,6 +174,11 @@ class Engine:
         handling = self.options.params.t_claim if fill else 0.0
         self.vehicles = {i + 1: VehicleState(i + 1, pose, handling, first)
                          for i, pose in enumerate(self.starts)}
+        if recovered is not None:  # a restarted dispatcher: where the forklifts really are
+            for v in self.vehicles.values():
+                v.pose, v.t_free = recovered.poses[v.vehicle], recovered.t_free[v.vehicle]
+                v.next_task = TaskKind.DELIVER if recovered.delivers_next[v.vehicle] == fill \
+                    else TaskKind.RETURN
         for v in self.vehicles.values():
             self.executor.park(v.vehicle, v.pose)
         by_cluster: dict[str, list] = {}
@@ -194,6 +200,9 @@ class Engine:
         # What each forklift's agent was told, in order: ("add", trajectory, loaded),
         # ("cut", t), ("stop", t), ("resume", t): an in-process run drives its states from it.
         self.drive_log: dict[int, list[tuple]] = {v: [] for v in self.vehicles}
+        self.undelivered: tuple[tuple[str, int, float, int], ...] = ()
+        if recovered is not None:
+            self._pick_up(recovered)
         self.dispatcher = Dispatcher(
             grid_for=lambda: self.layout.grid_map(self.present),
             store=self.executor.store, strategy=mission.strategy, params=self.options.params,
@@ -250,11 +259,31 @@ class Engine:
                 (v.next_task is TaskKind.RETURN or work_left)]
 
     # -- the run -------------------------------------------------------------------------------
+    def _pick_up(self, r: Recovered) -> None:
+        """Start from what a restarted dispatcher found: stacks done, legs committed."""
+        for cluster, index, t_done in (*r.done, *((c, i, t + self.options.params.t_unload)
+                                                  for c, i, t, _ in r.undelivered)):
+            stack = next(s for s in self.queue[cluster] if s.index == index)
+            self.queue[cluster].remove(stack)
+            self.present.add(stack.cell)
+            self.record.stacks_done.append((cluster, index, t_done))
+        self.record.end_time = max((d[2] for d in self.record.stacks_done), default=0.0)
+        self.undelivered = r.undelivered
+        for vehicle, leg in r.legs.items():
+            self.driven[vehicle] = [leg]
+        self.now = r.t
+
     def run(self) -> MissionRecord:
         failed: list[int] = []  # vehicles whose plan failed since the last success, in order
         streak = 0
         fill = self.mission.kind is MissionKind.FILL
         p = self.options.params
+        for cluster, index, t_end, vehicle in self.undelivered:  # goods the last dispatcher
+            cell = next(s.cell for s in self.layout.stacks  # did not get to reserve
+                        if s.cluster == cluster and s.index == index)
+            self.executor.reserve_goods([Interval(cell, t_end, math.inf)])
+            self._emit(StackDone(cluster, index, vehicle, t_end + p.t_unload),
+                       t_end + p.t_unload)
         while True:
             active = self.active()
             if not active and not self.down:

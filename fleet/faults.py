@@ -57,7 +57,7 @@ KINDS: dict[FaultKind, KindSpec] = {
         "the agent's planning takes `factor` times longer for `duration` sim seconds",
         ("vehicle", "duration", "factor")),
     FaultKind.KILL_SERVICE: KindSpec(
-        "SIGKILL the reservation service or the recorder (the dispatcher: not yet) and start "
+        "SIGKILL the reservation service, the dispatcher or the recorder and start "
         "a new one `downtime` wall seconds later (default 1)", ("service",), ("downtime",)),
     FaultKind.CLOSE_ZONE: KindSpec(
         "cells unusable (a spill) for `duration` sim seconds: `cells` as in layouts, e.g. "

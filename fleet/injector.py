@@ -168,7 +168,8 @@ class Injector:
         without the service, so the delay cannot be sim time). The tick is acknowledged only
         once its token is gone, so the fast clock holds from the instant it died."""
         self.launcher.kill(name)
-        token = self.keys.recorder_alive if name == "recorder" else self.keys.reservation_alive
+        token = {"recorder": self.keys.recorder_alive, "dispatcher": self.keys.dispatcher_alive,
+                 "reservation": self.keys.reservation_alive}[name]
         if not wait_gone(self.session, token, SERVICE_GONE_S):
             log.warning("the %s's liveliness token outlived it by %g s", name, SERVICE_GONE_S)
         timer = threading.Timer(downtime, self._restart, args=(name,))

@@ -278,6 +278,33 @@ class ResumeRequest(Message):
 
 
 @dataclass(frozen=True)
+class StatusRequest(Message):
+    """A restarted dispatcher asks a forklift what it holds. The agent answers once the work
+    it had in hand is done (its requests are served in order), so nothing is in flight."""
+
+    TYPE: ClassVar[str] = "dispatch.status_request"
+    request_id: str
+    vehicle: int
+
+
+@dataclass(frozen=True)
+class VehicleStatus(Message):
+    """What a forklift holds: its last committed leg (`steps`, from `start`; none: at rest
+    at `pose`), what that leg was for, whether it is down, and the last tick it heard."""
+
+    TYPE: ClassVar[str] = "vehicle.status"
+    vehicle: int
+    pose: str  # where it stands once everything committed is driven
+    loaded: bool  # on its last leg (or at rest)
+    kind: str  # "deliver", "return" or "" (no leg yet)
+    start: str = ""
+    steps: list[WireStep] = field(default_factory=list)
+    down: bool = False
+    tick: int = 0
+    t: float = 0.0
+
+
+@dataclass(frozen=True)
 class Halt(Message):
     """A forklift frozen at t: it holds `cells` from t to infinity. A moving one completes
     its maneuver and stands at `pose` from t_stand; one that is down stands at (x, y, theta)
@@ -374,7 +401,8 @@ TYPES: dict[str, type[Message]] = {
                               ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
                               SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
                               HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
-                              ZoneClosed, VehicleFault, InjectFault)
+                              ZoneClosed, VehicleFault, InjectFault, StatusRequest,
+                              VehicleStatus)
 }
 
 

@@ -128,7 +128,8 @@ def follow(session: zenoh.Session, keys: Keys, mirror: TableMirror,
 def resync(mirror: TableMirror, keys: Keys, requester: Requester) -> None:
     """Catch up: a diff when the copy is synced, else the whole table."""
     since = mirror.revision if mirror.synced else -1
-    reply = requester.request(keys.reservation_request, SnapshotRequest(since)).message
+    reply = requester.request(keys.reservation_request(requester.sender),
+                              SnapshotRequest(since)).message
     if not isinstance(reply, Snapshot):
         raise ProtocolError(f"expected a snapshot, got {reply.TYPE}")
     mirror.load(reply)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
+import re
 import threading
 from pathlib import Path
 
@@ -25,7 +26,15 @@ from fleet.bus import (
     open_session,
     stop_on_signals,
 )
-from fleet.protocol import Change, ProtocolError, Reply, decode, encode
+from fleet.protocol import (
+    Change,
+    CommitRequest,
+    ProtocolError,
+    ReleaseRequest,
+    Reply,
+    decode,
+    encode,
+)
 from reservation.store import ReservationStore, change_time
 
 log = logging.getLogger("fleet.reservation")
@@ -43,10 +52,10 @@ class ReservationService:
 
     def run(self) -> None:
         publisher = Stream(self.session, self.keys.reservation_change, SENDER, reliable=True)
-        queryable = self.session.declare_queryable(self.keys.reservation_request,
+        queryable = self.session.declare_queryable(self.keys.reservation_requests,
                                                    self.inbox.put)
         token = self.session.liveliness().declare_token(self.keys.reservation_alive)
-        log.info("serving %s at revision %d", self.keys.reservation_request,
+        log.info("serving %s at revision %d", self.keys.reservation_requests,
                  self.store.revision)
         try:
             while (query := self.inbox.get()) is not None:
@@ -69,6 +78,14 @@ class ReservationService:
                 query.reply(query.key_expr, self._encode(
                     Reply("", False, self.store.revision, reason=f"malformed request: {exc}")))
                 return []
+            refusal = not_theirs(str(query.key_expr), envelope.message)
+            if refusal:
+                self.rejected += 1
+                log.warning("refused a request on %s: %s", query.key_expr, refusal)
+                query.reply(query.key_expr, self._encode(
+                    Reply(getattr(envelope.message, "request_id", ""), False,
+                          self.store.revision, reason=refusal)))
+                return []
             outcome = self.store.handle(envelope.message)
             query.reply(query.key_expr, self._encode(outcome.reply))
             return outcome.published
@@ -83,6 +100,17 @@ class ReservationService:
         # From a signal handler in the main thread, which may be inside inbox.get holding the
         # queue's lock: put from another thread, or it could wait on itself.
         threading.Thread(target=self.inbox.put, args=(None,), daemon=True).start()
+
+
+def not_theirs(key: str, message) -> str:
+    """Why the principal the key names may not make this request ("" if it may): a forklift
+    commits and releases only its own reservations (access control keeps it to its key)."""
+    who = key.rsplit("/", 1)[-1]
+    match = re.fullmatch(r"vehicle-(\d+)", who)
+    if match and isinstance(message, CommitRequest | ReleaseRequest) and \
+            message.vehicle != int(match.group(1)):
+        return f"{who} may change only its own reservations, not vehicle {message.vehicle}'s"
+    return ""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -45,10 +45,12 @@ def journal_overlaps(path) -> list[str]:
     held: dict[int, list[tuple[tuple[int, int], float, float]]] = defaultdict(list)
     for change in Journal(path).replay().changes:
         mine = held[change.vehicle]
-        if change.release_from is not None:
-            cut = change.release_from
-            held[change.vehicle] = mine = [(c, t0, min(t1, cut)) for c, t0, t1 in mine
-                                           if t0 < cut]
+        if change.release_from is not None:  # on the listed cells only, if any are
+            cut, only = change.release_from, change.release_cells
+            only = None if only is None else {tuple(c) for c in only}
+            held[change.vehicle] = mine = [
+                (c, t0, min(t1, cut)) if only is None or c in only else (c, t0, t1)
+                for c, t0, t1 in mine if t0 < cut or (only is not None and c not in only)]
         mine += [((c, r), t0, t1) for c, r, t0, t1 in change.intervals]
     return overlaps([(v, cell, t0, t1) for v, spans in held.items() for cell, t0, t1 in spans])
 

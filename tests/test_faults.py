@@ -144,6 +144,6 @@ def test_fleet_faults_list_show_and_check(capsys):
     assert main(["faults", "show", "cut_link"]) == 0
     assert 'kind = "cut_link"' in capsys.readouterr().out
     assert main(["faults", "check", "mixed"]) == 0
-    assert "8 faults, fine for paper with 4 forklifts" in capsys.readouterr().out
+    assert "9 faults, fine for paper with 4 forklifts" in capsys.readouterr().out
     assert main(["faults", "check", "mixed", "--vehicles", "2"]) == 2
     assert "the run has forklifts 1 to 2" in capsys.readouterr().err

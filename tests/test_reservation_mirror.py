@@ -60,7 +60,7 @@ def test_a_mirror_follows_the_service_over_zenoh(service):
     reader = open_session(BusConfig("peer", (service.endpoint,), ()))
     try:
         put = Requester(writer, "writer")
-        key = service.keys.reservation_request
+        key = service.keys.reservation_request("test")
         for k in range(10):
             assert put.request(key, CommitRequest(put.next_id(), k % 3 + 1,
                                                   [(k, 0, 0.0, 5.0 + k)])).message.ok
@@ -88,7 +88,7 @@ def test_fleet_table_shows_the_services_table(service, capsys):
     try:
         put = Requester(writer, "writer")
         for k in range(3):
-            assert put.request(service.keys.reservation_request, CommitRequest(
+            assert put.request(service.keys.reservation_request("test"), CommitRequest(
                 put.next_id(), 7, [(k, 2, 0.0, 9.0)])).message.ok
     finally:
         writer.close()

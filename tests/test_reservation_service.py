@@ -31,9 +31,9 @@ def test_commit_conflict_and_published_changes(service):
                                          lambda s: (changes.append(decode(
                                              s.payload.to_bytes()).message), got.set()))
         req = Requester(session, "test")
-        ok = req.request(service.keys.reservation_request, commit("a", 1, [(0, 0)])).message
+        ok = req.request(service.keys.reservation_request("test"), commit("a", 1, [(0, 0)])).message
         assert ok == Reply("a", True, 1)
-        no = req.request(service.keys.reservation_request,
+        no = req.request(service.keys.reservation_request("test"),
                          commit("b", 2, [(0, 0)], 5.0, 6.0)).message
         assert no.ok is False and no.conflict_vehicle == 1 and no.conflict_cell == [0, 0]
         assert got.wait(10)
@@ -51,7 +51,7 @@ def test_two_agents_commit_the_same_cells_at_once_one_wins(service):
         def agent(k):
             req = Requester(sessions[k], f"vehicle/{k + 1}")
             barrier.wait()
-            return req.request(service.keys.reservation_request,
+            return req.request(service.keys.reservation_request("test"),
                                commit(f"v{k}", k + 1, [(3, 3), (3, 4)])).message
 
         with ThreadPoolExecutor(2) as pool:
@@ -69,7 +69,7 @@ def test_restart_after_a_kill_serves_the_same_table(service):
     session = client(service)
     try:
         req = Requester(session, "test")
-        key = service.keys.reservation_request
+        key = service.keys.reservation_request("test")
         for k in range(20):
             assert req.request(key, commit(f"r{k}", k % 4 + 1, [(k, 1)], t1=float("inf"))
                                ).message.ok
@@ -96,7 +96,7 @@ def test_restart_after_a_kill_serves_the_same_table(service):
 def test_garbage_is_rejected_and_the_service_lives_on(service):
     session = client(service)
     try:
-        key = service.keys.reservation_request
+        key = service.keys.reservation_request("test")
         for payload in [b"", b"\xc1garbage", encode(VehicleState(1, "0,0,E", 0, "", False),
                                                      "x", 1, 0.0)[:-2],
                         encode(commit("z", 1, [(0, 0)]), "x", 1, 0.0).replace(b"\x01", b"\x07",
@@ -110,3 +110,30 @@ def test_garbage_is_rejected_and_the_service_lives_on(service):
     finally:
         session.close()
     assert "rejected a request" in service.log.read_text()
+
+
+def test_a_forklift_changes_only_its_own_reservations(service):
+    """The request key names who asks: under vehicle-1's key, a commit or release for
+    vehicle 2 is refused (access control keeps each forklift to its own key); the
+    dispatcher's key may commit for anyone (goods, zones, freezes)."""
+    from fleet.protocol import ReleaseRequest
+
+    session = client(service)
+    try:
+        req = Requester(session, "vehicle-1")
+        keys = service.keys
+        mine = req.request(keys.reservation_request("vehicle-1"),
+                           commit("v1a", 1, [(3, 3)])).message
+        theirs = req.request(keys.reservation_request("vehicle-1"),
+                             commit("v1b", 2, [(4, 4)])).message
+        release = req.request(keys.reservation_request("vehicle-1"),
+                              ReleaseRequest("v1c", 2, 0.0)).message
+        assert mine.ok and not theirs.ok and not release.ok
+        assert "vehicle-1 may change only its own reservations" in theirs.reason
+        assert theirs.revision == release.revision == mine.revision  # nothing applied
+        anyone = Requester(session, "dispatcher")
+        goods = anyone.request(keys.reservation_request("dispatcher"),
+                               commit("d1", 0, [(5, 5)])).message
+        assert goods.ok and goods.revision == mine.revision + 1
+    finally:
+        session.close()

@@ -112,7 +112,8 @@ class Intruder:
             for payload in hostile_payloads(key):
                 self.session.put(key, payload)
                 self.sent[key].append(payload)
-        for key in (keys.reservation_request, *(keys.vehicle_task(v) for v in self.vehicle_ids)):
+        for key in (keys.reservation_request("test"),
+                    *(keys.vehicle_task(v) for v in self.vehicle_ids)):
             for payload in hostile_payloads(key):
                 self.sent[key] += list(self.session.get(key, payload=payload, timeout=30))
         # Well-formed but absurd, from someone else, where only the recorder listens.
@@ -140,7 +141,7 @@ class Intruder:
         keys = self.keys
         agents = [f"agent-{v}" for v in self.vehicle_ids]
         listeners = {keys.reservation_change: [*agents, "dispatcher"], keys.clock: agents,
-                     keys.reservation_request: ["reservation"]}
+                     keys.reservation_request("test"): ["reservation"]}
         for v in self.vehicle_ids:
             listeners[keys.vehicle_task(v)] = [f"agent-{v}"]
             if clock == "fast":  # only the fast clock waits for acknowledgements
@@ -154,7 +155,7 @@ class Intruder:
                 assert len(rejected) == 3, (name, key, logs[name][-2000:])
         for key in (keys.dispatch_progress, keys.dispatch_done):
             assert len([r for r in self.rejections if f"on {key}:" in r]) == 3
-        for reply in self.sent[keys.reservation_request]:
+        for reply in self.sent[keys.reservation_request("test")]:
             answer = decode(reply.ok.payload.to_bytes()).message
             assert isinstance(answer, Reply) and not answer.ok
             assert answer.reason.startswith("malformed request")

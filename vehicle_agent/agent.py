@@ -38,14 +38,16 @@ from fleet.protocol import (
     ProtocolError,
     Reply,
     ResumeRequest,
+    StatusRequest,
     TaskRequest,
     TaskResult,
     VehicleFault,
+    VehicleStatus,
     decode,
     encode,
 )
 from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire import result_to_wire, step_from_wire, task_from_wire
+from fleet.wire import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
 from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
@@ -137,6 +139,7 @@ class Agent:
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
         self.fault_pub: Stream | None = None
+        self.last_kind = ""  # what the last committed leg was for (a restarted dispatcher asks)
 
     # -- the process ---------------------------------------------------------------------------
     def run(self, service_timeout_s: float = 60.0) -> None:
@@ -208,14 +211,18 @@ class Agent:
         try:
             try:
                 message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       (TaskRequest, HaltRequest, ResumeRequest),
+                                       (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
                                        str(query.key_expr))
             except ProtocolError as exc:
                 query.reply_err(f"rejected: {exc}".encode())
                 return
             if not isinstance(message, TaskRequest):
-                reply = self._halt(message) if isinstance(message, HaltRequest) else \
-                    self._resume(message)
+                if isinstance(message, HaltRequest):
+                    reply = self._halt(message)
+                elif isinstance(message, ResumeRequest):
+                    reply = self._resume(message)
+                else:
+                    reply = self._status()
                 query.reply(query.key_expr, self._encode(reply, self.clock.now()))
                 return
             answer = self.answers.get(message.task_id)
@@ -255,6 +262,7 @@ class Agent:
             if reply.ok:
                 with self.drive_lock:
                     self.drive.add(result, task.loaded)
+                self.last_kind = message.kind
                 return result_to_wire(message.task_id, self.vehicle, result, reply.revision,
                                       rejections)
             rejections.append(reply.reason)
@@ -283,6 +291,7 @@ class Agent:
                          reason=f"halt for vehicle {message.vehicle} sent to {self.vehicle}")
         with self.drive_lock:
             self.drive.cut(message.t)
+        self.last_kind = ""  # what was cut did not arrive
         log.info("halted at t=%.2f: standing at %s after the maneuver in progress", message.t,
                  self.drive.pose)
         return Reply(message.request_id, True, self.mirror.revision)
@@ -306,9 +315,21 @@ class Agent:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
             self.drive.skip_to(message.t_resume, period)
         self.down = False
+        self.last_kind = ""
         log.info("resumed at t=%.2f from %s (table at revision %d)", message.t_resume,
                  step.start if step else pose, self.mirror.revision)
         return Reply(message.request_id, True, self.mirror.revision)
+
+    def _status(self) -> VehicleStatus:
+        """What we hold, for a restarted dispatcher (answered in turn: nothing in flight)."""
+        tick = self.clock.tick
+        with self.drive_lock:
+            leg = self.drive.legs[-1] if self.drive.legs else None
+            return VehicleStatus(
+                self.vehicle, str(self.drive.pose), leg.loaded if leg else self.drive.loaded,
+                self.last_kind if leg else "", str(leg.trajectory.start) if leg else "",
+                [step_to_wire(s) for s in leg.trajectory.steps] if leg else [], self.down,
+                tick.tick if tick else 0, tick.t if tick else 0.0)
 
     def _on_inject(self, query: zenoh.Query) -> None:
         """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
@@ -349,7 +370,7 @@ class Agent:
         request id, which the store applies once)."""
         request = CommitRequest(request_id, self.vehicle, intervals, release_from)
         try:
-            reply = self.requester.request(self.keys.reservation_request, request,
+            reply = self.requester.request(self.keys.reservation_request(self.sender), request,
                                            self.clock.now()).message
         except RequestFailed as exc:
             raise RuntimeError(f"commit {request_id}: {exc}") from None

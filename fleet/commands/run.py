@@ -166,8 +166,6 @@ def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int,
                         "a claim from a stack is not modelled yet)")
     if clock != "fast":
         raise UserError("--faults: fault scenarios run on the fast clock for now")
-    if any(f.service == "dispatcher" for f in scenario.faults):
-        raise UserError(f"--faults {source}: killing the dispatcher is not supported yet")
     return scenario
 
 

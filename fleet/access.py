@@ -1,0 +1,182 @@
+"""Who may do what on the bus: user/password authentication and zenoh access control on the
+router (zenoh 1.10: `transport/auth/usrpwd` and `access_control`).
+
+Every process is a client of one router, and the router checks every message a client sends
+it (flow "ingress") against the rules of the client's user name; a message that is not
+allowed is dropped there, silently: the sender's put returns as usual, its get ends with no
+reply, as if nobody served the key. A reply is checked on its own key, so a server answers on the
+concrete key it may serve (a reply on a wildcard query's key expression is dropped). A
+session without a user in the router's dictionary, or with the wrong password, is refused
+during the handshake, so it never connects (zenoh.open retries until its connect timeout).
+Only what goes through the router is checked: a session's own queryables and subscribers
+still get what that session itself sends.
+
+The principals, and why each gets what (`router_acl`; keys below fleet/<run>/):
+- `vehicle-N`, a forklift's agent: publishes only its own streams (vehicle/N/**: state,
+  fault) and clock acks (clock/ack/N), so it cannot pose as another forklift; its token is
+  vehicle/N/alive; it serves its own task and inject keys (declares the queryable and
+  replies there, so it can answer no one else's task); it asks the reservation service only
+  on reservation/request/vehicle-N, the key that names it, so the service can tell whose
+  commit it is; it reads the clock, the table's changes and the service's token.
+- `dispatcher`: assigns tasks (get on vehicle/*/task), asks the service under its own name,
+  publishes the mission (dispatch/**) and the clock, serves dispatch/mission to a late
+  recorder, reads acks, states, faults and table changes, and everyone's liveliness.
+- `reservation`: serves reservation/request/** (every principal's request key), publishes
+  reservation/change, and its token.
+- `recorder`: reads everything (a subscriber on the whole run, a get of dispatch/mission);
+  the one thing it writes is its own status (published and served on recorder/status) and
+  its token.
+- `operator`, `fleet run` with its fault injector: injects faults (get on vehicle/*/inject),
+  acks the clock as the injector, reads everything, liveliness included.
+
+What the router sends to a client (flow "egress") is allowed for everyone on the whole run:
+a client only gets what it subscribed to or asked for, which ingress already decides. It
+must be allowed: a publisher sends nothing until the router has told it of a matching
+subscriber, and a liveliness subscriber hears of tokens the same way.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+DISPATCHER = "dispatcher"
+RESERVATION = "reservation"
+RECORDER = "recorder"
+OPERATOR = "operator"
+SERVICES = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
+
+# zenoh's names for the messages a rule can govern (`access_control/rules/*/messages`).
+PUBLISH = ("put",)
+SUBSCRIBE = ("declare_subscriber",)
+ASK = ("query",)
+SERVE = ("declare_queryable", "reply")
+TOKEN = ("liveliness_token",)
+WATCH = ("declare_liveliness_subscriber", "liveliness_query")
+MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+            "liveliness_token", "declare_liveliness_subscriber", "liveliness_query")
+
+
+def vehicle_user(vehicle: int) -> str:
+    """A forklift agent's user name: also its sender name, which ends its request key."""
+    return f"vehicle-{vehicle}"
+
+
+def principals(vehicles: int) -> list[str]:
+    return [*SERVICES, *(vehicle_user(v) for v in range(1, vehicles + 1))]
+
+
+@dataclass(frozen=True)
+class Login:
+    user: str
+    password: str
+
+
+@dataclass(frozen=True)
+class Credentials:
+    """One run's logins: per principal (the user name, see `principals`) a random password."""
+
+    run: str
+    logins: dict[str, Login]
+
+    def __getitem__(self, principal: str) -> Login:
+        return self.logins[principal]
+
+    def vehicle(self, vehicle: int) -> Login:
+        return self.logins[vehicle_user(vehicle)]
+
+
+def generate_credentials(run: str, vehicles: int) -> Credentials:
+    # token_urlsafe: letters, digits, - and _; never the ':' that ends a user in the dictionary
+    return Credentials(run, {name: Login(name, secrets.token_urlsafe(24))
+                             for name in principals(vehicles)})
+
+
+def write_dictionary(credentials: Credentials, path: str | Path) -> Path:
+    """The router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`): one
+    `user:password` line each, readable by its owner only."""
+    path = Path(path)
+    text = "".join(f"{login.user}:{login.password}\n" for login in credentials.logins.values())
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.chmod(path, 0o600)  # an existing file keeps its mode through O_CREAT
+    return path
+
+
+def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], list[str]]]]:
+    """Per principal, what it may send the router: (messages, key expressions) pairs."""
+    grants = {
+        DISPATCHER: [
+            (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
+            (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
+            (SERVE, [f"{root}/dispatch/mission"]),
+            (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/vehicle/*/state",
+                         f"{root}/vehicle/*/fault", f"{root}/reservation/change"]),
+            (TOKEN, [f"{root}/dispatch/alive"]),
+            (WATCH, [f"{root}/**"])],
+        RESERVATION: [
+            (SERVE, [f"{root}/reservation/request/**"]),
+            (PUBLISH, [f"{root}/reservation/change"]),
+            (TOKEN, [f"{root}/reservation/alive"])],
+        RECORDER: [
+            (SUBSCRIBE, [f"{root}/**"]),
+            (ASK, [f"{root}/dispatch/mission"]),
+            (PUBLISH + SERVE, [f"{root}/recorder/status"]),
+            (TOKEN, [f"{root}/recorder/alive"])],
+        OPERATOR: [
+            (ASK, [f"{root}/vehicle/*/inject"]),
+            (PUBLISH, [f"{root}/clock/ack/injector"]),
+            (SUBSCRIBE + WATCH, [f"{root}/**"])],
+    }
+    for v in range(1, vehicles + 1):
+        grants[vehicle_user(v)] = [
+            (PUBLISH, [f"{root}/vehicle/{v}/**", f"{root}/clock/ack/{v}"]),
+            (TOKEN, [f"{root}/vehicle/{v}/alive"]),
+            (SERVE, [f"{root}/vehicle/{v}/task", f"{root}/vehicle/{v}/inject"]),
+            (ASK, [f"{root}/reservation/request/{vehicle_user(v)}"]),
+            (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change"]),
+            (WATCH, [f"{root}/reservation/alive"])]
+    return grants
+
+
+def router_acl(keys_root: str, vehicles: int) -> dict:
+    """The router's `access_control` section for one run (keys_root: `fleet/<run>`): deny
+    by default; each principal's user name may send what `_grants` lists, and receive
+    anything of the run."""
+    rules = [{"id": "egress", "messages": list(MESSAGES), "flows": ["egress"],
+              "permission": "allow", "key_exprs": [f"{keys_root}/**"]}]
+    subjects = []
+    policies = []
+    for principal, grants in _grants(keys_root, vehicles).items():
+        ids = []
+        for i, (messages, key_exprs) in enumerate(grants):
+            ids.append(f"{principal}/{i}")
+            rules.append({"id": ids[-1], "messages": list(messages), "flows": ["ingress"],
+                          "permission": "allow", "key_exprs": key_exprs})
+        subjects.append({"id": principal, "usernames": [principal]})
+        policies.append({"id": principal, "rules": [*ids, "egress"], "subjects": [principal]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}
+
+
+def configure_router(config: zenoh.Config, acl: dict, dictionary_file: str | Path
+                     ) -> zenoh.Config:
+    """Make a router's config authenticate every session against the dictionary and enforce
+    `acl` (from `router_acl`) on them."""
+    config.insert_json5("access_control", json.dumps(acl))
+    config.insert_json5("transport/auth/usrpwd/dictionary_file",
+                        json.dumps(str(dictionary_file)))
+    return config
+
+
+def configure_client(config: zenoh.Config, user: str, password: str) -> zenoh.Config:
+    """Make a session log in to its router as `user`."""
+    config.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+    config.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+    return config
