@@ -17,9 +17,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import zenoh
 
+from fleet.access import configure_client, configure_router
+from fleet.errors import UserError
 from fleet.protocol import Envelope, Message, ProtocolError, decode, encode
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
@@ -151,8 +154,12 @@ class BusConfig:
     mode: str = "client"  # "client", "peer" or "router"
     connect: tuple[str, ...] = (DEFAULT_ROUTER,)
     listen: tuple[str, ...] = ()
-    lease_ms: int = 1000  # a lost peer is noticed after about 3/4 of this
+    lease_ms: int = 1000  # a lost peer is noticed after this (measured: docs/reliability.md)
     connect_timeout_ms: int = -1  # -1: wait for the router however long it takes to start
+    user: str = ""  # log in to the router as this principal (fleet/access.py)
+    password: str = ""
+    acl: dict | None = None  # a router: enforce this access control ...
+    users_file: str = ""  # ... and authenticate sessions against this dictionary
 
     def zenoh_config(self) -> zenoh.Config:
         config = zenoh.Config()
@@ -162,6 +169,10 @@ class BusConfig:
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
         config.insert_json5("transport/link/tx/lease", str(self.lease_ms))
+        if self.user:
+            configure_client(config, self.user, self.password)
+        if self.acl is not None:
+            configure_router(config, self.acl, self.users_file)
         return config
 
 
@@ -297,11 +308,32 @@ def add_bus_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"zenoh endpoint to connect to (default {DEFAULT_ROUTER}; repeatable)")
     p.add_argument("--listen", action="append", default=[],
                    help="zenoh endpoint to listen on (repeatable)")
+    add_login_arguments(p)
+
+
+def add_login_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--user", default="", help="log in to a router that runs access control "
+                   "as this principal (fleet run --secure makes one per process)")
+    p.add_argument("--password-file", type=Path,
+                   help="the password of --user, in a file (never on the command line)")
+
+
+def login_of(args: argparse.Namespace) -> tuple[str, str]:
+    """The (user, password) the flags name; a user without its password is refused."""
+    if not args.user:
+        return "", ""
+    if args.password_file is None:
+        raise UserError(f"--user {args.user} needs --password-file")
+    try:
+        return args.user, args.password_file.read_text().strip()
+    except OSError as exc:
+        raise UserError(f"--password-file {args.password_file}: {exc.strerror}") from None
 
 
 def bus_config(args: argparse.Namespace) -> BusConfig:
     connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
-    return BusConfig(args.mode, connect, tuple(args.listen))
+    user, password = login_of(args)
+    return BusConfig(args.mode, connect, tuple(args.listen), user=user, password=password)
 
 
 def setup_logging() -> None:

@@ -5,7 +5,9 @@ result, and stops every child when the mission ends, on Ctrl-C, or as soon as an
 
 from __future__ import annotations
 
+import json
 import logging
+import os
 import queue
 import threading
 import time
@@ -15,6 +17,16 @@ from pathlib import Path
 
 import zenoh
 
+from fleet.access import (
+    DISPATCHER,
+    OPERATOR,
+    RECORDER,
+    RESERVATION,
+    generate_credentials,
+    router_acl,
+    vehicle_user,
+    write_dictionary,
+)
 from fleet.bus import BusConfig, Keys, free_port, open_session, received, wait_alive
 from fleet.faults import FaultKind, Scenario
 from fleet.injector import Applied, Injector
@@ -45,6 +57,7 @@ class RunSpec:
     record: bool = True  # start the recorder (benchmarks measure the run without it)
     faults: Scenario | None = None  # applied by an injector in this process
     faults_source: str = ""  # the scenario's name or file, for the dispatcher
+    secure: bool = False  # access control and a login per process (fleet/access.py)
 
     @property
     def recording(self) -> Path:
@@ -80,6 +93,31 @@ def dispatcher_args(spec: RunSpec) -> list[str]:
     return args
 
 
+class Secrets:
+    """A secure run's logins (fleet/access.py), kept in the run directory readable by its
+    owner only: the router's dictionary and access control, one password file each."""
+
+    def __init__(self, folder: Path, run: str, root: str, vehicles: int) -> None:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        self.folder = folder
+        credentials = generate_credentials(run, vehicles)
+        self.logins = credentials.logins
+        self.users = write_dictionary(credentials, folder / "users.txt")
+        self.acl = folder / "acl.json"
+        self.acl.write_text(json.dumps(router_acl(root, vehicles), indent=1))
+        for name, login in self.logins.items():
+            path = folder / f"{name}.password"
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write(login.password)
+
+    def args(self, principal: str) -> list[str]:
+        return ["--user", principal, "--password-file", str(self.folder / f"{principal}.password")]
+
+    def router_args(self) -> list[str]:
+        return ["--acl", str(self.acl), "--users", str(self.users)]
+
+
 def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None = None,
                   on_ready: Callable[[zenoh.Session, Keys, Launcher], None] | None = None
                   ) -> RunOutcome:
@@ -103,33 +141,42 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
     common = ["--run", spec.run, "--connect", endpoint]
     live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
+    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles) \
+        if spec.secure else None
 
-    def args_of(kind: str) -> list[str]:
-        """How to start each kind of process (again, after a fault killed it)."""
+    def login(principal: str) -> list[str]:
+        return secrets.args(principal) if secrets else []
+
+    def args_of(kind: str, again: bool = False) -> list[str]:
+        """How to start each kind of process (`again`: after a fault killed it)."""
         if kind == "recorder":
             out = next_segment(spec.run_dir)  # run.mcap, then run-2.mcap after a restart
-            return ["recorder", *common, "--out", str(out), *live,
+            return ["recorder", *common, *login(RECORDER), "--out", str(out), *live,
                     *spec.extra.get("recorder", [])]
         if kind == "reservation":
-            return ["reservation", *common, "--journal", str(journal),
+            return ["reservation", *common, *login(RESERVATION), "--journal", str(journal),
                     *spec.extra.get("reservation", [])]
         if kind.startswith("agent-"):
             v = int(kind.split("-")[1])
             connect = ["--connect", f"tcp/127.0.0.1:{proxies[v].port}"] if v in proxies \
                 else ["--connect", endpoint]
-            return ["agent", "--run", spec.run, *connect, "--id", str(v), "--layout",
-                    spec.mission.layout, *spec.extra.get("agent", [])]
+            return ["agent", "--run", spec.run, *connect, *login(vehicle_user(v)), "--id",
+                    str(v), "--layout", spec.mission.layout, *spec.extra.get("agent", [])]
         if kind == "dispatcher":  # a restart picks the mission up where it was
-            return ["dispatcher", *common, *dispatcher_args(spec), "--recover",
-                    *spec.extra.get("dispatcher", [])]
+            return ["dispatcher", *common, *login(DISPATCHER), *dispatcher_args(spec),
+                    *(["--recover"] if again else []), *spec.extra.get("dispatcher", [])]
         raise RunFailed(f"cannot restart a {kind} process")
 
     try:
-        launcher.start("router", ["router", "--listen", endpoint])
+        launcher.start("router", ["router", "--listen", endpoint,
+                                  *(secrets.router_args() if secrets else [])])
         for proxy in proxies.values():
             proxy.start()
+        operator = secrets.logins[OPERATOR] if secrets else None
         session = open_session(BusConfig("client", (endpoint,),
-                                         connect_timeout_ms=ROUTER_TIMEOUT_MS))
+                                         connect_timeout_ms=ROUTER_TIMEOUT_MS,
+                                         user=operator.user if operator else "",
+                                         password=operator.password if operator else ""))
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         recorded = threading.Event()  # the recorder holds the mission's result
@@ -142,9 +189,9 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         for v in range(1, spec.vehicles + 1):
             launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
         if spec.faults is not None:
-            injector = Injector(spec.faults, session, keys, launcher, args_of, proxies)
-        launcher.start("dispatcher", ["dispatcher", *common, *dispatcher_args(spec),
-                                      *spec.extra.get("dispatcher", [])])
+            injector = Injector(spec.faults, session, keys, launcher,
+                                lambda kind: args_of(kind, again=True), proxies)
+        launcher.start("dispatcher", args_of("dispatcher"))
         if on_ready is not None:
             on_ready(session, keys, launcher)
         done = _follow(inbox, launcher, on_progress)

@@ -5,12 +5,15 @@ compose deployment runs it as the `router` service."""
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import threading
+from pathlib import Path
 
 import zenoh
 
 from fleet.bus import BusConfig, open_session, stop_on_signals
+from fleet.errors import UserError
 
 log = logging.getLogger("fleet.router")
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
@@ -22,6 +25,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"endpoint to listen on (default {DEFAULT_LISTEN}; repeatable)")
     p.add_argument("--connect", action="append", default=[],
                    help="another router to connect to (repeatable)")
+    p.add_argument("--acl", type=Path, help="enforce this access control (a JSON file: the "
+                   "access_control section fleet/access.py writes); needs --users")
+    p.add_argument("--users", type=Path, help="authenticate every session against this "
+                   "user:password dictionary")
 
 
 class Clients:
@@ -52,7 +59,17 @@ def serve(args: argparse.Namespace) -> int:
     listen = tuple(args.listen) or (DEFAULT_LISTEN,)
     stop = threading.Event()
     stop_on_signals(stop.set)
-    session = open_session(BusConfig("router", tuple(args.connect), listen))
+    acl = None
+    if args.acl is not None or args.users is not None:
+        if args.acl is None or args.users is None:
+            raise UserError("--acl and --users go together: access control names the users "
+                            "the dictionary authenticates")
+        try:
+            acl = json.loads(args.acl.read_text())
+        except (OSError, ValueError) as exc:
+            raise UserError(f"--acl {args.acl}: {exc}") from None
+    session = open_session(BusConfig("router", tuple(args.connect), listen, acl=acl,
+                                     users_file=str(args.users or "")))
     try:
         clients = Clients(session)
         log.info("routing on %s", ", ".join(listen))

@@ -35,7 +35,10 @@ def reference_digest(scenario: str | None) -> str:
 @pytest.mark.parametrize("name", builtin_scenarios())
 def test_a_fault_scenario_with_processes_completes_safely_as_the_reference(name, tmp_path):
     scenario = load_scenario(name)
-    outcome = run_processes(RunSpec(MISSION, 4, tmp_path, faults=scenario, faults_source=name))
+    # Every kind at once runs behind access control too: restarted processes log in again,
+    # the injector as the operator.
+    outcome = run_processes(RunSpec(MISSION, 4, tmp_path, faults=scenario, faults_source=name,
+                                    secure=name == "mixed"))
     assert outcome.error == "" and outcome.done.ok
     # Faults that change no sim time (a slow planner, a service restarted) leave the record
     # of the fault-free run; the others that of the in-process run of the same scenario. A

@@ -45,6 +45,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--foxglove", type=int, metavar="PORT", nargs="?", const=8765,
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
+    p.add_argument("--secure", action="store_true",
+                   help="the router runs zenoh access control and every process logs in with "
+                   "credentials made for this run (kept in OUT/secrets): a forklift may "
+                   "publish only as itself and commit only its own reservations, only the "
+                   "dispatcher assigns tasks, the recorder only reads (docs/faults.md)")
     p.add_argument("--faults", metavar="SCENARIO",
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
                    "faults list) or a TOML file (docs/faults.md)")
@@ -112,9 +117,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--speed must be positive, not {args.speed}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
-    if args.inprocess and (args.clock != "fast" or args.foxglove is not None):
+    if args.inprocess and (args.clock != "fast" or args.foxglove is not None or args.secure):
         raise UserError("--inprocess runs the fast clock without processes: it takes neither "
-                        "--clock realtime nor --foxglove")
+                        "--clock realtime nor --foxglove nor --secure")
     scenario = fault_scenario(args.faults, mission, layout, n, args.clock) \
         if args.faults else None
     out = args.out or Path("runs") / (f"{time.strftime('%Y%m%d-%H%M%S')}-{layout.name}-"
@@ -192,7 +197,7 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
               file=sys.stderr)
     spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
-                   faults_source=args.faults or "")
+                   faults_source=args.faults or "", secure=args.secure)
     outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
     if outcome.done is None or not outcome.done.ok:
         print(f"fleet run: the mission failed: {outcome.error}", file=sys.stderr)
