@@ -97,16 +97,21 @@ def generate_credentials(run: str, vehicles: int) -> Credentials:
                              for name in principals(vehicles)})
 
 
-def write_dictionary(credentials: Credentials, path: str | Path) -> Path:
-    """The router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`): one
-    `user:password` line each, readable by its owner only."""
+def write_private(path: str | Path, text: str) -> Path:
+    """Write a secret: readable by its owner only, from the first byte on."""
     path = Path(path)
-    text = "".join(f"{login.user}:{login.password}\n" for login in credentials.logins.values())
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w") as f:
         f.write(text)
     os.chmod(path, 0o600)  # an existing file keeps its mode through O_CREAT
     return path
+
+
+def write_dictionary(credentials: Credentials, path: str | Path) -> Path:
+    """The router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`): one
+    `user:password` line each, readable by its owner only."""
+    return write_private(path, "".join(f"{login.user}:{login.password}\n"
+                                       for login in credentials.logins.values()))
 
 
 def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], list[str]]]]:

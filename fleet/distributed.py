@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import queue
 import threading
 import time
@@ -26,6 +25,7 @@ from fleet.access import (
     router_acl,
     vehicle_user,
     write_dictionary,
+    write_private,
 )
 from fleet.bus import BusConfig, Keys, free_port, open_session, received, wait_alive
 from fleet.faults import FaultKind, Scenario
@@ -106,10 +106,7 @@ class Secrets:
         self.acl = folder / "acl.json"
         self.acl.write_text(json.dumps(router_acl(root, vehicles), indent=1))
         for name, login in self.logins.items():
-            path = folder / f"{name}.password"
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-            with os.fdopen(fd, "w") as f:
-                f.write(login.password)
+            write_private(folder / f"{name}.password", login.password)
 
     def args(self, principal: str) -> list[str]:
         return ["--user", principal, "--password-file", str(self.folder / f"{principal}.password")]

@@ -160,14 +160,14 @@ def test_bench_recorder_json(capsys):
 
 
 def test_bench_faults_json(capsys):
-    assert main(["bench", "faults", "--scenarios", "stall_vehicle", "--json"]) == 0
+    assert main(["bench", "faults", "--scenarios", "vehicle_breakdown", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert set(result) == {"fault_free", "stall_vehicle", "machine"}
-    row, base = result["stall_vehicle"], result["fault_free"]
+    assert set(result) == {"fault_free", "vehicle_breakdown", "machine"}
+    row, base = result["vehicle_breakdown"], result["fault_free"]
     assert row["completed"] and row["verdicts_pass"] and base["verdicts_pass"]
     assert (row["overlaps"], row["outside_reservation"], row["stacks_lost"],
             row["stacks_duplicated"]) == (0, 0, 0, 0)
-    # the stall was seen (its lease ran out), recovered from, and the forklift came back
+    # the breakdown was reported and seen, recovered from, and the repaired forklift is back
     assert row["detect_s"] > 0 and row["recover_s"] > 0 and row["rejoin_s"] >= 0
     assert row["extra_s"] == pytest.approx(row["end_time_s"] - base["end_time_s"])
     assert main(["bench", "faults", "--scenarios", "nope"]) == 2
