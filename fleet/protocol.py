@@ -13,9 +13,12 @@ import math
 import types
 import typing
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import msgpack
+
+from fleet.maneuvers import Manner
+from fleet.trajectory import Pose
 
 SCHEMA_VERSION = 1
 MAX_PAYLOAD = 16 * 1024 * 1024  # no legitimate message comes near this
@@ -24,6 +27,21 @@ MAX_PAYLOAD = 16 * 1024 * 1024  # no legitimate message comes near this
 class ProtocolError(ValueError):
     """A payload that is not a valid message; the message says why."""
 
+
+def _maneuver_label(text: str) -> None:
+    Manner.from_label(text)
+
+
+def _maneuver_or_rest(text: str) -> None:
+    if text:
+        Manner.from_label(text)
+
+
+# Strings with a syntax of their own: `decode` checks them too (the validator raises
+# ValueError), so a reader never meets a pose or maneuver it cannot interpret.
+PoseText = Annotated[str, Pose.parse]  # "col,row,H"
+ManeuverLabel = Annotated[str, _maneuver_label]
+ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
@@ -38,9 +56,9 @@ class Message:
 class VehicleState(Message):
     TYPE: ClassVar[str] = "vehicle.state"
     vehicle: int
-    pose: str  # "col,row,H"
+    pose: PoseText
     speed: int  # 0 v_zero, 1 v_mid, 2 v_high
-    maneuver: str  # label of the maneuver being driven ("" at rest)
+    maneuver: ManeuverOrRest  # label of the maneuver being driven
     loaded: bool
     x: float = 0.0  # world position of the rear axle point (metres) and heading (radians)
     y: float = 0.0
@@ -108,7 +126,8 @@ class Snapshot(Message):
 
 
 # (manner label, start pose, end pose, t0, t1, v0, v1, swept cells): one maneuver.
-WireStep = tuple[str, str, str, float, float, int, int, list[tuple[int, int]]]
+WireStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int,
+                 list[tuple[int, int]]]
 
 
 @dataclass(frozen=True)
@@ -192,7 +211,7 @@ class MissionDone(Message):
 
 
 # (manner label, start pose, end pose, t0, t1, v0, v1): one maneuver of a recorded subtask.
-RecordStep = tuple[str, str, str, float, float, int, int]
+RecordStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int]
 
 
 @dataclass(frozen=True)
@@ -272,7 +291,7 @@ class ResumeRequest(Message):
     vehicle: int
     t_stop: float
     t_resume: float
-    pose: str  # where it stands once the maneuver is over
+    pose: PoseText  # where it stands once the maneuver is over
     loaded: bool
     step: WireStep | None = None
 
@@ -294,7 +313,7 @@ class VehicleStatus(Message):
 
     TYPE: ClassVar[str] = "vehicle.status"
     vehicle: int
-    pose: str  # where it stands once everything committed is driven
+    pose: PoseText  # where it stands once everything committed is driven
     loaded: bool  # on its last leg (or at rest)
     kind: str  # "deliver", "return" or "" (no leg yet)
     start: str = ""
@@ -315,7 +334,7 @@ class Halt(Message):
     t: float
     cause: str
     moving: bool
-    pose: str
+    pose: PoseText
     t_stand: float
     cells: list[tuple[int, int]]
     x: float
@@ -463,12 +482,21 @@ def build_message(cls: type[Message], body: dict) -> Message:
 
 @functools.cache
 def _hints(cls: type[Message]) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
+    return typing.get_type_hints(cls, include_extras=True)
 
 
 def _check(value: Any, hint: Any, where: str) -> Any:
     """`value` converted to the type `hint` describes, or ProtocolError."""
     origin = typing.get_origin(hint)
+    if origin is Annotated:
+        base, *validators = typing.get_args(hint)
+        value = _check(value, base, where)
+        for validate in validators:
+            try:
+                validate(value)
+            except ValueError as exc:
+                raise ProtocolError(f"{where}: {exc}") from None
+        return value
     if origin in (types.UnionType, typing.Union):
         errors = []
         for option in typing.get_args(hint):

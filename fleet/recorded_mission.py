@@ -29,10 +29,9 @@ def record_of(recording: Recording) -> dict[str, Any]:
     failure_count = max([m.failures for _, m in recording.of(Progress)]
                         + [sum(f["stage"] == "plan" for f in failures)])
     done = [m for _, m in recording.of(MissionDone) if m.ok and m.record]
-    if done:  # the dispatcher's own account, which also counts postponements as waiting
-        record = done[-1].record
-        busy, wait, failure_count = record["busy_s"], record["wait_s"], \
-            record["decision_failures"]
+    account = _dispatcher_account(done[-1].record) if done else None
+    if account:  # the dispatcher's own, which also counts postponements as waiting
+        busy, wait, failure_count = account
     return {
         "mission": {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
                     "vehicles": info.vehicles, "seed": info.seed},
@@ -46,3 +45,20 @@ def record_of(recording: Recording) -> dict[str, Any]:
         "failures": failures,
         "subtasks": subtasks,
     }
+
+
+def _dispatcher_account(record: dict) -> tuple[dict, dict, int] | None:
+    """Busy and waiting seconds per forklift and the decision failures from the dispatcher's
+    final record, or None if they are not there in the expected shape (a damaged file)."""
+    busy, wait, failures = (record.get(k) for k in ("busy_s", "wait_s", "decision_failures"))
+
+    def seconds(value: Any) -> bool:
+        return isinstance(value, dict) and all(
+            isinstance(k, str) and k.isdigit() and isinstance(v, int | float)
+            and not isinstance(v, bool)
+            for k, v in value.items())
+
+    if seconds(busy) and seconds(wait) and isinstance(failures, int) \
+            and not isinstance(failures, bool):
+        return busy, wait, failures
+    return None

@@ -1,6 +1,6 @@
 """Paired conversions between core objects and wire messages (fleet/protocol.py). Every
-`*_from_wire` validates what `decode` cannot (pose syntax, maneuver names, enum values) and
-raises ProtocolError naming the field."""
+`*_from_wire` validates what `decode` does not (pose syntax of the free-text fields, enum
+values, time order) and raises ProtocolError naming the field."""
 
 from __future__ import annotations
 

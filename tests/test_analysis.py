@@ -171,7 +171,7 @@ def test_forged_and_absurd_messages_neither_fool_nor_break_the_analysis(clean_st
             first_change.message, op="release", release_from=0.0), "evil", 0.0),
         Outgoing(keys.dispatch_stack, StackDone("s1", 1, 1, 5.0), "evil", 5.0),
         # A state in forklift 1's name from nowhere a run can be.
-        Outgoing(keys.vehicle_state(1), VehicleState(1, "0,0,0", 0, "", False, math.inf,
+        Outgoing(keys.vehicle_state(1), VehicleState(1, "0,0,E", 0, "", False, math.inf,
                                                      1e300, 0.0), "vehicle-1", 1e300),
     ]
     path = tmp_path / "run.mcap"
