@@ -47,6 +47,8 @@ class FastClock:
         self.scenario = scenario
         self.pending = [i for i in scenario.instants() if i > t] if scenario else []
         self.down: frozenset[int] = frozenset()
+        self.scheduled_down: set[int] = set()  # down by the scenario, back by it too
+        self.seen_gone: set[int] = set()  # down without a scenario, their token seen gone
         self.tick = tick
         self.t = t
         self.acked: dict[int, int] = {}
@@ -109,10 +111,18 @@ class FastClock:
             found = [self._detect(d) for d in scheduled_at(self.scenario, t)]
             if found:
                 return found
-        lost = sorted(v for v in self.vehicles
-                      if v not in down and v not in self.liveness.alive)
-        return [VehicleDown(v, self.t, "agent lost (its liveliness token is gone)")
-                for v in lost]
+        return self._unscheduled(down)
+
+    def _unscheduled(self, down: frozenset[int]) -> list[Disruption]:
+        """Forklifts lost or back without a scenario saying so (a killed, paused or cut-off
+        container): gone when their token goes, back when it comes again."""
+        alive = set(self.liveness.alive)
+        self.seen_gone |= {v for v in down - self.scheduled_down if v not in alive}
+        back = sorted(v for v in self.seen_gone & alive if v in down)
+        lost = sorted(v for v in self.vehicles if v not in down and v not in alive)
+        self.seen_gone = (self.seen_gone - set(back)) | set(lost)
+        return [VehicleUp(v, self.t) for v in back] + \
+            [VehicleDown(v, self.t, "agent lost (its liveliness token is gone)") for v in lost]
 
     def _detect(self, expected: Disruption) -> Disruption:
         """Wait until the fault is seen the way it would be without a schedule."""
@@ -133,6 +143,9 @@ class FastClock:
                                       f"{DETECT_TIMEOUT_S:g} s")
         if isinstance(expected, VehicleUp):
             self.reports -= {(expected.vehicle, "broken"), (expected.vehicle, "repaired")}
+            self.scheduled_down.discard(expected.vehicle)
+        else:
+            self.scheduled_down.add(expected.vehicle)
         self.detected.append({"what": repr(expected), "vehicle": expected.vehicle,
                               "up": isinstance(expected, VehicleUp), "t": expected.t,
                               "detected_wall": time.time()})

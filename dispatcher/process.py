@@ -11,10 +11,14 @@ last message is delivered before its session closes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import logging
 import threading
 import time
+from pathlib import Path
 
+from dispatcher.claims import Claims, Roster
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.recovery import pick_up
@@ -27,10 +31,12 @@ from fleet.bus import (
     add_bus_arguments,
     bus_config,
     open_session,
+    received,
     stop_on_signals,
 )
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.engine import Engine, MissionStuck
+from fleet.errors import UserError
 from fleet.faults import load_scenario
 from fleet.layout import load_layout
 from fleet.protocol import (
@@ -39,6 +45,7 @@ from fleet.protocol import (
     MissionDone,
     Progress,
     ProtocolError,
+    RecorderStatus,
     Resume,
     StackDone,
     StackReopened,
@@ -51,6 +58,7 @@ from fleet.recording import mission_info
 from reservation.mirror import TableMirror, follow
 
 log = logging.getLogger("fleet.dispatcher")
+RECORDED_WAIT_S = 10.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -73,7 +81,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a restarted dispatcher: pick the mission up from what the "
                    "reservation service and the forklifts hold (fill missions, fast clock)")
     p.add_argument("--exit-when-done", action="store_true",
-                   help="exit after publishing the result instead of waiting to be stopped")
+                   help="exit after publishing the result (once the recorder has it, with "
+                   "--recorded) instead of waiting to be stopped")
+    p.add_argument("--claims", action="store_true",
+                   help="hand out forklift ids to agents started with --id auto; without "
+                   "--vehicles the fleet is whoever claimed one before claims stopped for "
+                   "--gather seconds (docs/deployment.md)")
+    p.add_argument("--gather", type=float, default=5.0,
+                   help="--claims without --vehicles: start once no new forklift has claimed "
+                   "an id for this many seconds (default 5)")
+    p.add_argument("--restart-marker", type=Path,
+                   help="create this file when the mission starts; if it is already there, "
+                   "this is a restart: pick the mission up as --recover does (a container "
+                   "keeps its files across restarts, not across re-creation)")
 
 
 class Stopped(Exception):
@@ -84,9 +104,13 @@ def serve(args: argparse.Namespace) -> int:
     mission = mission_from_args(args)
     layout = load_layout(mission.layout)
     options = engine_options(mission, layout, args.weights)
-    n = mission.vehicles if mission.vehicles is not None else len(layout.vehicle_starts)
-    vehicles = list(range(1, n + 1))
     keys = Keys(args.run)
+    roster = None  # the claims of the dispatcher this one replaces
+    if args.restart_marker is not None and args.restart_marker.exists():
+        args.recover = True
+        roster = read_roster(args.restart_marker)
+        log.warning("%s exists: this dispatcher was restarted, it picks the mission up",
+                    args.restart_marker)
     stop = threading.Event()
     in_mission = threading.Event()
 
@@ -97,7 +121,21 @@ def serve(args: argparse.Namespace) -> int:
 
     stop_on_signals(stop_requested)
     session = open_session(bus_config(args))
+    claims = None
     try:
+        limit = mission.vehicles or len(layout.vehicle_starts)
+        if args.claims:
+            claims = Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))
+            ids = claims.gather(mission.vehicles, args.gather, args.startup_timeout, stop)
+            if not ids:
+                raise ParticipantLost(f"no forklift claimed an id within "
+                                      f"{args.startup_timeout:g} s")
+            mission = dataclasses.replace(mission, vehicles=len(ids))
+            log.info("the fleet: %d forklifts", len(ids))
+        if args.restart_marker is not None and not args.recover:
+            write_roster(args.restart_marker, claims.roster.ids if claims else {})
+        n = mission.vehicles or len(layout.vehicle_starts)
+        vehicles = list(range(1, n + 1))
         token = session.liveliness().declare_token(keys.dispatcher_alive)
         info = mission_info(mission, layout, n, args.clock, args.speed, args.command)
         info_pub = Stream(session, keys.dispatch_mission, SENDER, reliable=True)
@@ -115,6 +153,9 @@ def serve(args: argparse.Namespace) -> int:
                                      (ZoneClosed.TYPE, keys.dispatch_zone))}
         done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
+        recorded = threading.Event()
+        status = session.declare_subscriber(keys.recorder_status,
+                                            lambda sample: _on_status(sample, recorded))
         try:
             in_mission.set()
             info_pub.put(info, 0.0)
@@ -129,12 +170,40 @@ def serve(args: argparse.Namespace) -> int:
         log.info("mission %s; %s", "done" if done.ok else "failed", done.error or done.digest)
         if not args.exit_when_done:
             stop.wait()
+        elif args.recorded and not recorded.wait(RECORDED_WAIT_S):
+            log.warning("the recorder had not recorded the result within %g s",
+                        RECORDED_WAIT_S)
         liveness.close()
-        for declared in (done_pub, info_pub, info_answer, *streams.values(), token):
+        for declared in (done_pub, info_pub, info_answer, *streams.values(), token, status):
             declared.undeclare()
     finally:
+        if claims is not None:
+            claims.close()
         session.close()
     return 0 if done.ok else 1
+
+
+def read_roster(path: Path) -> dict[str, int]:
+    """The claims a restarted dispatcher's predecessor handed out (its restart marker)."""
+    try:
+        roster = json.loads(path.read_text() or "{}")
+    except (OSError, ValueError) as exc:
+        raise UserError(f"{path}: not a dispatcher's restart marker ({exc})") from None
+    if not (isinstance(roster, dict) and all(isinstance(k, str) and isinstance(v, int)
+                                             for k, v in roster.items())):
+        raise UserError(f"{path}: not a dispatcher's restart marker (a name -> id map)")
+    return roster
+
+
+def write_roster(path: Path, ids: dict[str, int]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(ids))
+
+
+def _on_status(sample, recorded: threading.Event) -> None:
+    status = received(sample, RecorderStatus, log)
+    if status is not None and status.done_seen:
+        recorded.set()
 
 
 def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: list[int],

@@ -93,6 +93,10 @@ class Keys:
         return f"{self.root}/dispatch/alive"
 
     @property
+    def dispatch_claim(self) -> str:
+        return f"{self.root}/dispatch/claim"
+
+    @property
     def dispatch_mission(self) -> str:
         return f"{self.root}/dispatch/mission"
 

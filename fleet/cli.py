@@ -11,11 +11,13 @@ from fleet.commands import (
     analyze,
     bench,
     compare,
+    compose,
     faults,
     layout,
     plan,
     plot,
     run,
+    service,
     services,
     train,
 )
@@ -27,7 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts.")
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (run, analyze, plot, compare, faults, plan, layout, train, bench, services):
+    for module in (run, analyze, plot, compare, faults, plan, layout, train, bench, services,
+                   service, compose):
         module.register(sub)
     return parser
 

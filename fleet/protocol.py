@@ -397,6 +397,25 @@ class InjectFault(Message):
 
 
 @dataclass(frozen=True)
+class VehicleClaim(Message):
+    """An agent started without an id (`fleet agent --id auto`, one replica of a compose
+    service) asks the dispatcher for one. The same name gets the same forklift back."""
+
+    TYPE: ClassVar[str] = "dispatch.claim"
+    request_id: str
+    name: str  # the claimant's host name, which a restarted container keeps
+
+
+@dataclass(frozen=True)
+class ClaimReply(Message):
+    TYPE: ClassVar[str] = "dispatch.claim_reply"
+    request_id: str
+    ok: bool
+    vehicle: int = 0
+    reason: str = ""
+
+
+@dataclass(frozen=True)
 class RecorderStatus(Message):
     """The recorder's answer on fleet/<run>/recorder/status: how much it holds."""
 
@@ -421,7 +440,7 @@ TYPES: dict[str, type[Message]] = {
                               SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
                               HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
                               ZoneClosed, VehicleFault, InjectFault, StatusRequest,
-                              VehicleStatus)
+                              VehicleStatus, VehicleClaim, ClaimReply)
 }
 
 

@@ -8,6 +8,7 @@ import argparse
 import json
 import logging
 import threading
+import time
 from pathlib import Path
 
 import zenoh
@@ -29,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "access_control section fleet/access.py writes); needs --users")
     p.add_argument("--users", type=Path, help="authenticate every session against this "
                    "user:password dictionary")
+    p.add_argument("--exit-when-idle", type=float, metavar="SECONDS",
+                   help="exit once sessions have come and every one has gone for this long "
+                   "(a deployment whose processes exit when the mission ends)")
 
 
 class Clients:
@@ -39,20 +43,39 @@ class Clients:
         self.lock = threading.Lock()
         self.none = threading.Event()
         self.none.set()
+        self.changed = threading.Condition(self.lock)
+        self.came = False  # some session has connected
+        self.idle_since = time.monotonic()
         self.listener = session.info.declare_transport_events_listener(self._on_event,
                                                                       history=True)
+
+    def wait_idle(self, quiet_s: float, stop: threading.Event) -> None:
+        """Set `stop` once sessions came and none has been connected for `quiet_s`; return
+        then, or when `stop` is set otherwise."""
+        with self.changed:
+            while not stop.is_set():
+                left = self.idle_since + quiet_s - time.monotonic() \
+                    if self.came and not self.connected else quiet_s
+                if left <= 0:
+                    log.info("no session for %g s: stopping", quiet_s)
+                    stop.set()
+                    return
+                self.changed.wait(min(left, 0.5))  # events notify; the cap re-checks stop
 
     def _on_event(self, event) -> None:
         with self.lock:
             zid = str(event.transport.zid)
             if event.kind == zenoh.SampleKind.PUT:
                 self.connected.add(zid)
+                self.came = True
             else:
                 self.connected.discard(zid)
             if self.connected:
                 self.none.clear()
-            else:
+            elif not self.none.is_set():
                 self.none.set()
+                self.idle_since = time.monotonic()
+            self.changed.notify_all()
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -73,6 +96,8 @@ def serve(args: argparse.Namespace) -> int:
     try:
         clients = Clients(session)
         log.info("routing on %s", ", ".join(listen))
+        if args.exit_when_idle is not None:
+            clients.wait_idle(args.exit_when_idle, stop)
         stop.wait()
         # Told to stop, the router goes last: a process closing its session after its router
         # is gone can hang, and when `fleet run` dies every child stops at once.

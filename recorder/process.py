@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
+import socket
 import threading
 import time
 from pathlib import Path
@@ -26,7 +27,7 @@ from fleet.bus import Keys, Stream, add_bus_arguments, bus_config, open_session,
 from fleet.errors import UserError
 from fleet.layout import parse_layout
 from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
-from fleet.recording import Recorded, RecordingWriter
+from fleet.recording import RUN_FILE, Recorded, RecordingWriter, next_segment
 
 log = logging.getLogger("fleet.recorder")
 SENDER = "recorder"
@@ -38,14 +39,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("run.mcap"),
                    help="MCAP file to write (default run.mcap; never overwritten: a recorder "
                    "restarted for a run writes its next segment, RUN_DIR/run-2.mcap, ...)")
+    p.add_argument("--out-dir", type=Path,
+                   help="instead of --out: write DIR/<UTC date-time>-<host name>/run.mcap, or "
+                   "the next segment in this host's latest directory there when it restarts "
+                   "(a container keeps its host name across restarts)")
+    p.add_argument("--exit-when-done", action="store_true",
+                   help="close the file and exit once the mission's result is recorded")
     p.add_argument("--foxglove", type=int, metavar="PORT",
                    help="also serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove)")
+    p.add_argument("--foxglove-host", default="127.0.0.1",
+                   help="the address the live view listens on (0.0.0.0 in a container, "
+                   "whose published port is what the host reaches)")
 
 
 class Recorder:
     def __init__(self, session: zenoh.Session, keys: Keys, writer: RecordingWriter,
-                 live=None) -> None:
+                 live=None, exit_when_done: bool = False) -> None:
         self.session = session
         self.keys = keys
         self.writer = writer
@@ -53,6 +63,7 @@ class Recorder:
         self.inbox: queue.Queue[tuple[str, bytes, int] | None] = queue.Queue()
         self.views = None  # Foxglove scene views, once the run's description is known
         self.done_seen = False
+        self.exit_when_done = exit_when_done
         self.lock = threading.Lock()  # status answers read what the writer thread counts
 
     def run(self) -> None:
@@ -127,7 +138,10 @@ class Recorder:
             if isinstance(message, MissionDone):
                 with self.lock:
                     self.done_seen = True
+                self.writer.flush()
                 self._announce()
+                if self.exit_when_done:
+                    self.inbox.put(None)  # this thread reads the inbox: no lock to wait on
             if self.views is not None:
                 self._show(self.views.on_message(key, message, sim_time))
         except Exception:  # a view or description failing must not lose the recording
@@ -164,6 +178,8 @@ class Recorder:
 
 
 def serve(args: argparse.Namespace) -> int:
+    if args.out_dir is not None:
+        args.out = output_in(args.out_dir, socket.gethostname(), time.gmtime())
     if args.out.exists():
         raise UserError(f"{args.out} exists: a recording is never overwritten; give another "
                         f"--out")
@@ -171,14 +187,25 @@ def serve(args: argparse.Namespace) -> int:
     if args.foxglove is not None:
         from recorder.live import LiveView
 
-        live = LiveView(port=args.foxglove)
-        log.info("Foxglove live view on ws://127.0.0.1:%d", live.port)
+        live = LiveView(port=args.foxglove, host=args.foxglove_host)
+        log.info("Foxglove live view on ws://%s:%d", args.foxglove_host, live.port)
     writer = RecordingWriter(args.out)
     session = open_session(bus_config(args))
-    recorder = Recorder(session, Keys(args.run), writer, live)
+    recorder = Recorder(session, Keys(args.run), writer, live, args.exit_when_done)
     stop_on_signals(recorder.stop)
     try:
         recorder.run()
     finally:
         session.close()
     return 0
+
+
+def output_in(folder: Path, host: str, now: time.struct_time) -> Path:
+    """Where a recorder with --out-dir writes: the next segment of this host's latest run
+    directory (a restarted recorder), else a new directory named for now and the host."""
+    mine = sorted(folder.glob(f"*-{host}")) if folder.is_dir() else []
+    if mine:
+        return next_segment(mine[-1])
+    run_dir = folder / f"{time.strftime('%Y%m%d-%H%M%S', now)}-{host}"
+    run_dir.mkdir(parents=True)
+    return run_dir / RUN_FILE

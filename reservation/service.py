@@ -13,6 +13,7 @@ import argparse
 import logging
 import queue
 import re
+import socket
 import threading
 from pathlib import Path
 
@@ -24,11 +25,13 @@ from fleet.bus import (
     add_bus_arguments,
     bus_config,
     open_session,
+    received,
     stop_on_signals,
 )
 from fleet.protocol import (
     Change,
     CommitRequest,
+    MissionDone,
     ProtocolError,
     ReleaseRequest,
     Reply,
@@ -116,19 +119,31 @@ def not_theirs(key: str, message) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
     p.add_argument("--journal", type=Path, default=Path("reservation.journal"),
-                   help="append-only journal (replayed on start)")
+                   help="append-only journal (replayed on start); '{host}' in it stands for "
+                   "the host name, so a restarted container replays its own journal and a "
+                   "new one starts afresh")
+    p.add_argument("--exit-when-done", action="store_true",
+                   help="exit once the dispatcher publishes the mission's result")
 
 
 def serve(args: argparse.Namespace) -> int:
+    args.journal = Path(str(args.journal).replace("{host}", socket.gethostname()))
+    args.journal.parent.mkdir(parents=True, exist_ok=True)
     store = ReservationStore(args.journal)
     if store.torn_bytes:
         log.warning("cut a torn last record (%d bytes) off %s", store.torn_bytes, args.journal)
     session = open_session(bus_config(args))
-    service = ReservationService(store, session, Keys(args.run))
+    keys = Keys(args.run)
+    service = ReservationService(store, session, keys)
     stop_on_signals(service.stop)
+    done = session.declare_subscriber(keys.dispatch_done, lambda sample: service.stop()
+                                      if received(sample, MissionDone, log) else None) \
+        if args.exit_when_done else None
     try:
         service.run()
     finally:
+        if done is not None:
+            done.undeclare()
         store.close()
         session.close()
     return 0

@@ -35,6 +35,7 @@ from fleet.protocol import (
     HaltRequest,
     InjectFault,
     Message,
+    MissionDone,
     ProtocolError,
     Reply,
     ResumeRequest,
@@ -112,7 +113,7 @@ class Stopped(Exception):
 
 @dataclass
 class _Inbox:
-    kind: str  # "task", "tick" or "inject"
+    kind: str  # "task", "tick", "inject" or "done"
     item: object = None
 
 
@@ -142,7 +143,8 @@ class Agent:
         self.last_kind = ""  # what the last committed leg was for (a restarted dispatcher asks)
 
     # -- the process ---------------------------------------------------------------------------
-    def run(self, service_timeout_s: float = 60.0) -> None:
+    def run(self, service_timeout_s: float = 60.0, exit_when_done: bool = False) -> None:
+        """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
         if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
             raise RuntimeError(f"no reservation service on {self.keys.root} within "
                                f"{service_timeout_s:g} s")
@@ -168,6 +170,8 @@ class Agent:
             self.keys.clock, lambda s: self.inbox.put(_Inbox("tick", s)))
         injector = self.session.declare_queryable(
             self.keys.vehicle_inject(self.vehicle), lambda q: self.inbox.put(_Inbox("inject", q)))
+        done_sub = self.session.declare_subscriber(
+            self.keys.dispatch_done, lambda s: self.inbox.put(_Inbox("done", s)))
         token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
         ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
         ticker.start()
@@ -181,13 +185,16 @@ class Agent:
                     self._on_tick(entry.item, state_pub, ack_pub)
                 elif entry.kind == "inject":
                     self._on_inject(entry.item)
+                elif exit_when_done and received(entry.item, MissionDone, log) is not None:
+                    log.info("vehicle %d: the mission is over", self.vehicle)
+                    return
                 if self.mirror.needs_resync:
                     resync(self.mirror, self.keys, self.requester)
         finally:
             self.stopping.set()
             ticker.join()
             for declared in (token, injector, clock_sub, queryable, ack_pub, state_pub,
-                             self.fault_pub, changes):
+                             self.fault_pub, changes, done_sub):
                 declared.undeclare()
 
     def stop(self) -> None:

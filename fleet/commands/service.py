@@ -1,0 +1,79 @@
+"""`fleet service NAME`: what each container of the compose deployment runs. The settings
+come from FLEET_* environment variables (fleet/deploy.py, docs/deployment.md); `--health` is
+the container's health check."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import socket
+import sys
+from pathlib import Path
+
+from fleet.deploy import ROUTER_PORT, SERVICES, VEHICLE_ID_FILE, config_from_env, service_args
+
+HEALTH_TIMEOUT_S = 3.0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("service", help="run one service of the compose deployment, set up "
+                       "from FLEET_* environment variables",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("name", choices=SERVICES)
+    p.add_argument("--health", action="store_true",
+                   help="check that the service is up (exit 0) instead of running it")
+    p.add_argument("--print", action="store_true",
+                   help="print the command line the service runs and exit")
+    p.set_defaults(handler=run_service)
+
+
+def run_service(args: argparse.Namespace) -> int:
+    config = config_from_env(os.environ)
+    argv = service_args(args.name, config)
+    if args.print:
+        print(shlex.join(["fleet", *argv]))
+        return 0
+    if args.health:
+        return 0 if healthy(args.name, config) else 1
+    from fleet.cli import main
+
+    return main(argv)
+
+
+def healthy(name: str, config) -> bool:
+    """The router takes connections; any other service's liveliness token is on the bus (a
+    forklift's once it has claimed its id)."""
+    if name == "router":
+        try:
+            with socket.create_connection(("127.0.0.1", ROUTER_PORT), HEALTH_TIMEOUT_S):
+                return True
+        except OSError:
+            return False
+    from fleet.bus import BusConfig, Keys, open_session, wait_alive
+    from fleet.deploy import secret
+
+    keys = Keys(config.run)
+    if name == "vehicle":
+        try:
+            token = keys.vehicle_alive(int(Path(VEHICLE_ID_FILE).read_text()))
+        except (OSError, ValueError):
+            return False  # no id claimed yet
+    else:
+        token = {"reservation": keys.reservation_alive, "dispatcher": keys.dispatcher_alive,
+                 "recorder": keys.recorder_alive}[name]
+    user, password = "", ""
+    if config.secure:
+        user = {"vehicle": "vehicle"}.get(name, name)
+        password = Path(secret(config, f"{user}_password")).read_text().strip()
+    try:
+        session = open_session(BusConfig("client", (config.endpoint,),
+                                         connect_timeout_ms=int(HEALTH_TIMEOUT_S * 1000),
+                                         user=user, password=password))
+    except Exception as exc:  # zenoh raises its own error type when the router is away
+        print(f"cannot reach the router: {exc}", file=sys.stderr)
+        return False
+    try:
+        return wait_alive(session, token, HEALTH_TIMEOUT_S)
+    finally:
+        session.close()

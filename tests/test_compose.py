@@ -1,0 +1,205 @@
+"""The compose deployment for real: the image built by deploy/build-images, a real docker
+engine, `docker compose up --scale vehicle=4`, containers killed and cut off the network.
+
+Needs a docker engine (.ci/run installs and starts one). Where there is none these tests are
+skipped, saying so; with FLEET_REQUIRE_DOCKER=1 (set by .ci/run) they fail instead, so CI
+never passes without them."""
+
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from fleet.analysis import analyze
+from fleet.bus import BusConfig, Keys, free_port, open_session
+from fleet.commands.compose import collect, compose_command
+from fleet.commands.run import engine_options
+from fleet.engine import run_mission
+from fleet.layout import load_layout
+from fleet.mission import Mission, MissionKind, Strategy
+from fleet.protocol import Halt, MissionDone, Progress, Resume, decode
+from fleet.record_io import digest
+from fleet.recording import read_recording
+
+ROOT = Path(__file__).resolve().parent.parent
+IMAGE = "forklift-fleet:test"
+MISSION_TIMEOUT_S = 600
+
+
+def docker_ready() -> bool:
+    try:
+        return subprocess.run(["docker", "info"], capture_output=True,
+                              timeout=30).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+
+
+if not docker_ready():
+    if os.environ.get("FLEET_REQUIRE_DOCKER") == "1":
+        raise RuntimeError("FLEET_REQUIRE_DOCKER=1 but no docker engine answers `docker info`")
+    pytest.skip("no docker engine answers `docker info` (.ci/run installs one)",
+                allow_module_level=True)
+
+
+@pytest.fixture(scope="session")
+def image(tmp_path_factory) -> str:
+    """The image of this checkout, built by deploy/build-images (which takes a lock: two
+    test workers, or .ci/run's early build, never build at once; the base image and the
+    dependency layers are cached, so a rebuild is the project's own wheel)."""
+    log = tmp_path_factory.mktemp("image") / "build.log"
+    with open(log, "w") as out:
+        built = subprocess.run([str(ROOT / "deploy" / "build-images")], cwd=ROOT,
+                               env={**os.environ, "IMAGE": IMAGE}, stdout=out,
+                               stderr=subprocess.STDOUT)
+    assert built.returncode == 0, log.read_text()[-3000:]
+    return IMAGE
+
+
+class Deployment:
+    """One compose project of its own (names, network, volumes), removed afterwards."""
+
+    def __init__(self, tmp_path: Path, image: str, **settings: str) -> None:
+        self.project = f"fleettest{os.getpid()}{tmp_path.name[-8:].lower()}".replace("_", "")
+        self.tmp = tmp_path
+        self.router_port = free_port()
+        self.env = {**os.environ, "FLEET_IMAGE": image, "COMPOSE_PROJECT_NAME": self.project,
+                    "FLEET_ROUTER_PORT": str(self.router_port),
+                    "FLEET_FOXGLOVE_PORT": str(free_port()), **settings}
+
+    def compose(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
+        done = subprocess.run([*compose_command(), "-p", self.project, "-f",
+                               str(ROOT / "compose.yaml"), *args], cwd=self.tmp, env=self.env,
+                              capture_output=True, text=True, timeout=MISSION_TIMEOUT_S)
+        if check:
+            assert done.returncode == 0, f"compose {args}: {done.stdout}{done.stderr}"
+        return done
+
+    def containers(self, service: str) -> list[str]:
+        """The service's containers, running or not, by their compose labels."""
+        return subprocess.run(["docker", "ps", "-aq", "--filter",
+                               f"label=com.docker.compose.project={self.project}", "--filter",
+                               f"label=com.docker.compose.service={service}"],
+                              capture_output=True, text=True, check=True).stdout.split()
+
+    def wait(self, service: str) -> list[int]:
+        """Block until the service's containers exit; their exit codes."""
+        waited = subprocess.run(["docker", "wait", *self.containers(service)],
+                                capture_output=True, text=True, timeout=MISSION_TIMEOUT_S)
+        return [int(code) for code in waited.stdout.split()]
+
+    def logs(self) -> str:
+        return self.compose("logs", "--no-color", "--tail", "40", check=False).stdout
+
+    def down(self) -> None:
+        (self.tmp / "compose.log").write_text(
+            self.compose("logs", "--no-color", check=False).stdout)
+        self.compose("down", "-v", "--remove-orphans", "-t", "5", check=False)
+
+    def recording(self) -> Path:
+        (latest,) = collect(self.project, self.tmp / "recordings", every=False)
+        return latest
+
+
+@pytest.fixture
+def deployment(tmp_path, image):
+    made: list[Deployment] = []
+
+    def make(**settings: str) -> Deployment:
+        made.append(Deployment(tmp_path, image, **settings))
+        return made[-1]
+
+    yield make
+    for d in made:
+        d.down()
+        leftovers = subprocess.run(["docker", "ps", "-aq", "--filter",
+                                    f"label=com.docker.compose.project={d.project}"],
+                                   capture_output=True, text=True).stdout.split()
+        volumes = subprocess.run(["docker", "volume", "ls", "-q", "--filter",
+                                  f"label=com.docker.compose.project={d.project}"],
+                                 capture_output=True, text=True).stdout.split()
+        assert leftovers == [] and volumes == [], "compose down left containers or volumes"
+
+
+def paper_reference() -> str:
+    mission = Mission("paper", MissionKind.FILL, Strategy.ANN, vehicles=4)
+    layout = load_layout("paper")
+    return digest(run_mission(mission, engine_options(mission, layout, None), layout))
+
+
+def test_compose_up_with_four_forklifts_runs_the_reference_mission(deployment):
+    """Four replicas claim their ids, the mission runs in fast mode, every container exits by
+    itself, and the recording in the volume passes its verdicts with the very trajectories
+    of `fleet run` (the same record digest)."""
+    d = deployment()
+    d.compose("up", "-d", "--no-build", "--scale", "vehicle=4")
+    codes = [d.wait(service) for service in ("dispatcher", "recorder", "vehicle", "router")]
+    recording = read_recording(d.recording())
+    # Every container exits by itself, the router last once everyone has left.
+    assert codes == [[0], [0], [0] * 4, [0]], d.logs()
+    (done,) = [m for _, m in recording.of(MissionDone)]
+    assert done.ok and done.digest == paper_reference()
+    report = analyze(recording)
+    assert report.passed and report.complete, report
+    assert (len(report.overlaps), len(report.outside_reservation), report.stacks_done,
+            report.stacks_duplicated, report.messages_lost) == (0, 0, 136, [], 0)
+
+
+def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(deployment):
+    """Mid-mission one forklift's container is killed and another's is cut off its network;
+    once the dispatcher has halted each, the killed one is started again (it claims its
+    forklift back under its host name) and the other connected again. The mission completes
+    with no overlap and every stack exactly once, and both forklifts worked again."""
+    d = deployment()
+    d.compose("up", "-d", "--no-build", "--scale", "vehicle=4")
+    events: queue.Queue = queue.Queue()
+    session = open_session(BusConfig("client", (f"tcp/127.0.0.1:{d.router_port}",)))
+    keys = Keys()
+    subscribers = [session.declare_subscriber(key, lambda s: events.put(
+        decode(s.payload.to_bytes()).message)) for key in
+        (keys.dispatch_progress, keys.dispatch_halt, keys.dispatch_resume, keys.dispatch_done)]
+    network = f"{d.project}_default"
+    vehicles = d.containers("vehicle")
+    assert len(vehicles) == 4
+    killed, cut = vehicles[0], vehicles[1]
+    fixes = {}  # forklift id -> how it is brought back once it is seen down
+    resumed: set[int] = set()
+    try:
+        while not isinstance(message := events.get(timeout=MISSION_TIMEOUT_S), MissionDone):
+            if not fixes and isinstance(message, Progress) and message.done >= 30:
+                # every forklift has claimed its id by now
+                fixes = {forklift_id(killed): ["docker", "start", killed],
+                         forklift_id(cut): ["docker", "network", "connect", network, cut]}
+                docker("kill", killed)
+                docker("network", "disconnect", network, cut)
+            elif isinstance(message, Halt) and not message.moving and fixes.get(message.vehicle):
+                subprocess.run(fixes[message.vehicle], check=True, capture_output=True)
+                fixes[message.vehicle] = []  # seen down, brought back
+            elif isinstance(message, Resume):
+                resumed.add(message.vehicle)
+    finally:
+        for subscriber in subscribers:
+            subscriber.undeclare()
+        session.close()
+    codes = d.wait("dispatcher") + d.wait("recorder")
+    recording = read_recording(d.recording())
+    assert codes == [0, 0], d.logs()
+    assert all(f == [] for f in fixes.values()) and len(fixes) == 2, "not both seen down"
+    assert resumed == set(fixes), f"only {sorted(resumed)} of {sorted(fixes)} came back"
+    report = analyze(recording)
+    assert report.finished, report.mission_error
+    assert (len(report.overlaps), len(report.outside_reservation), report.stacks_done,
+            report.stacks_duplicated, report.stacks_lost) == (0, 0, 136, [], []), report
+    assert report.passed, report
+
+
+def forklift_id(container: str) -> int:
+    return int(subprocess.run(["docker", "exec", container, "cat", "/tmp/fleet/vehicle.id"],
+                              capture_output=True, text=True, check=True).stdout)
+
+
+def docker(*args: str) -> None:
+    subprocess.run(["docker", *args], check=True, capture_output=True)

@@ -1,0 +1,148 @@
+"""The compose deployment's configuration and forklift id claims, without docker: the
+settings from the environment, each service's command line, and the claim roster. The
+claims also run for real between processes here (agents started with --id auto)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dispatcher.claims import Roster
+from fleet.analysis import analyze
+from fleet.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.cli import build_parser
+from fleet.commands.run import engine_options
+from fleet.deploy import DeployConfig, config_from_env, service_args
+from fleet.engine import run_mission
+from fleet.errors import UserError
+from fleet.layout import load_layout
+from fleet.mission import Mission, MissionKind, Strategy
+from fleet.protocol import MissionDone
+from fleet.record_io import digest
+from fleet.recording import read_recording
+from vehicle_agent.process import claim
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_unset_or_empty_variables_keep_the_defaults():
+    assert config_from_env({}) == DeployConfig()
+    assert config_from_env({"FLEET_LAYOUT": "", "FLEET_SEED": "  "}) == DeployConfig()
+
+
+def test_every_setting_comes_from_its_variable():
+    config = config_from_env({"FLEET_RUN": "r", "FLEET_LAYOUT": "small", "FLEET_MISSION":
+                              "empty", "FLEET_STRATEGY": "greedy", "FLEET_VEHICLES": "2",
+                              "FLEET_SEED": "7", "FLEET_CLOCK": "realtime",
+                              "FLEET_SPEED": "20", "FLEET_GATHER_S": "1.5"})
+    assert config == DeployConfig(run="r", layout="small", mission="empty", strategy="greedy",
+                                  vehicles="2", seed=7, clock="realtime", speed=20.0,
+                                  gather_s=1.5)
+    args = service_args("dispatcher", config)
+    for flag, value in (("--layout", "small"), ("--mission", "empty"), ("--strategy",
+                        "greedy"), ("--vehicles", "2"), ("--seed", "7"),
+                        ("--clock", "realtime"), ("--speed", "20.0"), ("--gather", "1.5"),
+                        ("--run", "r")):
+        assert args[args.index(flag) + 1] == value
+
+
+@pytest.mark.parametrize("env, named", [
+    ({"FLEET_SEED": "x"}, "FLEET_SEED"), ({"FLEET_SPEED": "-1"}, "FLEET_SPEED"),
+    ({"FLEET_SPEED": "nan"}, "FLEET_SPEED"), ({"FLEET_CLOCK": "slow"}, "FLEET_CLOCK"),
+    ({"FLEET_STRATEGY": "best"}, "FLEET_STRATEGY"), ({"FLEET_VEHICLES": "0"}, "FLEET_VEHICLES"),
+    ({"FLEET_VEHICLES": "many"}, "FLEET_VEHICLES"), ({"FLEET_MISSION": "x"}, "FLEET_MISSION")])
+def test_a_bad_setting_is_an_error_naming_the_variable(env, named):
+    with pytest.raises(UserError, match=named):
+        config_from_env(env)
+
+
+def test_every_service_command_line_parses_as_the_cli_defines_it():
+    parser = build_parser()
+    for service in ("router", "reservation", "dispatcher", "vehicle", "recorder"):
+        args = parser.parse_args(service_args(service, DeployConfig()))
+        assert args.handler is not None
+    dispatcher = parser.parse_args(service_args("dispatcher", DeployConfig()))
+    assert dispatcher.claims and dispatcher.vehicles is None  # "auto": who claims an id
+    assert dispatcher.connect == ["tcp/router:7447"] and dispatcher.exit_when_done
+    vehicle = parser.parse_args(service_args("vehicle", DeployConfig()))
+    assert vehicle.id is None and vehicle.exit_when_done
+    with pytest.raises(UserError, match="unknown service"):
+        service_args("forklift", DeployConfig())
+
+
+def test_the_roster_hands_out_the_lowest_free_id_and_the_same_one_again():
+    roster = Roster(limit=3)
+    assert [roster.claim(n) for n in ("a", "b", "a", "c")] == [1, 2, 1, 3]
+    assert "complete" in roster.claim("d")  # no fourth forklift
+    assert roster.claim("") == "a claim must name the claimant"
+
+
+def test_a_closed_roster_answers_only_names_it_knows():
+    roster = Roster(limit=4, ids={"a": 1, "b": 2}, closed=True)
+    assert roster.claim("b") == 2  # a restarted container gets its forklift back
+    assert "has started with 2 forklifts" in roster.claim("z")
+
+
+def test_a_fleet_that_claims_its_ids_runs_the_reference_mission_and_every_process_exits(
+        tmp_path):
+    """What each container runs, as processes on loopback: agents with no id claim one
+    (two of three names; the third arrives after the fleet is closed and is refused), every
+    process exits by itself when the mission ends, the router last, and the mission is the
+    in-process reference."""
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY, vehicles=2)
+    layout = load_layout("small")
+    reference = run_mission(mission, engine_options(mission, layout, None), layout)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--connect", endpoint]
+    logs = tmp_path / "logs"
+    logs.mkdir()
+
+    def start(name: str, *args: str) -> subprocess.Popen:
+        with open(logs / f"{name}.log", "wb") as log:
+            return subprocess.Popen([sys.executable, "-m", "fleet", *args], cwd=ROOT,
+                                    stdout=log, stderr=subprocess.STDOUT)
+
+    router = start("router", "router", "--listen", endpoint, "--exit-when-idle", "1")
+    services = [
+        start("reservation", "reservation", *common, "--journal",
+              str(tmp_path / "journal" / "r-{host}.journal"), "--exit-when-done"),
+        start("recorder", "recorder", *common, "--out-dir", str(tmp_path / "recordings"),
+              "--exit-when-done"),
+        *[start(f"agent-{name}", "agent", *common, "--id", "auto", "--claim-as", name,
+                "--layout", "small", "--id-file", str(tmp_path / f"{name}.id"),
+                "--exit-when-done") for name in ("crane", "hoist")],
+        start("dispatcher", "dispatcher", *common, "--layout", "small", "--strategy",
+              "greedy", "--claims", "--vehicles", "2", "--recorded", "--exit-when-done",
+              "--restart-marker", str(tmp_path / "dispatcher.started"))]
+    session = open_session(BusConfig("client", (endpoint,)))
+    try:
+        keys = Keys()
+        for v in (1, 2):  # a forklift's token comes once it has its id
+            assert wait_alive(session, keys.vehicle_alive(v), 120)
+        with pytest.raises(UserError, match=r"no forklift id for late: the (fleet is complete|"
+                                            r"mission has started)"):
+            claim(session, keys, "late", 10.0)
+        crane = claim(session, keys, "crane", 10.0)  # a restarted container, its forklift
+    finally:
+        session.close()
+    codes = [p.wait(timeout=180) for p in services]
+    assert router.wait(timeout=60) == 0, (logs / "router.log").read_text()
+    assert codes == [0] * len(services), [(p.args[3], c) for p, c in
+                                          zip(services, codes, strict=True)]
+    assert (tmp_path / "crane.id").read_text() == f"{crane}\n"
+    assert sorted((tmp_path / n).read_text() for n in ("crane.id", "hoist.id")) == \
+        ["1\n", "2\n"]
+    assert len(list((tmp_path / "journal").glob("r-*.journal"))) == 1
+    (run_dir,) = (tmp_path / "recordings").iterdir()
+    recording = read_recording(run_dir)
+    (done,) = [m for _, m in recording.of(MissionDone)]
+    assert done.digest == digest(reference)
+    report = analyze(recording)
+    assert report.passed and report.complete and report.stacks_done == 24
+    roster = json.loads((tmp_path / "dispatcher.started").read_text())  # for a restart
+    assert sorted(roster.items()) == sorted(
+        (name, int((tmp_path / f"{name}.id").read_text())) for name in ("crane", "hoist"))
