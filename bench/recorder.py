@@ -66,7 +66,7 @@ def publish(streams: list, rate: float, seconds: float) -> tuple[int, float]:
             continue
         for _ in range(min(due - sent, batch)):
             k, v = divmod(sent, n)
-            streams[v].put(VehicleState(v + 1, f"{k % 40},{v + 1},E", 2, "straight",
+            streams[v].put(VehicleState(v + 1, f"{k % 40},{v + 1},E", 2, "forward",
                                         k % 2 == 0, 0.1 * (k % 400), 2.0 * (v + 1), 0.0),
                            k * n / rate)
             sent += 1

@@ -11,18 +11,21 @@ during the handshake, so it never connects (zenoh.open retries until its connect
 Only what goes through the router is checked: a session's own queryables and subscribers
 still get what that session itself sends.
 
-The principals, and why each gets what (`router_acl`; keys below fleet/<run>/):
+The principals, and why each gets what (`router_acl`; keys below fleet/<run>/). Each may
+watch its own liveliness token: a container's health check logs in as the service it checks.
 - `vehicle-N`, a forklift's agent: publishes only its own streams (vehicle/N/**: state,
   fault) and clock acks (clock/ack/N), so it cannot pose as another forklift; its token is
   vehicle/N/alive; it serves its own task and inject keys (declares the queryable and
   replies there, so it can answer no one else's task); it asks the reservation service only
   on reservation/request/vehicle-N, the key that names it, so the service can tell whose
-  commit it is; it reads the clock, the table's changes and the service's token.
+  commit it is, and the dispatcher for an id (dispatch/claim); it reads the clock, the
+  table's changes, the mission's end and the service's token.
 - `dispatcher`: assigns tasks (get on vehicle/*/task), asks the service under its own name,
   publishes the mission (dispatch/**) and the clock, serves dispatch/mission to a late
-  recorder, reads acks, states, faults and table changes, and everyone's liveliness.
+  recorder and dispatch/claim to forklifts, reads acks, states, faults, table changes and
+  the recorder's status, and everyone's liveliness.
 - `reservation`: serves reservation/request/** (every principal's request key), publishes
-  reservation/change, and its token.
+  reservation/change, and its token; reads the mission's end.
 - `recorder`: reads everything (a subscriber on the whole run, a get of dispatch/mission);
   the one thing it writes is its own status (published and served on recorder/status) and
   its token.
@@ -44,6 +47,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
+
+from fleet.errors import UserError
 
 DISPATCHER = "dispatcher"
 RESERVATION = "reservation"
@@ -110,8 +115,28 @@ def write_private(path: str | Path, text: str) -> Path:
 def write_dictionary(credentials: Credentials, path: str | Path) -> Path:
     """The router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`): one
     `user:password` line each, readable by its owner only."""
-    return write_private(path, "".join(f"{login.user}:{login.password}\n"
-                                       for login in credentials.logins.values()))
+    return write_private(path, dictionary_text(credentials.logins.values()))
+
+
+def dictionary_text(logins) -> str:
+    return "".join(f"{login.user}:{login.password}\n" for login in logins)
+
+
+def read_dictionary(path: Path) -> dict[str, str]:
+    """A `user:password` dictionary (as `write_dictionary` writes), user -> password."""
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise UserError(f"{path}: {exc.strerror}") from None
+    logins = {}
+    for n, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        user, colon, password = line.strip().partition(":")
+        if not (user and colon and password):
+            raise UserError(f"{path}:{n}: not a 'user:password' line")
+        logins[user] = password
+    return logins
 
 
 def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], list[str]]]]:
@@ -120,20 +145,22 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
         DISPATCHER: [
             (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
             (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
-            (SERVE, [f"{root}/dispatch/mission"]),
+            (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
             (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/vehicle/*/state",
-                         f"{root}/vehicle/*/fault", f"{root}/reservation/change"]),
+                         f"{root}/vehicle/*/fault", f"{root}/reservation/change",
+                         f"{root}/recorder/status"]),
             (TOKEN, [f"{root}/dispatch/alive"]),
             (WATCH, [f"{root}/**"])],
         RESERVATION: [
             (SERVE, [f"{root}/reservation/request/**"]),
             (PUBLISH, [f"{root}/reservation/change"]),
-            (TOKEN, [f"{root}/reservation/alive"])],
+            (SUBSCRIBE, [f"{root}/dispatch/done"]),
+            (TOKEN + WATCH, [f"{root}/reservation/alive"])],
         RECORDER: [
             (SUBSCRIBE, [f"{root}/**"]),
             (ASK, [f"{root}/dispatch/mission"]),
             (PUBLISH + SERVE, [f"{root}/recorder/status"]),
-            (TOKEN, [f"{root}/recorder/alive"])],
+            (TOKEN + WATCH, [f"{root}/recorder/alive"])],
         OPERATOR: [
             (ASK, [f"{root}/vehicle/*/inject"]),
             (PUBLISH, [f"{root}/clock/ack/injector"]),
@@ -144,9 +171,10 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (PUBLISH, [f"{root}/vehicle/{v}/**", f"{root}/clock/ack/{v}"]),
             (TOKEN, [f"{root}/vehicle/{v}/alive"]),
             (SERVE, [f"{root}/vehicle/{v}/task", f"{root}/vehicle/{v}/inject"]),
-            (ASK, [f"{root}/reservation/request/{vehicle_user(v)}"]),
-            (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change"]),
-            (WATCH, [f"{root}/reservation/alive"])]
+            (ASK, [f"{root}/reservation/request/{vehicle_user(v)}", f"{root}/dispatch/claim"]),
+            (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change",
+                         f"{root}/dispatch/done"]),
+            (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/{v}/alive"])]
     return grants
 
 

@@ -11,10 +11,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import PurePosixPath
 
+from fleet.access import DISPATCHER, OPERATOR, RECORDER, RESERVATION, Credentials, dictionary_text
 from fleet.errors import UserError
 from fleet.mission import MissionKind, Strategy
 
 SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
+SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
 ROUTER_PORT = 7447
 FOXGLOVE_PORT = 8765
 
@@ -32,7 +34,6 @@ class DeployConfig:
     gather_s: float = 5.0  # "auto" fleets: start once no forklift has claimed for this long
     router: str = "router"  # the router's host name (its compose service)
     secure: bool = False  # access control; the logins come from compose secrets
-    secrets: str = "/run/secrets"  # where compose mounts them
 
     @property
     def endpoint(self) -> str:
@@ -42,6 +43,9 @@ class DeployConfig:
 ENV = {f.name: "FLEET_" + f.name.upper() for f in dataclasses.fields(DeployConfig)}
 ENV["gather_s"] = "FLEET_GATHER_S"
 
+SECRETS = PurePosixPath("/run/secrets")  # where compose mounts the secrets
+ACL_FILE = "/tmp/fleet/acl.json"  # the router writes the run's access control here
+MAX_VEHICLES = 16  # logins are made for this many forklifts
 JOURNAL = "/data/journal/reservation-{host}.journal"  # a recreated container starts afresh
 RECORDINGS = "/data/recordings"
 RESTART_MARKER = "/tmp/fleet/dispatcher.started"  # survives a restart, not a re-creation
@@ -103,7 +107,7 @@ def service_args(service: str, config: DeployConfig) -> list[str]:
     if service == "router":
         args = ["router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--exit-when-idle", "5"]
         if config.secure:
-            args += ["--acl", secret(config, "acl.json"), "--users", secret(config, "users")]
+            args += ["--acl", ACL_FILE, "--users", str(SECRETS / "fleet_users")]
         return args
     common = ["--run", config.run, "--connect", config.endpoint]
     if service == "reservation":
@@ -114,7 +118,8 @@ def service_args(service: str, config: DeployConfig) -> list[str]:
                 "--exit-when-done", "--foxglove", str(FOXGLOVE_PORT), "--foxglove-host",
                 "0.0.0.0"]
     if service == "vehicle":
-        return ["agent", *common, *login(config, "vehicle"), "--id", "auto", "--layout",
+        logins = ["--logins", str(SECRETS / "fleet_vehicle_logins")] if config.secure else []
+        return ["agent", *common, *logins, "--id", "auto", "--layout",
                 config.layout, "--id-file", VEHICLE_ID_FILE, "--exit-when-done"]
     fleet = [] if config.vehicles == "auto" else ["--vehicles", config.vehicles]
     return ["dispatcher", *common, *login(config, "dispatcher"), "--layout", config.layout,
@@ -126,11 +131,24 @@ def service_args(service: str, config: DeployConfig) -> list[str]:
             f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})"]
 
 
-def secret(config: DeployConfig, name: str) -> str:
-    return str(PurePosixPath(config.secrets) / f"fleet_{name.replace('.', '_')}")
+def password_file(principal: str) -> PurePosixPath:
+    return SECRETS / f"fleet_{principal}_password"
 
 
 def login(config: DeployConfig, principal: str) -> list[str]:
     if not config.secure:
         return []
-    return ["--user", principal, "--password-file", secret(config, f"{principal}_password")]
+    return ["--user", principal, "--password-file", str(password_file(principal))]
+
+
+def secret_files(credentials: Credentials) -> dict[str, str]:
+    """What `fleet compose secrets` writes, file name -> text: the router's dictionary, a
+    password per service (and the operator's, for tools on the host), and the forklifts'
+    logins, which every forklift container gets (it learns its id only by claiming one)."""
+    files = {"users": dictionary_text(credentials.logins.values()),
+             "vehicle_logins": dictionary_text(
+                 login for name, login in credentials.logins.items()
+                 if name.startswith("vehicle-"))}
+    for principal in SERVICES_WITH_LOGINS:
+        files[f"{principal}_password"] = credentials[principal].password + "\n"
+    return files

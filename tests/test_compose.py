@@ -13,10 +13,11 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from fleet.analysis import analyze
 from fleet.bus import BusConfig, Keys, free_port, open_session
-from fleet.commands.compose import collect, compose_command
+from fleet.commands.compose import collect, compose_command, write_secrets
 from fleet.commands.run import engine_options
 from fleet.engine import run_mission
 from fleet.layout import load_layout
@@ -28,6 +29,7 @@ from fleet.recording import read_recording
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"
 MISSION_TIMEOUT_S = 600
+KILLED, CUT = 4, 2  # the forklifts the fault test disturbs
 
 
 def docker_ready() -> bool:
@@ -62,7 +64,13 @@ def image(tmp_path_factory) -> str:
 class Deployment:
     """One compose project of its own (names, network, volumes), removed afterwards."""
 
-    def __init__(self, tmp_path: Path, image: str, **settings: str) -> None:
+    def __init__(self, tmp_path: Path, image: str, secure: bool = False,
+                 **settings: str) -> None:
+        self.files = ["-f", str(ROOT / "compose.yaml")]
+        if secure:  # this deployment's own logins, as `fleet compose secrets` makes them
+            write_secrets(tmp_path / "secrets", force=False)
+            self.files += ["-f", str(ROOT / "compose.secure.yaml")]
+            settings["FLEET_SECRETS"] = str(tmp_path / "secrets")
         self.project = f"fleettest{os.getpid()}{tmp_path.name[-8:].lower()}".replace("_", "")
         self.tmp = tmp_path
         self.router_port = free_port()
@@ -71,8 +79,8 @@ class Deployment:
                     "FLEET_FOXGLOVE_PORT": str(free_port()), **settings}
 
     def compose(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-        done = subprocess.run([*compose_command(), "-p", self.project, "-f",
-                               str(ROOT / "compose.yaml"), *args], cwd=self.tmp, env=self.env,
+        done = subprocess.run([*compose_command(), "-p", self.project, *self.files, *args],
+                              cwd=self.tmp, env=self.env,
                               capture_output=True, text=True, timeout=MISSION_TIMEOUT_S)
         if check:
             assert done.returncode == 0, f"compose {args}: {done.stdout}{done.stderr}"
@@ -108,8 +116,8 @@ class Deployment:
 def deployment(tmp_path, image):
     made: list[Deployment] = []
 
-    def make(**settings: str) -> Deployment:
-        made.append(Deployment(tmp_path, image, **settings))
+    def make(secure: bool = False, **settings: str) -> Deployment:
+        made.append(Deployment(tmp_path, image, secure, **settings))
         return made[-1]
 
     yield make
@@ -131,11 +139,17 @@ def paper_reference() -> str:
 
 
 def test_compose_up_with_four_forklifts_runs_the_reference_mission(deployment):
-    """Four replicas claim their ids, the mission runs in fast mode, every container exits by
-    itself, and the recording in the volume passes its verdicts with the very trajectories
-    of `fleet run` (the same record digest)."""
-    d = deployment()
+    """Behind access control (compose.secure.yaml), four replicas claim their ids, the
+    mission runs in fast mode, every container exits by itself, and the recording in the
+    volume passes its verdicts with the very trajectories of `fleet run` (the same record
+    digest). A session without a login cannot even connect to the router."""
+    d = deployment(secure=True)
     d.compose("up", "-d", "--no-build", "--scale", "vehicle=4")
+    router = (f"tcp/127.0.0.1:{d.router_port}",)
+    operator = (d.tmp / "secrets" / "operator_password").read_text().strip()
+    open_session(BusConfig("client", router, user="operator", password=operator)).close()
+    with pytest.raises(zenoh.ZError):  # refused in the handshake: it never connects
+        open_session(BusConfig("client", router, connect_timeout_ms=3000)).close()
     codes = [d.wait(service) for service in ("dispatcher", "recorder", "vehicle", "router")]
     recording = read_recording(d.recording())
     # Every container exits by itself, the router last once everyone has left.
@@ -162,17 +176,17 @@ def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(
         decode(s.payload.to_bytes()).message)) for key in
         (keys.dispatch_progress, keys.dispatch_halt, keys.dispatch_resume, keys.dispatch_done)]
     network = f"{d.project}_default"
-    vehicles = d.containers("vehicle")
-    assert len(vehicles) == 4
-    killed, cut = vehicles[0], vehicles[1]
+    assert len(d.containers("vehicle")) == 4
     fixes = {}  # forklift id -> how it is brought back once it is seen down
     resumed: set[int] = set()
     try:
         while not isinstance(message := events.get(timeout=MISSION_TIMEOUT_S), MissionDone):
             if not fixes and isinstance(message, Progress) and message.done >= 30:
-                # every forklift has claimed its id by now
-                fixes = {forklift_id(killed): ["docker", "start", killed],
-                         forklift_id(cut): ["docker", "network", "connect", network, cut]}
+                # every forklift has claimed its id by now: forklift 4 is killed, 2 cut off
+                by_id = {forklift_id(c): c for c in d.containers("vehicle")}
+                killed, cut = by_id[KILLED], by_id[CUT]
+                fixes = {KILLED: ["docker", "start", killed],
+                         CUT: ["docker", "network", "connect", network, cut]}
                 docker("kill", killed)
                 docker("network", "disconnect", network, cut)
             elif isinstance(message, Halt) and not message.moving and fixes.get(message.vehicle):

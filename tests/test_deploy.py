@@ -12,11 +12,12 @@ from pathlib import Path
 import pytest
 
 from dispatcher.claims import Roster
+from fleet.access import generate_credentials, read_dictionary
 from fleet.analysis import analyze
 from fleet.bus import BusConfig, Keys, free_port, open_session, wait_alive
 from fleet.cli import build_parser
 from fleet.commands.run import engine_options
-from fleet.deploy import DeployConfig, config_from_env, service_args
+from fleet.deploy import DeployConfig, config_from_env, secret_files, service_args
 from fleet.engine import run_mission
 from fleet.errors import UserError
 from fleet.layout import load_layout
@@ -107,20 +108,23 @@ def test_a_fleet_that_claims_its_ids_runs_the_reference_mission_and_every_proces
                                     stdout=log, stderr=subprocess.STDOUT)
 
     router = start("router", "router", "--listen", endpoint, "--exit-when-idle", "1")
+    recorder = start("recorder", "recorder", *common, "--out-dir",
+                     str(tmp_path / "recordings"), "--exit-when-done")
+    session = open_session(BusConfig("client", (endpoint,)))
+    keys = Keys()
+    # The recorder first, as compose orders it (depends_on): it hears everything from the start.
+    assert wait_alive(session, keys.recorder_alive, 60)
     services = [
+        recorder,
         start("reservation", "reservation", *common, "--journal",
               str(tmp_path / "journal" / "r-{host}.journal"), "--exit-when-done"),
-        start("recorder", "recorder", *common, "--out-dir", str(tmp_path / "recordings"),
-              "--exit-when-done"),
         *[start(f"agent-{name}", "agent", *common, "--id", "auto", "--claim-as", name,
                 "--layout", "small", "--id-file", str(tmp_path / f"{name}.id"),
                 "--exit-when-done") for name in ("crane", "hoist")],
         start("dispatcher", "dispatcher", *common, "--layout", "small", "--strategy",
               "greedy", "--claims", "--vehicles", "2", "--recorded", "--exit-when-done",
               "--restart-marker", str(tmp_path / "dispatcher.started"))]
-    session = open_session(BusConfig("client", (endpoint,)))
     try:
-        keys = Keys()
         for v in (1, 2):  # a forklift's token comes once it has its id
             assert wait_alive(session, keys.vehicle_alive(v), 120)
         with pytest.raises(UserError, match=r"no forklift id for late: the (fleet is complete|"
@@ -146,3 +150,31 @@ def test_a_fleet_that_claims_its_ids_runs_the_reference_mission_and_every_proces
     roster = json.loads((tmp_path / "dispatcher.started").read_text())  # for a restart
     assert sorted(roster.items()) == sorted(
         (name, int((tmp_path / f"{name}.id").read_text())) for name in ("crane", "hoist"))
+
+
+def test_a_secure_deployment_logs_every_service_in_with_its_own_secret():
+    parser = build_parser()
+    config = DeployConfig(secure=True)
+    router = parser.parse_args(service_args("router", config))
+    assert str(router.users) == "/run/secrets/fleet_users" and router.acl is not None
+    for service in ("reservation", "dispatcher", "recorder"):
+        args = parser.parse_args(service_args(service, config))
+        assert (args.user, str(args.password_file)) == \
+            (service, f"/run/secrets/fleet_{service}_password")
+    vehicle = parser.parse_args(service_args("vehicle", config))
+    assert str(vehicle.logins) == "/run/secrets/fleet_vehicle_logins" and not vehicle.user
+
+
+def test_the_secrets_give_the_router_every_login_and_the_forklifts_only_theirs(tmp_path):
+    credentials = generate_credentials("compose", 3)
+    files = secret_files(credentials)
+    (tmp_path / "users").write_text(files["users"])
+    (tmp_path / "vehicle_logins").write_text(files["vehicle_logins"])
+    users = read_dictionary(tmp_path / "users")
+    assert users == {name: login.password for name, login in credentials.logins.items()}
+    assert read_dictionary(tmp_path / "vehicle_logins") == {
+        f"vehicle-{v}": credentials.vehicle(v).password for v in (1, 2, 3)}
+    assert files["dispatcher_password"].strip() == credentials["dispatcher"].password
+    (tmp_path / "bad").write_text("vehicle-1 no colon\n")
+    with pytest.raises(UserError, match="bad:1: not a 'user:password' line"):
+        read_dictionary(tmp_path / "bad")

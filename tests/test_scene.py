@@ -56,7 +56,7 @@ def views_by_topic(views):
 
 
 def state(vehicle=1, x=0.0, y=0.0, theta=0.0, loaded=False):
-    return VehicleState(vehicle, "8,10,S", 1, "straight", loaded, x, y, theta)
+    return VehicleState(vehicle, "8,10,S", 1, "forward", loaded, x, y, theta)
 
 
 def entity(views, topic, entity_id=None):

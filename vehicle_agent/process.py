@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import socket
 from pathlib import Path
 
 import zenoh
 
+from fleet.access import read_dictionary, vehicle_user
 from fleet.bus import (
     Keys,
     Requester,
@@ -52,6 +54,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
     p.add_argument("--start", type=Pose.parse,
                    help="start pose 'col,row,H' (default: the layout's start pose for --id)")
+    p.add_argument("--logins", type=Path,
+                   help="the forklifts' logins, a 'user:password' line each (the compose "
+                   "deployment's secret): claim an id logged in as any of them, then run as "
+                   "vehicle-ID (instead of --user and --password-file)")
     p.add_argument("--id-file", type=Path,
                    help="write the forklift's id here once it is known (a container's health "
                    "check reads it)")
@@ -62,10 +68,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def serve(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
     keys = Keys(args.run)
-    session = open_session(bus_config(args))
+    config = bus_config(args)
+    logins = read_dictionary(args.logins) if args.logins else {}
+    vehicle = args.id
+    if vehicle is None:  # in a session of its own, logged in as any forklift
+        claimant = config
+        if logins:
+            user, password = next(iter(logins.items()))
+            claimant = dataclasses.replace(config, user=user, password=password)
+        claiming = open_session(claimant)
+        try:
+            vehicle = claim(claiming, keys, args.claim_as, args.claim_timeout)
+        finally:
+            claiming.close()
+    if logins:
+        user = vehicle_user(vehicle)
+        if user not in logins:
+            raise UserError(f"--logins {args.logins} has no login for {user}")
+        config = dataclasses.replace(config, user=user, password=logins[user])
+    session = open_session(config)
     try:
-        vehicle = args.id if args.id is not None else \
-            claim(session, keys, args.claim_as, args.claim_timeout)
         start = args.start
         if start is None:
             if not 1 <= vehicle <= len(layout.vehicle_starts):

@@ -1,6 +1,7 @@
 """`fleet compose`: the compose deployment's chores, so nobody types docker's long forms
 (docs/deployment.md). `up` runs a mission and analyses it, `collect` copies recordings out
-of the volume, `analyze` looks at the latest one."""
+of the volume, `analyze` looks at the latest one, `secrets` makes the logins that
+compose.secure.yaml hands the containers."""
 
 from __future__ import annotations
 
@@ -12,9 +13,12 @@ import sys
 import tarfile
 from pathlib import Path
 
+from fleet.deploy import MAX_VEHICLES
 from fleet.errors import UserError
 
 DEFAULT_PROJECT = "forklift-fleet"  # also in .env, which both compose tools read
+SECRETS = Path("deploy/secrets")  # compose.secure.yaml reads them here ($FLEET_SECRETS)
+CONTAINER_UID = 1000  # the image's user (the Dockerfile's UID argument)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     up = actions.add_parser("up", help="run a mission with N forklifts, then analyse it")
     up.add_argument("--vehicles", type=int, default=4, help="forklift containers (default 4)")
     up.add_argument("--build", action="store_true", help="build the image first")
+    up.add_argument("--secure", action="store_true", help="behind the router's access "
+                    "control (compose.secure.yaml), with the logins of `fleet compose secrets` "
+                    "(made if there are none)")
     up.set_defaults(handler=run_up)
     collect = actions.add_parser("collect", help="copy recordings out of the volume")
     collect.add_argument("dest", type=Path, nargs="?", default=Path("runs/compose"))
@@ -39,6 +46,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     analyze.add_argument("--dest", type=Path, default=Path("runs/compose"),
                          help="where its copy goes (default runs/compose)")
     analyze.set_defaults(handler=run_analyze)
+    secrets = actions.add_parser("secrets", help="make the logins compose.secure.yaml uses")
+    secrets.add_argument("--out", type=Path, default=None,
+                         help=f"where (default $FLEET_SECRETS or {SECRETS})")
+    secrets.add_argument("--force", action="store_true", help="replace existing logins")
+    secrets.set_defaults(handler=run_secrets)
 
 
 def compose_command() -> list[str]:
@@ -52,7 +64,13 @@ def compose_command() -> list[str]:
 
 
 def run_up(args: argparse.Namespace) -> int:
-    up = [*compose_command(), "-p", args.project, "-f", str(args.file), "up", "--scale",
+    files = ["-f", str(args.file)]
+    if args.secure:
+        folder = secrets_folder(None)
+        if not (folder / "users").exists():
+            write_secrets(folder, force=False)
+        files += ["-f", str(args.file.with_name("compose.secure.yaml"))]
+    up = [*compose_command(), "-p", args.project, *files, "up", "--scale",
           f"vehicle={args.vehicles}", *(["--build"] if args.build else [])]
     print("$ " + " ".join(up), file=sys.stderr)
     # In the foreground: every container's log shows how far it is; the mission's processes
@@ -117,3 +135,33 @@ def run_analyze(args: argparse.Namespace) -> int:
     from fleet.cli import main
 
     return main(["analyze", str(latest), *(["--json"] if args.json else [])])
+
+
+def secrets_folder(out: Path | None) -> Path:
+    return out or Path(os.environ.get("FLEET_SECRETS", SECRETS))
+
+
+def run_secrets(args: argparse.Namespace) -> int:
+    folder = secrets_folder(args.out)
+    write_secrets(folder, args.force)
+    print(f"logins for the router, the services and {MAX_VEHICLES} forklifts in {folder}")
+    return 0
+
+
+def write_secrets(folder: Path, force: bool) -> None:
+    """Random logins for one deployment, readable by the containers' user only (compose
+    mounts a secret file with its owner and mode)."""
+    from fleet.access import generate_credentials, write_private
+    from fleet.deploy import secret_files
+
+    if (folder / "users").exists() and not force:
+        raise UserError(f"{folder} holds logins already (--force replaces them)")
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    for name, text in secret_files(generate_credentials("compose", MAX_VEHICLES)).items():
+        path = write_private(folder / name, text)
+        if os.getuid() == 0:
+            os.chown(path, CONTAINER_UID, CONTAINER_UID)
+    if os.getuid() not in (0, CONTAINER_UID):
+        print(f"note: the containers run as uid {CONTAINER_UID} and read these files only if "
+              f"it owns them: build the image with --build-arg UID={os.getuid()}",
+              file=sys.stderr)

@@ -11,7 +11,17 @@ import socket
 import sys
 from pathlib import Path
 
-from fleet.deploy import ROUTER_PORT, SERVICES, VEHICLE_ID_FILE, config_from_env, service_args
+from fleet.deploy import (
+    ACL_FILE,
+    MAX_VEHICLES,
+    ROUTER_PORT,
+    SECRETS,
+    SERVICES,
+    VEHICLE_ID_FILE,
+    config_from_env,
+    password_file,
+    service_args,
+)
 
 HEALTH_TIMEOUT_S = 3.0
 
@@ -36,6 +46,14 @@ def run_service(args: argparse.Namespace) -> int:
         return 0
     if args.health:
         return 0 if healthy(args.name, config) else 1
+    if args.name == "router" and config.secure:  # the run's rules; the logins are secrets
+        import json
+
+        from fleet.access import router_acl
+        from fleet.bus import Keys
+
+        Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
+        Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
     from fleet.cli import main
 
     return main(argv)
@@ -50,22 +68,25 @@ def healthy(name: str, config) -> bool:
                 return True
         except OSError:
             return False
+    from fleet.access import read_dictionary, vehicle_user
     from fleet.bus import BusConfig, Keys, open_session, wait_alive
-    from fleet.deploy import secret
 
     keys = Keys(config.run)
+    user, password = "", ""
     if name == "vehicle":
         try:
-            token = keys.vehicle_alive(int(Path(VEHICLE_ID_FILE).read_text()))
+            vehicle = int(Path(VEHICLE_ID_FILE).read_text())
         except (OSError, ValueError):
             return False  # no id claimed yet
+        token = keys.vehicle_alive(vehicle)
+        if config.secure:
+            user = vehicle_user(vehicle)
+            password = read_dictionary(Path(SECRETS / "fleet_vehicle_logins"))[user]
     else:
         token = {"reservation": keys.reservation_alive, "dispatcher": keys.dispatcher_alive,
                  "recorder": keys.recorder_alive}[name]
-    user, password = "", ""
-    if config.secure:
-        user = {"vehicle": "vehicle"}.get(name, name)
-        password = Path(secret(config, f"{user}_password")).read_text().strip()
+        if config.secure:
+            user, password = name, Path(password_file(name)).read_text().strip()
     try:
         session = open_session(BusConfig("client", (config.endpoint,),
                                          connect_timeout_ms=int(HEALTH_TIMEOUT_S * 1000),
