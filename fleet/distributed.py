@@ -33,7 +33,7 @@ from fleet.injector import Applied, Injector
 from fleet.launcher import Child, Launcher
 from fleet.linkproxy import LinkProxy
 from fleet.mission import Mission
-from fleet.protocol import MissionDone, Progress, RecorderStatus, decode
+from fleet.protocol import MissionDone, Progress, ProtocolError, RecorderStatus, decode
 from fleet.recording import next_segment
 
 ROUTER_TIMEOUT_MS = 30_000
@@ -269,10 +269,15 @@ def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:
 def _from_dispatcher(sample: zenoh.Sample) -> MissionDone | Progress | None:
     """The dispatcher's progress or result, believed only on its own key from its own name
     (anyone on the network could put a forged result)."""
-    message = received(sample, (MissionDone, Progress), log)
-    if message is None:
+    try:
+        envelope = decode(sample.payload.to_bytes())
+    except ProtocolError as exc:
+        log.warning("rejected a message on %s: %s", sample.key_expr, exc)
         return None
-    key, sender = str(sample.key_expr), decode(sample.payload.to_bytes()).sender
+    message, key, sender = envelope.message, str(sample.key_expr), envelope.sender
+    if not isinstance(message, MissionDone | Progress):
+        log.warning("rejected a %s on %s: it does not belong there", message.TYPE, key)
+        return None
     wanted = "dispatch/done" if isinstance(message, MissionDone) else "dispatch/progress"
     if sender != "dispatcher" or not key.endswith(wanted):
         log.warning("ignored a %s on %s from %r: only the dispatcher's on %s counts",

@@ -1,6 +1,9 @@
 """The command line as a user meets it, run in-process through fleet.cli.main."""
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -171,3 +174,14 @@ def test_bench_faults_json(capsys):
     assert row["detect_s"] > 0 and row["recover_s"] > 0 and row["rejoin_s"] >= 0
     assert row["extra_s"] == pytest.approx(row["end_time_s"] - base["end_time_s"])
     assert main(["bench", "faults", "--scenarios", "nope"]) == 2
+
+
+def test_a_reader_that_leaves_early_gets_no_traceback():
+    """`fleet faults list | head -1`: the reader is gone before the output comes; the
+    command stops quietly, with the shell's status for a broken pipe."""
+    read, write = os.pipe()
+    os.close(read)  # nobody will read: every write fails with EPIPE
+    proc = subprocess.run([sys.executable, "-m", "fleet", "faults", "list"], stdout=write,
+                          stderr=subprocess.PIPE, text=True, timeout=60)
+    os.close(write)
+    assert proc.returncode == 141 and proc.stderr == "", proc.stderr
