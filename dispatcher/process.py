@@ -30,8 +30,8 @@ from fleet.bus import (
     Stream,
     add_bus_arguments,
     bus_config,
+    follow_recorded,
     open_session,
-    received,
     stop_on_signals,
 )
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
@@ -45,7 +45,6 @@ from fleet.protocol import (
     MissionDone,
     Progress,
     ProtocolError,
-    RecorderStatus,
     Resume,
     StackDone,
     StackReopened,
@@ -154,8 +153,7 @@ def serve(args: argparse.Namespace) -> int:
         done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
         recorded = threading.Event()
-        status = session.declare_subscriber(keys.recorder_status,
-                                            lambda sample: _on_status(sample, recorded))
+        status = follow_recorded(session, keys, recorded, log)
         try:
             in_mission.set()
             info_pub.put(info, 0.0)
@@ -198,12 +196,6 @@ def read_roster(path: Path) -> dict[str, int]:
 def write_roster(path: Path, ids: dict[str, int]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(ids))
-
-
-def _on_status(sample, recorded: threading.Event) -> None:
-    status = received(sample, RecorderStatus, log)
-    if status is not None and status.done_seen:
-        recorded.set()
 
 
 def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: list[int],

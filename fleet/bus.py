@@ -23,7 +23,7 @@ import zenoh
 
 from fleet.access import configure_client, configure_router
 from fleet.errors import UserError
-from fleet.protocol import Envelope, Message, ProtocolError, decode, encode
+from fleet.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 # Congestion control for streams that must not lose a message (table changes, the clock, the
@@ -269,6 +269,18 @@ def received(sample: zenoh.Sample, expected: type[Message] | tuple[type[Message]
                     message.TYPE)
         return None
     return message
+
+
+def follow_recorded(session: zenoh.Session, keys: Keys, recorded: threading.Event,
+                    log: logging.Logger):
+    """Set `recorded` once the recorder says the mission's result is in its file; returns
+    the subscriber (undeclare it when done)."""
+    def on_status(sample: zenoh.Sample) -> None:
+        status = received(sample, RecorderStatus, log)
+        if status is not None and status.done_seen:
+            recorded.set()
+
+    return session.declare_subscriber(keys.recorder_status, on_status)
 
 
 def free_port() -> int:

@@ -27,13 +27,13 @@ from fleet.access import (
     write_dictionary,
     write_private,
 )
-from fleet.bus import BusConfig, Keys, free_port, open_session, received, wait_alive
+from fleet.bus import BusConfig, Keys, follow_recorded, free_port, open_session, wait_alive
 from fleet.faults import FaultKind, Scenario
 from fleet.injector import Applied, Injector
 from fleet.launcher import Child, Launcher
 from fleet.linkproxy import LinkProxy
 from fleet.mission import Mission
-from fleet.protocol import MissionDone, Progress, ProtocolError, RecorderStatus, decode
+from fleet.protocol import MissionDone, Progress, ProtocolError, decode
 from fleet.recording import next_segment
 
 ROUTER_TIMEOUT_MS = 30_000
@@ -178,8 +178,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         recorded = threading.Event()  # the recorder holds the mission's result
         if spec.record:
-            subscribers.append(session.declare_subscriber(
-                keys.recorder_status, lambda sample: _on_status(sample, recorded)))
+            subscribers.append(follow_recorded(session, keys, recorded, log))
             recorder = launcher.start("recorder", args_of("recorder"))
             _wait_started(session, keys.recorder_alive, launcher, recorder)
         launcher.start("reservation", args_of("reservation"))
@@ -234,12 +233,6 @@ def _follow(inbox: queue.Queue, launcher: Launcher,
             return message
         if isinstance(message, Progress) and on_progress is not None:
             on_progress(message)
-
-
-def _on_status(sample: zenoh.Sample, recorded: threading.Event) -> None:
-    status = received(sample, RecorderStatus, log)
-    if status is not None and status.done_seen:
-        recorded.set()
 
 
 def _wait_started(session: zenoh.Session, token: str, launcher: Launcher, child: Child) -> None:

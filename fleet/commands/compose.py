@@ -89,18 +89,20 @@ def image() -> str:
     return os.environ.get("FLEET_IMAGE", "forklift-fleet:latest")
 
 
-def in_volume(project: str, *command: str, **kwargs) -> subprocess.CompletedProcess:
-    """Run a command in a throwaway container of the image with the recordings mounted."""
+def in_volume(project: str, *command: str) -> list[str]:
+    """A docker command line: `command` in a throwaway container of the image with the
+    recordings mounted (read only)."""
     if subprocess.run(["docker", "volume", "inspect", volume(project)],
                       capture_output=True).returncode != 0:
         raise UserError(f"no volume {volume(project)}: has project {project!r} run yet?")
-    return subprocess.run(["docker", "run", "--rm", "-v", f"{volume(project)}:/recordings:ro",
-                           "--entrypoint", command[0], image(), *command[1:]], **kwargs)
+    return ["docker", "run", "--rm", "-v", f"{volume(project)}:/recordings:ro",
+            "--entrypoint", command[0], image(), *command[1:]]
 
 
 def recordings(project: str) -> list[str]:
     """The run directories in the volume, oldest first (they are named by date-time)."""
-    listing = in_volume(project, "ls", "-1", "/recordings", capture_output=True, text=True)
+    listing = subprocess.run(in_volume(project, "ls", "-1", "/recordings"),
+                             capture_output=True, text=True)
     if listing.returncode != 0:
         raise UserError(f"cannot list {volume(project)}: {listing.stderr.strip()}")
     return sorted(line for line in listing.stdout.split() if line)
@@ -112,9 +114,8 @@ def collect(project: str, dest: Path, every: bool) -> list[Path]:
         raise UserError(f"{volume(project)} holds no recording yet")
     chosen = names if every else names[-1:]
     dest.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.Popen(["docker", "run", "--rm", "-v", f"{volume(project)}:/recordings:ro",
-                             "--entrypoint", "tar", image(), "-C", "/recordings", "-cf", "-",
-                             *chosen], stdout=subprocess.PIPE)
+    proc = subprocess.Popen(in_volume(project, "tar", "-C", "/recordings", "-cf", "-", *chosen),
+                            stdout=subprocess.PIPE)
     assert proc.stdout is not None
     with tarfile.open(fileobj=proc.stdout, mode="r|") as archive:
         archive.extractall(dest, filter="data")
