@@ -1,7 +1,7 @@
 """`fleet bench faults`: every shipped fault scenario on paper with four forklifts, as real
-processes on the fast clock, beside the fault-free run: how fast each fault is detected and
-recovered from (wall clock), what it costs the mission (sim time), and what the recording's
-verdicts say (docs/reliability.md).
+processes on the fast or the real-time clock, beside the fault-free run on the same clock: how
+fast each fault is detected and recovered from (wall clock), what it costs the mission (sim
+time), and what the recording's verdicts say (docs/reliability.md).
 
 Detection: from the injector applying the fault (its wall clock) to the dispatcher seeing it
 (a liveliness token gone, a forklift's report). Recovery: from there to the engine asking the
@@ -27,19 +27,20 @@ from fleet.recording import Recording, read_recording
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
 
 
-def run(names: list[str] | None = None, say: Callable[[str], None] = print) -> dict:
+def run(names: list[str] | None = None, say: Callable[[str], None] = print,
+        clock: str = "fast", speed: float = 1.0) -> dict:
     """One row per scenario (a kind's own scenario is named after the kind), and the
     fault-free run's as "fault_free"."""
     names = names or builtin_scenarios()
     with tempfile.TemporaryDirectory() as tmp:
-        say("fault-free run ...")
-        base = _run(Path(tmp) / "none", None)
+        say(f"fault-free run ({clock} clock) ...")
+        base = _run(Path(tmp) / "none", None, clock, speed)
         base_end = base["end_time_s"]
         base["extra_s"] = 0.0
         rows = {"fault_free": base}
         for name in names:
             say(f"{name} ...")
-            row = _run(Path(tmp) / name, name)
+            row = _run(Path(tmp) / name, name, clock, speed)
             row["extra_s"] = round(row["end_time_s"] - base_end, 2) \
                 if row["end_time_s"] is not None else None
             rows[name] = row
@@ -47,18 +48,20 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print) -> d
     return rows
 
 
-def _run(out: Path, name: str | None) -> dict:
+def _run(out: Path, name: str | None, clock: str, speed: float) -> dict:
     scenario = load_scenario(name) if name else None
-    outcome = run_processes(RunSpec(MISSION, 4, out, faults=scenario,
+    outcome = run_processes(RunSpec(MISSION, 4, out, clock, speed, faults=scenario,
                                     faults_source=name or ""))
     recording = read_recording(out)
     report = analyze(recording)
-    detect, recover, rejoin = _timings(outcome, recording)
+    detect, recover, rejoin = timings(outcome, recording)
     return {
         "completed": outcome.done is not None and outcome.done.ok,
         "error": outcome.error,
         "end_time_s": report.end_time_s,
         "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
+        "faults": sum(not a.ends for a in outcome.injected if _timed(a.fault)),
+        "detected": len(detect),
         "detect_s": _median(detect), "detect_max_s": max(detect, default=None),
         "recover_s": _median(recover), "rejoin_s": _median(rejoin),
         "overlaps": len(report.overlaps),
@@ -71,35 +74,49 @@ def _run(out: Path, name: str | None) -> dict:
     }
 
 
-def _timings(outcome: RunOutcome, recording: Recording
+def timings(outcome: RunOutcome, recording: Recording
              ) -> tuple[list[float], list[float], list[float]]:
     """Pair the injector's actions with the dispatcher's detections (same forklift, same
-    sim instant). A dispatcher that was restarted took its detections with it: those come
-    from the recording instead, as the instant the recorder heard the halt or the resume
-    (detection plus recovery, a few milliseconds more)."""
+    sim instant on the fast clock, the next one on the real-time clock). A dispatcher that
+    was restarted took its detections with it: those come from the recording instead, as
+    the instant the recorder heard the halt or the resume (detection plus recovery, a few
+    milliseconds more)."""
     seen = list(outcome.done.detections if outcome.done else [])
     for kind, up in ((Halt, False), (Resume, True)):
         for r, m in recording.of(kind):
+            if kind is Halt and m.moving:
+                continue  # halted because of another forklift's fault
             if not any(d["vehicle"] == m.vehicle and d["t"] == m.t and d["up"] == up
                        for d in seen):
                 seen.append({"vehicle": m.vehicle, "t": m.t, "up": up,
                              "detected_wall": r.log_ns / 1e9})
     detect, recover, rejoin = [], [], []
+    used: set[int] = set()
     for applied in outcome.injected:
         fault = applied.fault
-        if fault.kind not in VEHICLE_KINDS or fault.kind.value == "slow_planner":
+        if not _timed(fault):
             continue
+        # The first sighting of this forklift going (or coming back) after the action: on
+        # the fast clock at the fault's own instant, on the real-time one when noticed.
         t = fault.until if applied.ends else fault.at
-        match = [d for d in seen if d["vehicle"] == fault.vehicle and d["up"] == applied.ends
-                 and d["t"] == t]
+        match = [i for i, d in enumerate(seen) if i not in used and
+                 d["vehicle"] == fault.vehicle and d["up"] == applied.ends and
+                 (d["t"] == t or d["detected_wall"] >= applied.wall)]
         if not match:
-            continue
-        found = match[0]
+            continue  # not seen: a stall or a cut link shorter than the lease, in real time
+        i = min(match, key=lambda i: (seen[i]["t"] != t, seen[i]["detected_wall"]))
+        used.add(i)
+        found = seen[i]
         latency = max(0.0, found["detected_wall"] - applied.wall)
         (rejoin if applied.ends else detect).append(round(latency, 3))
         if not applied.ends and "recovered_wall" in found:
             recover.append(round(found["recovered_wall"] - found["detected_wall"], 3))
     return detect, recover, rejoin
+
+
+def _timed(fault) -> bool:
+    """A fault the dispatcher detects: a forklift's (a slow planner is not noticed)."""
+    return fault.kind in VEHICLE_KINDS and fault.kind.value != "slow_planner"
 
 
 def _median(values: list[float]) -> float | None:

@@ -11,11 +11,13 @@ reproducible as any other and detection costs no sim time (docs/faults.md).
 Real time: sim time = speed x wall time since the start; ticks carry the wall anchor so every
 process computes the same "now". The dispatcher decides a subtask a little ahead of the
 forklift's free time; a forklift whose free time has already passed waits until the next
-instant a plan can still be ready for.
+instant a plan can still be ready for. Faults are noticed as they come, and frozen a margin
+ahead of now, so that every forklift that can move hears of the freeze before it.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -23,9 +25,9 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.bus import RELIABLE, Keys, received
-from fleet.faults import Scenario
+from fleet.faults import FaultKind, Scenario
 from fleet.protocol import ClockAck, ClockTick, VehicleFault, encode
-from fleet.recovery import Disruption, VehicleDown, VehicleUp, scheduled_at
+from fleet.recovery import BREAKDOWN, Disruption, VehicleDown, VehicleUp, ZoneClosure, scheduled_at
 
 SENDER = "clock"
 ACK_TIMEOUT_S = 60.0
@@ -153,6 +155,9 @@ class FastClock:
         return expected
 
 
+    def instant(self, t: float) -> float:
+        return t  # sim time stands still while the engine recovers
+
     def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
         self.advance(t_next)
         return t_free
@@ -172,20 +177,40 @@ def _who(late: list[int]) -> str:
 
 
 class RealtimeClock:
+    """Sim time = speed x wall time since the start. Faults are not waited for: the clock
+    notices them as they come (a liveliness token gone or back, a forklift's report, a zone
+    whose time has come) and the engine freezes at the first instant every forklift that can
+    move can still be told of: now + `margin` (docs/faults.md)."""
+
     TICK_PERIOD_S = 0.5
 
     def __init__(self, session: zenoh.Session, keys: Keys, speed: float, vehicles: list[int],
-                 liveness: Liveness, lead_wall_s: float = 0.3) -> None:
+                 liveness: Liveness, log, scenario: Scenario | None = None, tick: int = 0,
+                 t: float = 0.0, wall: float = 0.0, lead_wall_s: float = 0.3,
+                 margin_wall_s: float = 0.5) -> None:
+        """`tick`, `t` and `wall`: the last tick a restarted dispatcher's forklifts heard
+        (the clock goes on from its anchor; they refuse a tick numbered before it)."""
         if speed <= 0:
             raise ValueError(f"--speed must be positive, not {speed}")
         self.speed = speed
         self.vehicles = vehicles
         self.liveness = liveness
+        self.log = log
         self.lead = lead_wall_s * speed  # decide this much sim time ahead
-        self.wall0 = time.time()
-        self.tick = 0
+        self.margin = margin_wall_s * speed  # a freeze this much ahead reaches everyone
+        self.zones = sorted((f for f in scenario.faults if f.kind is FaultKind.CLOSE_ZONE
+                             and f.at > t), key=lambda f: f.at) if scenario else []
+        self.last_instant = max(scenario.instants(), default=0.0) if scenario else 0.0
+        self.down: frozenset[int] = frozenset()
+        self.generation: dict[int, int] = {}  # each token's appearances when last known up
+        self.reports: dict[int, str] = {}  # forklift -> "broken" / "repaired", not yet acted on
+        self.detected: list[dict] = []  # as FastClock's, for `fleet bench faults`
+        self.wall0 = wall - t / speed if wall else time.time()
+        self.tick = tick
+        self.publishing = threading.Lock()  # ticks go out numbered in order, from two threads
         self.stopping = threading.Event()
         self.publisher = session.declare_publisher(keys.clock, congestion_control=RELIABLE)
+        self.subscriber = session.declare_subscriber(keys.vehicle_fault("*"), self._on_fault)
         self._publish()
         self.ticker = threading.Thread(target=self._tick, daemon=True)
         self.ticker.start()
@@ -193,20 +218,37 @@ class RealtimeClock:
     def now(self) -> float:
         return (time.time() - self.wall0) * self.speed
 
+    def instant(self, t: float) -> float:
+        return max(t, self.now() + self.margin)
+
     def _publish(self) -> None:
-        self.tick += 1
-        wall = time.time()
-        t = (wall - self.wall0) * self.speed
-        self.publisher.put(encode(ClockTick(self.tick, "realtime", t, self.speed, wall),
-                                  SENDER, self.tick, t))
+        with self.publishing:
+            self.tick += 1
+            wall = time.time()
+            t = (wall - self.wall0) * self.speed
+            self.publisher.put(encode(ClockTick(self.tick, "realtime", t, self.speed, wall,
+                                                down=sorted(self.down)), SENDER, self.tick, t))
+
+    def _held_down(self, down: frozenset[int]) -> None:
+        """Say at once who is down: a forklift must hear it before its freeze instant (it
+        then stays silent), and one resumed must not hear it again afterwards."""
+        if down != self.down:
+            self.down = down
+            self._publish()
 
     def _tick(self) -> None:
         while not self.stopping.wait(self.TICK_PERIOD_S):
             self._publish()
 
+    def _on_fault(self, sample: zenoh.Sample) -> None:
+        message = received(sample, VehicleFault, self.log)
+        if message is not None and message.vehicle in self.vehicles:
+            with self.liveness.changed:
+                self.reports[message.vehicle] = message.state
+                self.liveness.changed.notify_all()
+
     def wait_until(self, t: float) -> None:
         while (ahead := t - self.now()) > 0:
-            self.liveness.check(self.vehicles)
             self.stopping.wait(min(ahead / self.speed, 0.5))
 
     def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
@@ -218,9 +260,58 @@ class RealtimeClock:
         self.wait_until(t_end)
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
-        return []  # faults run on the fast clock for now (fleet run refuses the others)
+        """Wait for the next decision's time, returning early with whatever happens
+        meanwhile. With nobody to decide for (every forklift left is down), wait for one to
+        come back until the scenario's last instant, plus DETECT_TIMEOUT_S."""
+        self._held_down(down)
+        for seen in self.detected:
+            seen.setdefault("recovered_wall", time.time())
+        target = t_next - self.lead if math.isfinite(t_next) else \
+            max(self.last_instant, self.now()) + DETECT_TIMEOUT_S * self.speed
+        with self.liveness.changed:  # liveliness and fault reports notify it
+            while not (found := self._noticed(down)):
+                ahead = min([target, *(z.at for z in self.zones)]) - self.now()
+                if target <= self.now():
+                    return []
+                self.liveness.changed.wait(min(max(ahead, 0.0) / self.speed, 0.5))
+        self._held_down(down - {d.vehicle for d in found if isinstance(d, VehicleUp)}
+                        | {d.vehicle for d in found if isinstance(d, VehicleDown)})
+        for d in found:
+            self.detected.append({"what": repr(d), "vehicle": getattr(d, "vehicle", None),
+                                  "up": isinstance(d, VehicleUp), "t": d.t,
+                                  "detected_wall": time.time()})
+            self.log.info("noticed %s at t=%.2f", d, self.now())
+        return found
+
+    def _noticed(self, down: frozenset[int]) -> list[Disruption]:
+        """What changed since the engine last heard (called holding liveness.changed)."""
+        t = self.instant(self.now())
+        alive, appeared = self.liveness.alive, self.liveness.appeared
+        found: list[Disruption] = []
+        for v in sorted(down):  # back: its token came again since it was last known up
+            again = v in alive and appeared.get(v, 0) > self.generation.get(v, 0)
+            if (again and self.reports.get(v) != "broken") or \
+                    self.reports.get(v) == "repaired":
+                self.reports.pop(v, None)
+                self.generation[v] = appeared.get(v, 0)
+                found.append(VehicleUp(v, t))
+        for v in self.vehicles:
+            if v in down:
+                continue
+            if v not in alive:
+                found.append(VehicleDown(v, t, "agent lost (its liveliness token is gone)"))
+                continue
+            self.generation[v] = appeared.get(v, 0)
+            if self.reports.get(v) == "broken":
+                found.append(VehicleDown(v, t, BREAKDOWN))
+        while self.zones and self.zones[0].at <= self.now():
+            zone = self.zones.pop(0)
+            if zone.until > t:
+                found.append(ZoneClosure(frozenset(zone.cells), t, zone.until))
+        return found
 
     def close(self) -> None:
         self.stopping.set()
         self.ticker.join()
+        self.subscriber.undeclare()
         self.publisher.undeclare()

@@ -19,6 +19,7 @@ class Liveness:
         self.keys = keys
         self.alive: set[int] = set()
         self.lost: set[int] = set()
+        self.appeared: dict[int, int] = {}  # how many times each token came (back)
         self.service_alive = False
         self.recorder_alive = False
         self.changed = threading.Condition()
@@ -36,6 +37,7 @@ class Liveness:
         with self.changed:
             if sample.kind == zenoh.SampleKind.PUT:
                 self.alive.add(vehicle)
+                self.appeared[vehicle] = self.appeared.get(vehicle, 0) + 1
             else:
                 self.alive.discard(vehicle)
                 self.lost.add(vehicle)

@@ -72,13 +72,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the command line that started the run, for its recording (default: "
                    "this process's)")
     p.add_argument("--faults", help="fault scenario (docs/faults.md): the fast clock stops "
-                   "at its instants until each fault is detected")
+                   "at its instants until each fault is detected; the real-time clock "
+                   "closes its zones when their time comes")
     p.add_argument("--recorded", action="store_true",
                    help="fast clock: hold sim time while no recorder runs, so a recorder "
                    "killed and restarted misses nothing that happened meanwhile")
     p.add_argument("--recover", action="store_true",
                    help="a restarted dispatcher: pick the mission up from what the "
-                   "reservation service and the forklifts hold (fill missions, fast clock)")
+                   "reservation service and the forklifts hold (fill missions)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit after publishing the result (once the recorder has it, with "
                    "--recorded) instead of waiting to be stopped")
@@ -211,9 +212,9 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         liveness.wait_for(vehicles, args.startup_timeout)
         log.info("%d forklifts and the reservation service are up", len(vehicles))
         executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
-        recovered, tick = None, 0
+        recovered, tick, wall = None, 0, 0.0
         if args.recover:
-            recovered, tick = pick_up(executor, layout, vehicles, options.params)
+            recovered, tick, wall = pick_up(executor, layout, vehicles, options.params)
             log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
                      len(recovered.done) + len(recovered.undelivered))
         if args.clock == "fast":
@@ -221,7 +222,9 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
             clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded,
                               tick, recovered.t if recovered else 0.0)
         else:
-            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness)
+            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness, log,
+                                  load_scenario(args.faults) if args.faults else None,
+                                  tick, recovered.t if recovered else 0.0, wall)
 
         def progress(done: int, total: int, t: float, failures: int) -> None:
             publish(Progress(done, total, t, failures), t)

@@ -20,8 +20,9 @@ from fleet.wire import step_from_wire
 
 
 def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
-            params: DispatchParams) -> tuple[Recovered, int]:
-    """The mission as the store and the forklifts hold it, and the last tick they heard."""
+            params: DispatchParams) -> tuple[Recovered, int, float]:
+    """The mission as the store and the forklifts hold it, and the last tick they heard: its
+    number and (real time) its wall anchor."""
     statuses = [executor.status(v) for v in vehicles]
     held = []
     for s in statuses:
@@ -40,6 +41,6 @@ def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
         held.append(Held(s.vehicle, pose, leg, s.loaded, s.kind, s.down))
     goods = {r.cell: r.t0 for r in executor.store.reservations(GOODS) if r.t1 == math.inf}
     stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
-    t = max((s.t for s in statuses), default=0.0)
-    tick = max((s.tick for s in statuses), default=0)
-    return recovered_state(stacks, goods, held, t, params.t_claim, params.t_unload), tick
+    last = max(statuses, key=lambda s: s.tick)
+    return recovered_state(stacks, goods, held, last.t, params.t_claim, params.t_unload), \
+        last.tick, last.wall

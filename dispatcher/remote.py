@@ -93,7 +93,7 @@ class RemoteExecutor:
             self._sync(reply.revision)
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
-               zone_until: float, moving: list[int]) -> None:
+               zone_until: float, moving: list[int], standing: list[int]) -> None:
         """Commit the freeze to the store change by change (releases first: each change is
         valid on its own), then tell the forklifts that can move to stop."""
         for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
@@ -109,6 +109,8 @@ class RemoteExecutor:
             self._sync(reply.revision)
         for vehicle in moving:
             self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t), t)
+        for vehicle in standing:
+            self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t, True), t)
 
     def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
         step = step_to_wire(freeze.step) if freeze.step is not None else None

@@ -16,6 +16,7 @@ import bisect
 import functools
 import itertools
 import math
+import re
 from collections import Counter, defaultdict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -151,6 +152,7 @@ class Report:
     messages: dict[str, int]  # per message type
     messages_lost: int
     gaps: list[Gap]
+    messages_cut_off: int  # sent by a forklift around the time it was down: never arrived
     malformed: int  # payloads that were no valid message (recorded as they came)
     foreign: int  # valid messages on a key not theirs, or from a sender not the key's
     overlaps: list = field(default_factory=list)
@@ -200,9 +202,13 @@ class Report:
         if self.unverified:
             set_aside = (len(self.outside_reservation_unverified)
                          + len(self.double_bookings_unverified))
-            unchecked = (f"; {len(self.unverified)} windows not verified (no recorder "
-                         f"running)" + (f", {set_aside} findings in them not judged"
-                                        if set_aside else ""))
+            silent = sum(u.why.startswith(SILENT) for u in self.unverified)
+            why = ", ".join(part for part in (
+                f"{len(self.unverified) - silent} with no recorder running"
+                if len(self.unverified) > silent else "",
+                f"{silent} of a forklift {SILENT}" if silent else "") if part)
+            unchecked = (f"; {len(self.unverified)} windows not verified ({why})"
+                         + (f", {set_aside} findings in them not judged" if set_aside else ""))
         return [
             f"safety             {mark(self.safe)}: {len(self.overlaps)} overlaps, "
             f"{len(self.outside_reservation)} moments outside a reservation, "
@@ -214,6 +220,8 @@ class Report:
                f"only)" if self.stacks_not_recorded else ""),
             f"messages           {mark(self.messages_lost == 0)}: "
             f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
+            + (f"{self.messages_cut_off} sent while cut off, " if self.messages_cut_off
+               else "")
             + (f"{self.messages_not_recorded} not recorded (no recorder running), "
                if self.recorder_gaps else "")
             + f"{self.malformed} malformed, {self.foreign} foreign",
@@ -323,11 +331,19 @@ def analyze(recording: Recording) -> Report:
     stacks -= Counter((m.cluster, m.index) for _, m in recording.of(StackReopened))
     expected = {(s.cluster, s.index) for s in layout.stacks}
     holes = sequence_holes(recording)
-    lost = [h for h in holes if not h.window]
+    down_halts = [m for _, m in recording.of(Halt) if not m.moving]
+    late = LOSS_NOTICED_WALL_S * info.speed if info.clock == "realtime" else 0.0
+    cut_off = [h for h in holes if not h.window and _while_down(h, down_halts, late)]
+    lost = [h for h in holes if not h.window and h not in cut_off]
     unrecorded = [h for h in holes if h.window]
     gaps = _stream_gaps(lost)
     downs = {g: _recorder_down(recording, g) for g in recording.gaps}
-    unverified = unverified_windows(recording, unrecorded, downs)
+    unverified = unverified_windows(recording, unrecorded, downs) + \
+        silent_windows(states, down_halts, _state_period(info)) + \
+        [Unverified("states", h.right.envelope.message.vehicle,
+                    h.left.envelope.sim_time if h.left else 0.0, h.right.envelope.sim_time,
+                    f"{SILENT} ({h.missing} states sent while cut off)")
+         for h in cut_off if message_type(h.key) is VehicleState]
     outside = outside_reservation(samples, held, body)
     bookings = double_bookings(held)
     judged = [not _unknown(unverified, o.vehicle, o.t, o.t) for o in outside]
@@ -355,6 +371,7 @@ def analyze(recording: Recording) -> Report:
         messages=dict(Counter(r.envelope.message.TYPE for r in recording.messages
                               if r.genuine)),
         messages_lost=sum(g.missing for g in gaps), gaps=gaps,
+        messages_cut_off=sum(h.missing for h in cut_off),
         malformed=sum(r.envelope is None for r in recording.messages)
         + len(states) - len(usable),
         foreign=len(recording.foreign),
@@ -382,11 +399,14 @@ def standing_samples(recording: Recording, instants: list[float]) -> list[Sample
     """Where a forklift that was down stood at each recorded instant until it moved again:
     it says nothing then, the dispatcher's halt says where (so the check covers it too)."""
     resumes = sorted((m.vehicle, m.t) for _, m in recording.of(Resume))
+    # A forklift heard again was resumed, even if the resume was sent while no recorder ran.
+    heard = sorted((m.vehicle, r.envelope.sim_time) for r, m in recording.of(VehicleState))
     out = []
     for _, halt in recording.of(Halt):
         if halt.moving:
             continue
-        until = min((t for v, t in resumes if v == halt.vehicle and t >= halt.t),
+        until = min([t for v, t in resumes if v == halt.vehicle and t >= halt.t]
+                    + [t for v, t in heard if v == halt.vehicle and t > halt.t],
                     default=math.inf)
         first = bisect.bisect_left(instants, halt.t)
         last = bisect.bisect_left(instants, until)
@@ -514,6 +534,46 @@ def unverified_windows(recording: Recording, unrecorded: list[Hole],
                     found.append(Unverified("reservations", vehicle, start, until,
                                             f"{h.missing} table changes not recorded"))
     return found
+
+
+SILENT = "silent from its fault until the freeze"
+# Real time: a lost link is noticed within the zenoh lease (1 s) and frozen a margin (0.5 s)
+# later; with room for the rest, a forklift's freeze comes at most this long after its loss.
+LOSS_NOTICED_WALL_S = 2.0
+
+
+def _state_period(info) -> float:
+    """The grid of state instants the agents publish on (vehicle_agent/agent.py)."""
+    return min(info.speed * 0.1, 0.5) if info.clock == "realtime" else 0.5
+
+
+def silent_windows(states: list[tuple[float, VehicleState]], down_halts: list[Halt],
+                   period: float) -> list[Unverified]:
+    """A forklift that died, stalled or was cut off says nothing from its fault on. On the
+    real-time clock it is frozen only once that is noticed, a margin ahead (docs/faults.md),
+    and is taken to follow its committed plan until then: no check sees it meanwhile."""
+    found = []
+    for halt in down_halts:
+        before = [t for t, m in states if m.vehicle == halt.vehicle and t < halt.t]
+        last = max(before, default=0.0)
+        if halt.t - last > 1.5 * period:
+            found.append(Unverified("states", halt.vehicle, last, halt.t,
+                                    f"{SILENT} ({halt.cause})"))
+    return found
+
+
+def _while_down(hole: Hole, down_halts: list[Halt], late: float) -> bool:
+    """Whether the messages missing from a forklift's own stream were sent about when it
+    went down (cut off, stalled: they never left it), rather than lost on the way: the
+    hole spans its halt, or on the real-time clock began at most `late` before it (a link
+    cut shorter than that may be back before the forklift is frozen)."""
+    match = re.fullmatch(r"vehicle-(\d+)", hole.sender)
+    if match is None:
+        return False
+    vehicle = int(match.group(1))
+    t0 = hole.left.envelope.sim_time if hole.left is not None else 0.0
+    return any(h.vehicle == vehicle and t0 <= h.t <= max(hole.right.envelope.sim_time,
+                                                         t0 + late) for h in down_halts)
 
 
 def _unknown(unverified: list[Unverified], vehicle: int, t0: float, t1: float) -> bool:

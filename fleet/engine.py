@@ -37,6 +37,7 @@ from fleet.protocol import (
     ZoneClosed,
 )
 from fleet.recovery import (
+    BREAKDOWN,
     Disruption,
     Freeze,
     Motion,
@@ -320,7 +321,8 @@ class Engine:
                 try:
                     result = self._plan(decision)
                 except VehicleLost as exc:  # gone without a scheduled fault: recover all the same
-                    self.disrupt(VehicleDown(exc.vehicle, self.now, f"agent lost: {exc}"))
+                    self.disrupt(VehicleDown(exc.vehicle, self.pacer.instant(self.now),
+                                             f"agent lost: {exc}"))
                     failed = [v for v in failed if v != exc.vehicle]
                     continue
                 if isinstance(result, Trajectory):
@@ -442,8 +444,10 @@ class Engine:
             self._emit(self._halt_event(freeze, why, moving=not down), t)
         if zone:
             self._emit(ZoneClosed(sorted(result.zone), t, until), t)
+        broken = isinstance(disruption, VehicleDown) and disruption.cause == BREAKDOWN
         self.executor.freeze(t, list(result.freezes.values()), goods, result.zone, until,
-                             moving=[v for v in result.freezes if v not in self.down])
+                             moving=[v for v in result.freezes if v not in self.down],
+                             standing=sorted(first) if broken else [])
 
     def _goods_pending(self, t: float) -> Callable[[Cell], int | None]:
         """Which forklift's delivery, not yet arrived at t, reserved goods on a cell."""

@@ -68,11 +68,12 @@ class Executor(Protocol):
         vehicle holds the cell, exactly as the table refuses a conflicting commit."""
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
-               zone_until: float, moving: list[int]) -> None:
+               zone_until: float, moving: list[int], standing: list[int]) -> None:
         """Make the table say what the freezes say: each frozen forklift holds its cells from
         t to infinity and nothing else after t, the goods of cancelled deliveries go, the zone
         is held by ZONE until `zone_until`; the `moving` forklifts are told to stop after
-        their maneuver in progress."""
+        their maneuver in progress, the `standing` ones (broken down) to stand where they
+        are at t."""
 
     def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
         """A forklift that was down moves again from t, completing its interrupted maneuver."""
@@ -91,6 +92,10 @@ class Pacer(Protocol):
         """Hold the clock at each fault instant up to t_next and say what happened to the
         schedule there (forklifts down or back, zones closed; [] if nothing did). `down` are
         the forklifts the engine holds as down: nobody waits for them."""
+
+    def instant(self, t: float) -> float:
+        """The first sim instant, not before t, at which a change decided now can still take
+        effect (a freeze every forklift must hear of before it)."""
 
 
 GOODS = 0  # owner id of stacks with goods on them, in the reservation table
@@ -141,7 +146,7 @@ class LocalExecutor:
             self._log(GOODS, intervals, None)
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
-               zone_until: float, moving: list[int]) -> None:
+               zone_until: float, moving: list[int], standing: list[int]) -> None:
         for change in freeze_changes(t, freezes, goods, zone, zone_until):
             owner, intervals, release_from, cells = change
             if intervals:
@@ -185,3 +190,6 @@ class NoPacer:
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         return []
+
+    def instant(self, t: float) -> float:
+        return t

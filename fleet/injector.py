@@ -32,6 +32,7 @@ SENDER = "injector"
 INJECTOR_ID = 0  # its ClockAck's vehicle field
 ACK_WAIT_S = 10.0
 SERVICE_GONE_S = 10.0
+DUE = object()  # the worker's wake-up for an action due on a real-time clock
 
 
 @dataclass(frozen=True)
@@ -89,16 +90,29 @@ class Injector:
             proxy.close()
 
     def _work(self) -> None:
+        """Fast clock: apply what is due by each tick, then acknowledge it. Real time: apply
+        each action when the clock's anchor says its instant has come."""
         last: ClockTick | None = None
-        while (sample := self.inbox.get()) is not None:
-            tick = received(sample, ClockTick, log)
-            if tick is None or (last is not None and tick.tick <= last.tick):
+        while True:
+            try:
+                sample = self.inbox.get(timeout=self._until_due(last))
+            except queue.Empty:  # real time: the next action's instant has come
+                sample = DUE
+            if sample is None:
+                return
+            if sample is not DUE:
+                tick = received(sample, ClockTick, log)
+                if tick is None or (last is not None and tick.tick <= last.tick):
+                    continue
+                last = tick
+            if last is None:
                 continue
-            last = tick
-            while self.actions and self.actions[0][0].t <= tick.t:
+            fast = last.mode == "fast"
+            now = last.t if fast else last.t + last.speed * (time.time() - last.wall)
+            while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
-                if action.vehicle is not None:  # what it said up to now is on its way first
-                    self._wait_ack(action.vehicle, tick.tick)
+                if action.vehicle is not None and fast:  # what it said is on its way first
+                    self._wait_ack(action.vehicle, last.tick)
                 try:
                     action.apply()
                 except (OSError, RequestFailed, RuntimeError) as exc:  # never stop the clock
@@ -106,7 +120,15 @@ class Injector:
                 self.applied.append(Applied(action.what, action.t, time.time(), fault,
                                             action.ends))
                 log.warning("t=%.2f: %s", action.t, action.what)
-            self.ack.put(ClockAck(tick.tick, INJECTOR_ID), tick.t)
+            if fast and sample is not DUE:
+                self.ack.put(ClockAck(last.tick, INJECTOR_ID), last.t)
+
+    def _until_due(self, last: ClockTick | None) -> float | None:
+        """Wall seconds to the next action on a real-time clock (None: wait for a tick)."""
+        if last is None or last.mode == "fast" or not self.actions:
+            return None
+        due = last.wall + (self.actions[0][0].t - last.t) / last.speed
+        return max(0.0, due - time.time())
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
         ack = received(sample, ClockAck, log)

@@ -72,6 +72,12 @@ class CommitRequest(Message):
     vehicle: int
     intervals: list[WireInterval]
     release_from: float | None = None  # release the vehicle's reservations from here first
+    # The table revision the dispatcher's task was issued at: refused if the dispatcher has
+    # halted the vehicle since (a forklift cut off mid-task must not undo its freeze).
+    based_on: int | None = None
+    # Real time: the Unix time after which it is refused (the plan's start would be past,
+    # and releasing from there would rewrite what was already driven).
+    deadline: float | None = None
 
 
 @dataclass(frozen=True)
@@ -273,12 +279,14 @@ class DecisionFailure(Message):
 @dataclass(frozen=True)
 class HaltRequest(Message):
     """The dispatcher freezes a forklift at t (docs/faults.md): it completes the maneuver in
-    progress and drives nothing it committed after it."""
+    progress and drives nothing it committed after it; with `stand` (it broke down), it
+    stands where it is at t instead, until resumed."""
 
     TYPE: ClassVar[str] = "dispatch.halt_request"
     request_id: str
     vehicle: int
     t: float
+    stand: bool = False
 
 
 @dataclass(frozen=True)
@@ -321,6 +329,7 @@ class VehicleStatus(Message):
     down: bool = False
     tick: int = 0
     t: float = 0.0
+    wall: float = 0.0  # real time: the last tick's wall anchor (Unix time at sim time t)
 
 
 @dataclass(frozen=True)

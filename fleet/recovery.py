@@ -149,8 +149,9 @@ class ZoneClosure:
 
 
 Disruption = VehicleDown | VehicleUp | ZoneClosure
+BREAKDOWN = "breakdown"  # the one cause whose forklift still hears: it is told to stand
 CAUSES = {FaultKind.KILL_VEHICLE: "agent killed", FaultKind.STALL_VEHICLE: "agent stalled",
-          FaultKind.CUT_LINK: "link lost", FaultKind.VEHICLE_BREAKDOWN: "breakdown"}
+          FaultKind.CUT_LINK: "link lost", FaultKind.VEHICLE_BREAKDOWN: BREAKDOWN}
 
 
 def scheduled_at(scenario: Scenario, t: float) -> list[Disruption]:
@@ -184,6 +185,9 @@ class ScheduledPacer:
 
     def finish(self, t_end: float) -> None:
         pass
+
+    def instant(self, t: float) -> float:
+        return t
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         while self.pending and self.pending[0] <= t_next:

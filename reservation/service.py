@@ -15,6 +15,7 @@ import queue
 import re
 import socket
 import threading
+import time
 from pathlib import Path
 
 import zenoh
@@ -89,7 +90,7 @@ class ReservationService:
                     Reply(getattr(envelope.message, "request_id", ""), False,
                           self.store.revision, reason=refusal)))
                 return []
-            outcome = self.store.handle(envelope.message)
+            outcome = self.store.handle(envelope.message, time.time())
             query.reply(query.key_expr, self._encode(outcome.reply))
             return outcome.published
         finally:

@@ -62,6 +62,7 @@ class ReservationStore:
         self.journal = Journal(journal_path) if journal_path else None
         self.torn_bytes = 0
         self.log: list[Change] = []
+        self.halted_at: dict[int, int] = {}  # vehicle -> revision of its last release
         if self.journal is not None:
             replayed = self.journal.replay()
             self.torn_bytes = replayed.torn_bytes
@@ -72,13 +73,15 @@ class ReservationStore:
     def revision(self) -> int:
         return self.table.revision
 
-    def handle(self, message: Message) -> Outcome:
+    def handle(self, message: Message, wall: float = 0.0) -> Outcome:
+        """`wall`: the Unix time the request arrived (a commit's deadline is checked
+        against it)."""
         if isinstance(message, CommitRequest | ReleaseRequest):
             known = self.replies.get(message.request_id)
             if known is not None:
                 return Outcome(known)  # a retry: same answer, nothing applied twice
         if isinstance(message, CommitRequest):
-            return self._commit(message)
+            return self._commit(message, wall)
         if isinstance(message, ReleaseRequest):
             change = Change(self.revision + 1, "release", message.vehicle, [],
                             message.from_t, message.request_id,
@@ -89,11 +92,23 @@ class ReservationStore:
         return Outcome(Reply("", False, self.revision,
                              reason=f"{message.TYPE} is not a request the store answers"))
 
-    def _commit(self, request: CommitRequest) -> Outcome:
+    def _commit(self, request: CommitRequest, wall: float) -> Outcome:
         try:
             intervals = to_intervals(request.intervals)
         except ValueError as exc:
             return Outcome(Reply(request.request_id, False, self.revision, reason=str(exc)))
+        halted = self.halted_at.get(request.vehicle, -1)
+        refusal = ""
+        if request.based_on is not None and halted > request.based_on:
+            refusal = f"vehicle {request.vehicle} was halted at revision {halted}, after " \
+                f"its task's revision {request.based_on}"
+        elif request.deadline is not None and wall > request.deadline:
+            refusal = f"arrived {wall - request.deadline:.3f} s after its deadline (the " \
+                f"plan's start has passed)"
+        if refusal:  # no conflict: the requester must not replan the same task
+            reply = Reply(request.request_id, False, self.revision, reason=refusal)
+            self._remember(reply)
+            return Outcome(reply)
         # Only other vehicles' intervals can conflict, so releasing first changes nothing here.
         conflict = self.table.first_conflict(request.vehicle, intervals)
         if conflict is not None:
@@ -116,6 +131,8 @@ class ReservationStore:
     def _apply(self, change: Change) -> None:
         self.table.apply(table_change(change))
         self.log.append(change)
+        if change.op == "release":  # only the dispatcher releases: a freeze (docs/faults.md)
+            self.halted_at[change.vehicle] = change.revision
         if change.request_id:
             self._remember(Reply(change.request_id, True, change.revision))
 

@@ -122,3 +122,36 @@ def test_journal_replay_matches_the_live_table(tmp_path_factory, ops):
     again = ReservationStore(path)
     assert again.table.reservations() == store.table.reservations()
     assert [body_of(c) for c in again.log] == [body_of(c) for c in store.log]
+
+
+def test_a_task_issued_before_the_vehicle_was_halted_cannot_commit(tmp_path):
+    """A forklift cut off mid-task commits once its link is back: its freeze (a release by
+    the dispatcher) came after the task was issued, so the commit must not undo it; a task
+    issued after the halt commits as usual. A restarted store remembers the halt."""
+    journal = tmp_path / "j"
+    store = ReservationStore(journal)
+    store.handle(commit("park", 1, [(0, 0)], t1=INF))
+    issued = store.revision
+    store.handle(ReleaseRequest("freeze", 1, 5.0))
+    store.handle(commit("frozen", 1, [(0, 0)], t0=5.0, t1=INF))
+    late = CommitRequest("late", 1, [(1, 0, 6.0, 8.0)], 6.0, based_on=issued)
+    out = store.handle(late)
+    assert not out.reply.ok and out.reply.conflict_vehicle is None and out.published == []
+    assert "halted at revision 2" in out.reply.reason
+    store.close()
+    again = ReservationStore(journal)
+    assert not again.handle(CommitRequest("late2", 1, [(1, 0, 6.0, 8.0)], 6.0,
+                                          based_on=issued)).reply.ok
+    resumed = CommitRequest("after", 1, [(1, 0, 9.0, 10.0)], 9.0, based_on=again.revision)
+    assert again.handle(resumed).reply.ok
+    again.close()
+
+
+def test_a_commit_after_its_deadline_is_refused_and_answered_the_same_when_retried():
+    store = ReservationStore()
+    request = CommitRequest("rt", 1, [(0, 0, 4.0, 6.0)], 4.0, deadline=1000.0)
+    out = store.handle(request, wall=1000.5)
+    assert not out.reply.ok and "0.500 s after its deadline" in out.reply.reason
+    assert store.handle(request, wall=999.0).reply == out.reply  # a retry: the same answer
+    assert store.handle(CommitRequest("rt2", 1, [(0, 0, 4.0, 6.0)], 4.0, deadline=1000.0),
+                        wall=999.0).reply.ok

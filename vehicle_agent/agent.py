@@ -61,6 +61,12 @@ DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
 SIM_TIME_LIMIT_S = 1e7
 MAX_SPEED = 1e4
 SYNC_TIMEOUT_S = 10.0
+# Real time: a forklift that has not heard the clock (ticks every 0.5 s) for this long
+# publishes no state: it may be down, and the dispatcher's word on where it stands is awaited.
+CLOCK_SILENCE_S = 1.0
+# Real time: a commit must be applied this long before its plan starts, so that the reply is
+# back before the forklift is due to move (else it would have stood where it no longer holds).
+COMMIT_SLACK_S = 0.05
 
 
 def realtime_period(speed: float) -> float:
@@ -106,6 +112,13 @@ class SimClock:
             return tick.t + tick.speed * (time.time() - tick.wall)
         return tick.t
 
+    def wall_at(self, t: float) -> float | None:
+        """Real time: the Unix time at which sim time is t (None on the fast clock)."""
+        tick = self.tick
+        if tick is None or tick.mode != "realtime":
+            return None
+        return tick.wall + (t - tick.t) / tick.speed
+
 
 class Stopped(Exception):
     """SIGTERM or SIGINT: the agent leaves whatever it was doing."""
@@ -139,6 +152,7 @@ class Agent:
         # the forklift stands and that it moves again (ResumeRequest). Says nothing meanwhile.
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
+        self.heard = 0.0  # monotonic time the last clock tick arrived
         self.fault_pub: Stream | None = None
         self.last_kind = ""  # what the last committed leg was for (a restarted dispatcher asks)
 
@@ -167,7 +181,7 @@ class Agent:
         queryable = self.session.declare_queryable(
             self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
         clock_sub = self.session.declare_subscriber(
-            self.keys.clock, lambda s: self.inbox.put(_Inbox("tick", s)))
+            self.keys.clock, lambda s: self._on_clock(s, state_pub, ack_pub))
         injector = self.session.declare_queryable(
             self.keys.vehicle_inject(self.vehicle), lambda q: self.inbox.put(_Inbox("inject", q)))
         done_sub = self.session.declare_subscriber(
@@ -182,7 +196,7 @@ class Agent:
                 if entry.kind == "task":
                     self._answer(entry.item)
                 elif entry.kind == "tick":
-                    self._on_tick(entry.item, state_pub, ack_pub)
+                    self._fast_tick(entry.item, state_pub, ack_pub)
                 elif entry.kind == "inject":
                     self._on_inject(entry.item)
                 elif exit_when_done and received(entry.item, MissionDone, log) is not None:
@@ -264,8 +278,10 @@ class Agent:
                                     f"planned for t={result.t_start:.2f} but it is already "
                                     f"t={self.clock.now():.2f}", rejections)
             log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
+            start = self.clock.wall_at(result.t_start)
             reply = self._commit(f"{self.sender}:{message.task_id}:{attempt}",
-                                 to_wire(result.intervals), result.t_start)
+                                 to_wire(result.intervals), result.t_start, message.revision,
+                                 None if start is None else start - COMMIT_SLACK_S)
             if reply.ok:
                 with self.drive_lock:
                     self.drive.add(result, task.loaded)
@@ -273,6 +289,8 @@ class Agent:
                 return result_to_wire(message.task_id, self.vehicle, result, reply.revision,
                                       rejections)
             rejections.append(reply.reason)
+            if reply.conflict_vehicle is None:  # halted since, or too late: replanning won't do
+                return self._failed(message, FailureReason.REFUSED, reply.reason, rejections)
             log.info("task %s: the store refused the commit (%s); replanning",
                      message.task_id, reply.reason)
             self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
@@ -296,11 +314,18 @@ class Agent:
         if message.vehicle != self.vehicle:
             return Reply(message.request_id, False, self.mirror.revision,
                          reason=f"halt for vehicle {message.vehicle} sent to {self.vehicle}")
+        if self.clock.realtime and self.clock.now() > message.t:
+            log.error("the halt for t=%.2f came late, at t=%.2f", message.t, self.clock.now())
         with self.drive_lock:
-            self.drive.cut(message.t)
+            if message.stand:  # broken down: it stands where it is at t
+                self.drive.stop(message.t)
+            else:
+                self.drive.cut(message.t)
+        self.down = self.down or message.stand
         self.last_kind = ""  # what was cut did not arrive
-        log.info("halted at t=%.2f: standing at %s after the maneuver in progress", message.t,
-                 self.drive.pose)
+        log.info("halted at t=%.2f: standing %s", message.t,
+                 "where it is" if message.stand else
+                 f"at {self.drive.pose} after the maneuver in progress")
         return Reply(message.request_id, True, self.mirror.revision)
 
     def _resume(self, message: ResumeRequest) -> Reply:
@@ -336,7 +361,8 @@ class Agent:
                 self.vehicle, str(self.drive.pose), leg.loaded if leg else self.drive.loaded,
                 self.last_kind if leg else "", str(leg.trajectory.start) if leg else "",
                 [step_to_wire(s) for s in leg.trajectory.steps] if leg else [], self.down,
-                tick.tick if tick else 0, tick.t if tick else 0.0)
+                tick.tick if tick else 0, tick.t if tick else 0.0,
+                tick.wall if tick else 0.0)
 
     def _on_inject(self, query: zenoh.Query) -> None:
         """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
@@ -350,10 +376,7 @@ class Agent:
             t = self.clock.now()
             if message.kind == "slow_planner":
                 self.slow = message.factor
-            elif message.kind == "breakdown":
-                with self.drive_lock:
-                    self.drive.stop(t)
-                self.down = True
+            elif message.kind == "breakdown":  # it stands once the dispatcher says when
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "broken"), t)
             elif message.kind == "repair":
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "repaired"), t)
@@ -372,10 +395,12 @@ class Agent:
         return result_to_wire(message.task_id, self.vehicle, PlanFailure(reason, detail, 0),
                               self.mirror.revision, rejections or [])
 
-    def _commit(self, request_id: str, intervals, release_from: float | None) -> Reply:
+    def _commit(self, request_id: str, intervals, release_from: float | None,
+                based_on: int | None = None, deadline: float | None = None) -> Reply:
         """Commit through the service (the requester retries a lost reply with the same
         request id, which the store applies once)."""
-        request = CommitRequest(request_id, self.vehicle, intervals, release_from)
+        request = CommitRequest(request_id, self.vehicle, intervals, release_from, based_on,
+                                deadline)
         try:
             reply = self.requester.request(self.keys.reservation_request(self.sender), request,
                                            self.clock.now()).message
@@ -386,18 +411,30 @@ class Agent:
         return reply
 
     # -- the clock and the state stream --------------------------------------------------------
-    def _on_tick(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
+    def _on_clock(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
+        """A fast tick is the worker's, in turn with tasks; a real-time one is taken at once,
+        even while the worker plans (the state thread needs to know the clock is heard)."""
         tick = received(sample, ClockTick, log)
         if tick is None:
             return
+        if tick.mode == "fast":
+            self.inbox.put(_Inbox("tick", tick))
+        else:
+            self._take(tick)
+
+    def _take(self, tick: ClockTick) -> bool:
         problem = tick_problem(tick, self.clock.tick)
         if problem:
-            log.warning("ignored tick %d on %s: %s", tick.tick, sample.key_expr, problem)
-            return
-        self.clock.tick = tick
+            log.warning("ignored tick %d on %s: %s", tick.tick, self.keys.clock, problem)
+            return False
         if self.vehicle in tick.down:
             self.down = True  # the dispatcher holds us as down: we were cut off or stalled
-        if tick.mode != "fast" or self.down:
+        self.clock.tick = tick
+        self.heard = time.monotonic()  # after `down`: the state thread reads them unlocked
+        return True
+
+    def _fast_tick(self, tick: ClockTick, state_pub, ack_pub) -> None:
+        if not self._take(tick) or tick.mode != "fast" or self.down:
             return
         self._publish_states(state_pub, tick.t, FAST_STATE_PERIOD_S, before=True)
         ack_pub.put(ClockAck(tick.tick, self.vehicle), tick.t)
@@ -410,6 +447,8 @@ class Agent:
             tick = self.clock.tick
             if tick is None or tick.mode != "realtime" or self.down:
                 continue
+            if time.monotonic() - self.heard > CLOCK_SILENCE_S:
+                continue  # cut off or stalled: silent until the clock is heard (and says)
             period = realtime_period(tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)
             ahead = (self.drive.next_k * period - self.clock.now()) / tick.speed

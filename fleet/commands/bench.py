@@ -63,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     faults.add_argument("--scenarios", help="comma-separated shipped scenarios (default all)")
     faults.add_argument("--json", action="store_true", help="print one JSON object keyed by "
                         "scenario (a kind's own scenario is named after the kind)")
+    faults.add_argument("--clock", choices=["fast", "realtime"], default="fast",
+                        help="the runs' clock (default fast)")
+    faults.add_argument("--speed", type=float, default=20.0,
+                        help="sim seconds per wall second with --clock realtime (default 20)")
     faults.set_defaults(handler=run_faults)
 
 
@@ -192,7 +196,9 @@ def run_faults(args: argparse.Namespace) -> int:
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = faults.run(names, say)
+    if args.speed <= 0:
+        raise ValueError(f"--speed must be positive, not {args.speed}")
+    result = faults.run(names, say, args.clock, args.speed)
     if not emitted_json(result, args.json):
         print(faults.table(result))
     return 0

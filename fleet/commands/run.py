@@ -169,8 +169,6 @@ def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int,
     if mission.kind is not MissionKind.FILL:
         raise UserError("--faults: fault scenarios run on fill missions for now (cancelling "
                         "a claim from a stack is not modelled yet)")
-    if clock != "fast":
-        raise UserError("--faults: fault scenarios run on the fast clock for now")
     return scenario
 
 
