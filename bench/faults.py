@@ -17,6 +17,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+from dispatcher.clock import DETECT_TIMEOUT_S
 from fleet.analysis import analyze
 from fleet.distributed import RunOutcome, RunSpec, run_processes
 from fleet.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
@@ -101,7 +102,7 @@ def timings(outcome: RunOutcome, recording: Recording
         t = fault.until if applied.ends else fault.at
         match = [i for i, d in enumerate(seen) if i not in used and
                  d["vehicle"] == fault.vehicle and d["up"] == applied.ends and
-                 (d["t"] == t or d["detected_wall"] >= applied.wall)]
+                 (d["t"] == t or 0 <= d["detected_wall"] - applied.wall <= DETECT_TIMEOUT_S)]
         if not match:
             continue  # not seen: a stall or a cut link shorter than the lease, in real time
         i = min(match, key=lambda i: (seen[i]["t"] != t, seen[i]["detected_wall"]))

@@ -131,7 +131,7 @@ class FastClock:
         started = time.monotonic()
         if isinstance(expected, VehicleDown):
             v = expected.vehicle
-            seen = (lambda: (v, "broken") in self.reports) if expected.cause == "breakdown" \
+            seen = (lambda: (v, "broken") in self.reports) if expected.cause == BREAKDOWN \
                 else (lambda: v not in self.liveness.alive)
         elif isinstance(expected, VehicleUp):
             v = expected.vehicle
@@ -153,7 +153,6 @@ class FastClock:
                               "detected_wall": time.time()})
         self.log.info("detected %s after %.3f s", expected, time.monotonic() - started)
         return expected
-
 
     def instant(self, t: float) -> float:
         return t  # sim time stands still while the engine recovers
@@ -186,10 +185,11 @@ class RealtimeClock:
 
     def __init__(self, session: zenoh.Session, keys: Keys, speed: float, vehicles: list[int],
                  liveness: Liveness, log, scenario: Scenario | None = None, tick: int = 0,
-                 t: float = 0.0, wall: float = 0.0, lead_wall_s: float = 0.3,
-                 margin_wall_s: float = 0.5) -> None:
+                 t: float = 0.0, wall: float = 0.0, closed: frozenset = frozenset(),
+                 lead_wall_s: float = 0.3, margin_wall_s: float = 0.5) -> None:
         """`tick`, `t` and `wall`: the last tick a restarted dispatcher's forklifts heard
-        (the clock goes on from its anchor; they refuse a tick numbered before it)."""
+        (the clock goes on from its anchor; they refuse a tick numbered before it);
+        `closed`: the cells the store holds as a closed zone (zones closed before it)."""
         if speed <= 0:
             raise ValueError(f"--speed must be positive, not {speed}")
         self.speed = speed
@@ -199,11 +199,14 @@ class RealtimeClock:
         self.lead = lead_wall_s * speed  # decide this much sim time ahead
         self.margin = margin_wall_s * speed  # a freeze this much ahead reaches everyone
         self.zones = sorted((f for f in scenario.faults if f.kind is FaultKind.CLOSE_ZONE
-                             and f.at > t), key=lambda f: f.at) if scenario else []
+                             and f.until > t and not set(f.cells) & closed),
+                            key=lambda f: f.at) if scenario else []
         self.last_instant = max(scenario.instants(), default=0.0) if scenario else 0.0
         self.down: frozenset[int] = frozenset()
-        self.generation: dict[int, int] = {}  # each token's appearances when last known up
-        self.reports: dict[int, str] = {}  # forklift -> "broken" / "repaired", not yet acted on
+        # Each token's appearances when its forklift was last known up (every one is, now).
+        self.generation: dict[int, int] = dict(liveness.appeared)
+        self.reports: dict[int, list[str]] = {}  # "broken" / "repaired", in order, not acted on
+        self.broken: set[int] = set()  # down because broken: back when repaired
         self.detected: list[dict] = []  # as FastClock's, for `fleet bench faults`
         self.wall0 = wall - t / speed if wall else time.time()
         self.tick = tick
@@ -244,7 +247,7 @@ class RealtimeClock:
         message = received(sample, VehicleFault, self.log)
         if message is not None and message.vehicle in self.vehicles:
             with self.liveness.changed:
-                self.reports[message.vehicle] = message.state
+                self.reports.setdefault(message.vehicle, []).append(message.state)
                 self.liveness.changed.notify_all()
 
     def wait_until(self, t: float) -> None:
@@ -274,8 +277,8 @@ class RealtimeClock:
                 if target <= self.now():
                     return []
                 self.liveness.changed.wait(min(max(ahead, 0.0) / self.speed, 0.5))
-        self._held_down(down - {d.vehicle for d in found if isinstance(d, VehicleUp)}
-                        | {d.vehicle for d in found if isinstance(d, VehicleDown)})
+        # The new ones are down from now on; one back stays listed until it is resumed.
+        self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:
             self.detected.append({"what": repr(d), "vehicle": getattr(d, "vehicle", None),
                                   "up": isinstance(d, VehicleUp), "t": d.t,
@@ -288,21 +291,29 @@ class RealtimeClock:
         t = self.instant(self.now())
         alive, appeared = self.liveness.alive, self.liveness.appeared
         found: list[Disruption] = []
-        for v in sorted(down):  # back: its token came again since it was last known up
-            again = v in alive and appeared.get(v, 0) > self.generation.get(v, 0)
-            if (again and self.reports.get(v) != "broken") or \
-                    self.reports.get(v) == "repaired":
-                self.reports.pop(v, None)
+        for v in sorted(down):
+            events = self.reports.setdefault(v, [])
+            if v in self.broken:  # back when repaired
+                if "repaired" in events:
+                    del events[:events.index("repaired") + 1]
+                    self.broken.discard(v)
+                    self.generation[v] = appeared.get(v, 0)
+                    found.append(VehicleUp(v, t))
+            elif v in alive and appeared.get(v, 0) > self.generation.get(v, 0):
+                events.clear()  # back: its token came again since it was last known up
                 self.generation[v] = appeared.get(v, 0)
                 found.append(VehicleUp(v, t))
         for v in self.vehicles:
             if v in down:
                 continue
-            if v not in alive:
-                found.append(VehicleDown(v, t, "agent lost (its liveliness token is gone)"))
-                continue
-            self.generation[v] = appeared.get(v, 0)
-            if self.reports.get(v) == "broken":
+            events = self.reports.setdefault(v, [])
+            if v not in alive or appeared.get(v, 0) > self.generation.get(v, 0):
+                # Gone, or gone and back since last asked (a short outage, an agent that
+                # restarted at once): down now, back at the next look if its token is there.
+                found.append(VehicleDown(v, t, "agent lost (its liveliness token went)"))
+            elif "broken" in events:
+                del events[:events.index("broken") + 1]
+                self.broken.add(v)
                 found.append(VehicleDown(v, t, BREAKDOWN))
         while self.zones and self.zones[0].at <= self.now():
             zone = self.zones.pop(0)

@@ -36,8 +36,9 @@ class Liveness:
             return
         with self.changed:
             if sample.kind == zenoh.SampleKind.PUT:
+                if vehicle not in self.alive:  # history and live may both report a token
+                    self.appeared[vehicle] = self.appeared.get(vehicle, 0) + 1
                 self.alive.add(vehicle)
-                self.appeared[vehicle] = self.appeared.get(vehicle, 0) + 1
             else:
                 self.alive.discard(vehicle)
                 self.lost.add(vehicle)
@@ -74,14 +75,6 @@ class Liveness:
         """Give the liveliness subscriber a moment to hear of a vehicle that just went."""
         with self.changed:
             return self.changed.wait_for(lambda: vehicle not in self.alive, timeout)
-
-    def check(self, vehicles: list[int]) -> None:
-        """Raise if one of `vehicles` went away."""
-        with self.changed:
-            gone = sorted(set(vehicles) - self.alive)
-        if gone:
-            raise ParticipantLost(f"forklift {gone[0]} went away (its agent's liveliness "
-                                  f"token is gone)")
 
     def close(self) -> None:
         self._vehicles.undeclare()

@@ -37,6 +37,7 @@ from fleet.bus import (
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.engine import Engine, MissionStuck
 from fleet.errors import UserError
+from fleet.execution import ZONE
 from fleet.faults import load_scenario
 from fleet.layout import load_layout
 from fleet.protocol import (
@@ -217,14 +218,14 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
             recovered, tick, wall = pick_up(executor, layout, vehicles, options.params)
             log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
                      len(recovered.done) + len(recovered.undelivered))
+        scenario = load_scenario(args.faults) if args.faults else None
         if args.clock == "fast":
-            scenario = load_scenario(args.faults) if args.faults else None
             clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded,
                               tick, recovered.t if recovered else 0.0)
         else:
-            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness, log,
-                                  load_scenario(args.faults) if args.faults else None,
-                                  tick, recovered.t if recovered else 0.0, wall)
+            closed = frozenset(r.cell for r in mirror.table.reservations(ZONE))
+            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness, log, scenario,
+                                  tick, recovered.t if recovered else 0.0, wall, closed)
 
         def progress(done: int, total: int, t: float, failures: int) -> None:
             publish(Progress(done, total, t, failures), t)

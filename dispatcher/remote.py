@@ -6,6 +6,7 @@ table the in-process engine would."""
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 
@@ -34,6 +35,7 @@ from fleet.wire import result_from_wire, step_to_wire, task_to_wire
 from reservation.mirror import TableMirror
 from reservation.store import to_wire
 
+log = logging.getLogger("fleet.dispatcher")
 SENDER = "dispatcher"
 TASK_TIMEOUT_S = 120.0  # a search is capped far below this; the agent may first resync
 SYNC_TIMEOUT_S = 30.0
@@ -109,8 +111,12 @@ class RemoteExecutor:
             self._sync(reply.revision)
         for vehicle in moving:
             self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t), t)
-        for vehicle in standing:
-            self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t, True), t)
+        for vehicle in standing:  # down already: if it cannot hear, it stands all the same
+            try:
+                self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t, True),
+                           t)
+            except ParticipantLost as exc:
+                log.warning("forklift %d did not hear where to stand: %s", vehicle, exc)
 
     def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
         step = step_to_wire(freeze.step) if freeze.step is not None else None

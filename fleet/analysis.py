@@ -49,6 +49,7 @@ from fleet.safety import (
     overlaps,
     replay,
 )
+from vehicle_agent.driving import state_period
 
 IDLE, WAITING, BUSY = "idle", "waiting", "busy"
 # A stream whose numbers fall this far below the highest seen is a restarted sender whose
@@ -332,14 +333,15 @@ def analyze(recording: Recording) -> Report:
     expected = {(s.cluster, s.index) for s in layout.stacks}
     holes = sequence_holes(recording)
     down_halts = [m for _, m in recording.of(Halt) if not m.moving]
-    late = LOSS_NOTICED_WALL_S * info.speed if info.clock == "realtime" else 0.0
-    cut_off = [h for h in holes if not h.window and _while_down(h, down_halts, late)]
+    # On the fast clock a forklift is stopped between two ticks: nothing of it is in flight.
+    cut_off = [h for h in holes if not h.window and info.clock == "realtime" and
+               _while_down(h, down_halts, LOSS_NOTICED_WALL_S * info.speed)]
     lost = [h for h in holes if not h.window and h not in cut_off]
     unrecorded = [h for h in holes if h.window]
     gaps = _stream_gaps(lost)
     downs = {g: _recorder_down(recording, g) for g in recording.gaps}
     unverified = unverified_windows(recording, unrecorded, downs) + \
-        silent_windows(states, down_halts, _state_period(info)) + \
+        silent_windows(states, down_halts, state_period(info.clock, info.speed)) + \
         [Unverified("states", h.right.envelope.message.vehicle,
                     h.left.envelope.sim_time if h.left else 0.0, h.right.envelope.sim_time,
                     f"{SILENT} ({h.missing} states sent while cut off)")
@@ -350,7 +352,9 @@ def analyze(recording: Recording) -> Report:
     booked = [not any(_unknown(unverified, v, d.t0, d.t1) for v in d.vehicles)
               for d in bookings]
     seen = set(stacks) & expected
-    from_record = _stacks_not_recorded(done, unrecorded, expected - seen)
+    restarted = sum(r.envelope.seq == 1 for r, _ in recording.of(StackDone)) > 1
+    from_record = _stacks_not_recorded(done, unrecorded, expected - seen,
+                                       restarted and bool(recording.gaps))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
@@ -542,11 +546,6 @@ SILENT = "silent from its fault until the freeze"
 LOSS_NOTICED_WALL_S = 2.0
 
 
-def _state_period(info) -> float:
-    """The grid of state instants the agents publish on (vehicle_agent/agent.py)."""
-    return min(info.speed * 0.1, 0.5) if info.clock == "realtime" else 0.5
-
-
 def silent_windows(states: list[tuple[float, VehicleState]], down_halts: list[Halt],
                    period: float) -> list[Unverified]:
     """A forklift that died, stalled or was cut off says nothing from its fault on. On the
@@ -584,10 +583,15 @@ def _unknown(unverified: list[Unverified], vehicle: int, t0: float, t1: float) -
 
 
 def _stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
-                         unseen: set[tuple[str, int]]) -> set[tuple[str, int]]:
+                         unseen: set[tuple[str, int]], tail_unrecorded: bool = False
+                         ) -> set[tuple[str, int]]:
     """Stacks the dispatcher's final record lists as done whose dispatch/stack message was
-    not recorded (all of them, if no more than the messages not recorded; else none)."""
+    not recorded (all of them, if no more than the messages not recorded; else none).
+    `tail_unrecorded`: a dispatcher died while no recorder ran, so the last messages it sent
+    are missing without a number to count them by (its successor's record has every stack)."""
     missing = sum(h.missing for h in unrecorded if message_type(h.key) is StackDone)
+    if tail_unrecorded:
+        missing = len(unseen)
     if not (missing and unseen and done and isinstance(done[-1].record, dict)):
         return set()
     entries = done[-1].record.get("stacks_done", [])

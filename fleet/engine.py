@@ -133,6 +133,9 @@ class EngineOptions:
     mlp: Callable[[list[float]], list[float]] | None = None
     collect_training: bool = False
     max_consecutive_failures: int = 400
+    # After this many failures in a row the fleet may be stuck on a choice rather than on the
+    # layout: a forklift then skips the targets it failed to reach since the last success.
+    unstick_after: int = 300
     progress: Callable[[int, int, float, int], None] | None = None  # done, total, t, failures
     # Each subtask, stack done and decision failure as it happens, with its sim time (the
     # dispatcher publishes them; the in-process run records them).
@@ -198,6 +201,8 @@ class Engine:
         self.before: list[VehicleState] = []  # the forklift's state before each subtask
         self.driven: dict[int, list[Trajectory]] = {v: [] for v in self.vehicles}
         self.now = 0.0  # the instant the clock was last moved to
+        self.tried: dict[int, set[str]] = {}  # targets each forklift failed since a success
+        self.stuck = False  # failures in a row reached unstick_after
         # What each forklift's agent was told, in order: ("add", trajectory, loaded),
         # ("cut", t), ("stop", t), ("resume", t): an in-process run drives its states from it.
         self.drive_log: dict[int, list[tuple]] = {v: [] for v in self.vehicles}
@@ -233,6 +238,14 @@ class Engine:
         return {name: len(q) for name, q in self.queue.items()}
 
     def targets_for(self, view: VehicleView) -> list[Target]:
+        """Where the forklift may go next; once the fleet is stuck, not where it failed to
+        go since the last success, while it has somewhere else to try (the preliminary A*
+        sees cells, not turns, and may keep choosing a station the forklift cannot reach)."""
+        targets = self._targets(view)
+        tried = self.tried.get(view.vehicle, set()) if self.stuck else set()
+        return [t for t in targets if t.name not in tried] or targets
+
+    def _targets(self, view: VehicleView) -> list[Target]:
         if view.next_task is TaskKind.RETURN:
             return [Target(st.name, (st.dock,)) for st in self.layout.stations]
         targets = []
@@ -277,6 +290,7 @@ class Engine:
     def run(self) -> MissionRecord:
         failed: list[int] = []  # vehicles whose plan failed since the last success, in order
         streak = 0
+        self.tried = {}
         fill = self.mission.kind is MissionKind.FILL
         p = self.options.params
         for cluster, index, t_end, vehicle in self.undelivered:  # goods the last dispatcher
@@ -328,7 +342,9 @@ class Engine:
                 if isinstance(result, Trajectory):
                     self._apply(decision, result, fill, remaining)
                     failed, streak = [], 0
+                    self.tried = {}
                 else:
+                    self.tried.setdefault(decision.vehicle, set()).add(decision.target.name)
                     self.record.decision_failures += 1
                     self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
                                               result.reason.value))
@@ -336,6 +352,7 @@ class Engine:
                         self._collect(decision, None, remaining)
                     failed = [v for v in failed if v != decision.vehicle] + [decision.vehicle]
                     streak += 1
+            self.stuck = streak >= self.options.unstick_after
             if streak > self.options.max_consecutive_failures:
                 raise MissionStuck(f"{streak} decisions in a row failed at t="
                                    f"{min(v.t_free for v in active):.2f} s; last: "
@@ -416,6 +433,7 @@ class Engine:
     # -- faults: freeze, cancel, resume (fleet/recovery.py, docs/faults.md) --------------------
     def disrupt(self, disruption: Disruption) -> None:
         """Apply what the clock reports: a forklift down or back, a zone closed."""
+        self.tried = {}  # the table changes: a target that failed may not fail now
         if isinstance(disruption, VehicleUp):
             self._resume(disruption)
             return

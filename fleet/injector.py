@@ -46,7 +46,8 @@ class Action:
 
 @dataclass
 class Applied:
-    """When an action was applied: sim time and wall clock (the bench measures from it)."""
+    """When an action was applied: sim time and wall clock as it began (the bench measures
+    from it)."""
 
     what: str
     t: float
@@ -113,11 +114,12 @@ class Injector:
                 action, fault = self.actions.pop(0)
                 if action.vehicle is not None and fast:  # what it said is on its way first
                     self._wait_ack(action.vehicle, last.tick)
+                started = time.time()  # the fault's moment: applying it may take a while
                 try:
                     action.apply()
                 except (OSError, RequestFailed, RuntimeError) as exc:  # never stop the clock
                     log.error("fault action %r failed: %s", action.what, exc)
-                self.applied.append(Applied(action.what, action.t, time.time(), fault,
+                self.applied.append(Applied(action.what, action.t, started, fault,
                                             action.ends))
                 log.warning("t=%.2f: %s", action.t, action.what)
             if fast and sample is not DUE:

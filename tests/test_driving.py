@@ -9,8 +9,8 @@ from fleet.planner import HybridAStar
 from fleet.protocol import ClockTick
 from fleet.reservations import ReservationTable
 from fleet.trajectory import Pose
-from vehicle_agent.agent import realtime_period, tick_problem
-from vehicle_agent.driving import Drive
+from vehicle_agent.agent import tick_problem
+from vehicle_agent.driving import Drive, state_period
 
 
 def small_trip(t_start=10.0):
@@ -110,8 +110,9 @@ def test_real_time_ticks_need_a_positive_speed_and_keep_it():
 
 
 def test_real_time_states_are_never_coarser_than_fast_mode():
-    assert realtime_period(1.0) == pytest.approx(0.1)  # 10 Hz of wall time
-    assert realtime_period(40.0) == 0.5  # not 4 s of sim time apart
+    assert state_period("realtime", 1.0) == pytest.approx(0.1)  # 10 Hz of wall time
+    assert state_period("realtime", 40.0) == 0.5  # not 4 s of sim time apart
+    assert state_period("fast", 40.0) == 0.5
 
 
 # -- faults: cut, stop, resume, restart ---------------------------------------------------------

@@ -78,3 +78,30 @@ def test_the_mission_checker_catches_overlaps_and_repeats():
     problems = mission_problems(rec, SMALL)
     assert any("both hold" in p for p in problems)
     assert any("done 2 times" in p for p in problems)
+
+
+def test_a_fleet_stuck_on_one_station_tries_the_others():
+    """Seen in a real-time fault run: four forklifts parked after their last deliveries,
+    each sent back to a station it cannot reach (the preliminary A* sees cells, not turns,
+    and keeps choosing it). After `unstick_after` failures in a row each forklift skips the
+    stations it failed to reach since the last success, and every one gets home."""
+    from fleet.engine import MissionStuck
+    from fleet.recovery import Recovered
+    from fleet.trajectory import Pose
+
+    layout = load_layout("paper")
+    mission = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
+    poses = {1: "8,7,E", 2: "7,5,N", 3: "11,6,S", 4: "8,8,E"}
+    everything_done = Recovered(
+        tuple((s.cluster, s.index, 100.0) for s in layout.stacks), (),
+        {v: Pose.parse(p) for v, p in poses.items()}, dict.fromkeys(poses, 200.0),
+        dict.fromkeys(poses, False), {}, 200.0)
+    with pytest.raises(MissionStuck, match="decisions in a row failed"):
+        Engine(mission, EngineOptions(unstick_after=10_000), layout,
+               recovered=everything_done).run()
+    record = Engine(mission, EngineOptions(unstick_after=20), layout,
+                    recovered=everything_done).run()
+    homes = {s.vehicle: s.target for s in record.subtasks}
+    assert sorted(homes) == [1, 2, 3, 4]
+    assert set(homes.values()) <= {st.name for st in layout.stations}
+    assert 20 <= record.decision_failures < 400

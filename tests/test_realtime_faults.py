@@ -14,7 +14,7 @@ from fleet.analysis import SILENT, analyze
 from fleet.distributed import RunSpec, run_processes
 from fleet.faults import load_scenario
 from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Halt, Resume, ZoneClosed
+from fleet.protocol import Halt, Resume, VehicleState, ZoneClosed
 from fleet.recording import read_recording
 from reservation.journal import Journal
 
@@ -86,6 +86,11 @@ def test_every_kind_of_fault_on_the_real_time_clock(tmp_path: Path):
     assert len(ids) == len(set(ids))
 
     recording = read_recording(out)
+    # Every forklift spoke all along, but for its faults: states on a 0.5 s grid (40x).
+    for v in (1, 2, 3, 4):
+        said = {round(r.envelope.sim_time * 2) for r, m in recording.of(VehicleState)
+                if m.vehicle == v}
+        assert len(said) > 0.8 * 2 * report.end_time_s, (v, len(said))
     down = {m.vehicle: m for _, m in recording.of(Halt) if not m.moving}
     assert set(down) == {1, 2, 3, 4}  # each forklift's fault stopped it ...
     assert {m.vehicle for _, m in recording.of(Resume)} == {1, 2, 3, 4}  # ... and it moved on

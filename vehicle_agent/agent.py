@@ -51,11 +51,10 @@ from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.wire import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
-from vehicle_agent.driving import FAST_STATE_PERIOD_S, Drive
+from vehicle_agent.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 
 log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5
-STATE_PERIOD_S = 0.1  # 10 Hz in real time
 DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
 # No mission lasts 115 days of sim time or plays faster than 10 000x: a tick beyond is broken.
 SIM_TIME_LIMIT_S = 1e7
@@ -67,12 +66,6 @@ CLOCK_SILENCE_S = 1.0
 # Real time: a commit must be applied this long before its plan starts, so that the reply is
 # back before the forklift is due to move (else it would have stood where it no longer holds).
 COMMIT_SLACK_S = 0.05
-
-
-def realtime_period(speed: float) -> float:
-    """Sim seconds between two states in real time: 10 Hz of wall time, but never coarser
-    than the fast mode's grid, so the recording's safety check sees as much at any speed."""
-    return min(speed * STATE_PERIOD_S, FAST_STATE_PERIOD_S)
 
 
 def tick_problem(tick: ClockTick, last: ClockTick | None) -> str:
@@ -153,6 +146,10 @@ class Agent:
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
         self.heard = 0.0  # monotonic time the last clock tick arrived
+        # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`.
+        self.status_lock = threading.Lock()
+        self.broken = False  # reported a breakdown: it stands when the dispatcher says when
+        self.resumed_at = 0.0  # ticks before this may still list us as down
         self.fault_pub: Stream | None = None
         self.last_kind = ""  # what the last committed leg was for (a restarted dispatcher asks)
 
@@ -317,11 +314,10 @@ class Agent:
         if self.clock.realtime and self.clock.now() > message.t:
             log.error("the halt for t=%.2f came late, at t=%.2f", message.t, self.clock.now())
         with self.drive_lock:
-            if message.stand:  # broken down: it stands where it is at t
+            if message.stand:  # broken down: it stands where it is from t, and says so
                 self.drive.stop(message.t)
             else:
                 self.drive.cut(message.t)
-        self.down = self.down or message.stand
         self.last_kind = ""  # what was cut did not arrive
         log.info("halted at t=%.2f: standing %s", message.t,
                  "where it is" if message.stand else
@@ -341,12 +337,10 @@ class Agent:
         except (ValueError, ProtocolError) as exc:
             return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
         resync(self.mirror, self.keys, self.requester)
-        period = FAST_STATE_PERIOD_S if not self.clock.realtime else \
-            realtime_period(self.clock.tick.speed)
         with self.drive_lock:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
-            self.drive.skip_to(message.t_resume, period)
-        self.down = False
+        with self.status_lock:  # ticks before t_resume may still list us as down
+            self.resumed_at, self.down, self.broken = message.t_resume, False, False
         self.last_kind = ""
         log.info("resumed at t=%.2f from %s (table at revision %d)", message.t_resume,
                  step.start if step else pose, self.mirror.revision)
@@ -377,6 +371,8 @@ class Agent:
             if message.kind == "slow_planner":
                 self.slow = message.factor
             elif message.kind == "breakdown":  # it stands once the dispatcher says when
+                with self.status_lock:
+                    self.broken = True
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "broken"), t)
             elif message.kind == "repair":
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "repaired"), t)
@@ -427,37 +423,39 @@ class Agent:
         if problem:
             log.warning("ignored tick %d on %s: %s", tick.tick, self.keys.clock, problem)
             return False
-        if self.vehicle in tick.down:
-            self.down = True  # the dispatcher holds us as down: we were cut off or stalled
+        with self.status_lock:
+            if self.vehicle in tick.down and tick.t >= self.resumed_at and not self.broken:
+                self.down = True  # held as down: we were cut off, stalled or restarted
         self.clock.tick = tick
         self.heard = time.monotonic()  # after `down`: the state thread reads them unlocked
         return True
 
     def _fast_tick(self, tick: ClockTick, state_pub, ack_pub) -> None:
-        if not self._take(tick) or tick.mode != "fast" or self.down:
+        if not self._take(tick) or self.down:
             return
         self._publish_states(state_pub, tick.t, FAST_STATE_PERIOD_S, before=True)
         ack_pub.put(ClockAck(tick.tick, self.vehicle), tick.t)
 
     def _realtime_states(self, state_pub: Stream) -> None:
         """Wake when the next instant of the grid comes due and publish it (and any missed)."""
-        wait = STATE_PERIOD_S
+        wait = REALTIME_STATE_PERIOD_S
         while not self.stopping.wait(wait):
-            wait = STATE_PERIOD_S
+            wait = REALTIME_STATE_PERIOD_S
             tick = self.clock.tick
             if tick is None or tick.mode != "realtime" or self.down:
                 continue
             if time.monotonic() - self.heard > CLOCK_SILENCE_S:
                 continue  # cut off or stalled: silent until the clock is heard (and says)
-            period = realtime_period(tick.speed)
+            period = state_period(tick.mode, tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)
             ahead = (self.drive.next_k * period - self.clock.now()) / tick.speed
-            wait = min(STATE_PERIOD_S, max(0.0, ahead)) + DUE_MARGIN_S
+            wait = min(REALTIME_STATE_PERIOD_S, max(0.0, ahead)) + DUE_MARGIN_S
 
     def _publish_states(self, state_pub: Stream, until: float, period: float,
                         before: bool = False) -> None:
         """Every grid instant up to `until` not published yet (a late wake-up catches up)."""
         with self.drive_lock:
+            self.drive.skip_to(self.resumed_at, period)  # nothing before a resume is said
             due = self.drive.due(until, period, before)
             states = [(t, self.drive.state_at(t)) for t in due]
             if due:

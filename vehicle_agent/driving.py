@@ -22,6 +22,15 @@ from fleet.protocol import VehicleState
 from fleet.trajectory import Pose, Step, Trajectory
 
 FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
+REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (10 Hz)
+
+
+def state_period(mode: str, speed: float) -> float:
+    """Sim seconds between two states: the fast grid, or 10 Hz of wall time but never coarser
+    than the fast grid, so the recording's safety check sees as much at any speed."""
+    if mode != "realtime":
+        return FAST_STATE_PERIOD_S
+    return min(speed * REALTIME_STATE_PERIOD_S, FAST_STATE_PERIOD_S)
 
 
 @dataclass

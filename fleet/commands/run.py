@@ -120,8 +120,7 @@ def run(args: argparse.Namespace) -> int:
     if args.inprocess and (args.clock != "fast" or args.foxglove is not None or args.secure):
         raise UserError("--inprocess runs the fast clock without processes: it takes neither "
                         "--clock realtime nor --foxglove nor --secure")
-    scenario = fault_scenario(args.faults, mission, layout, n, args.clock) \
-        if args.faults else None
+    scenario = fault_scenario(args.faults, mission, layout, n) if args.faults else None
     out = args.out or Path("runs") / (f"{time.strftime('%Y%m%d-%H%M%S')}-{layout.name}-"
                                       f"{mission.strategy.value}")
     out.mkdir(parents=True, exist_ok=True)
@@ -161,8 +160,7 @@ def _verdicts(path: Path) -> int:
     return 0 if report.passed else 1
 
 
-def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int,
-                   clock: str) -> Scenario:
+def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int) -> Scenario:
     """The scenario of --faults, checked against the run before anything starts."""
     scenario = load_scenario(source)
     check_against(scenario, layout, vehicles)
