@@ -128,8 +128,13 @@ def _fmt(value, unit: str = "") -> str:
     return "-" if value is None else f"{value:g}{unit}"
 
 
+def _seen(row: dict) -> str:
+    """Forklift faults the dispatcher saw, of those applied."""
+    return f"{row['detected']}/{row['faults']}" if row.get("faults") else "-"
+
+
 def _line(name: str, row: dict) -> str:
-    return (f"{name:<18} detect {_fmt(row['detect_s'], ' s'):>8}  recover "
+    return (f"{name:<18} seen {_seen(row):>4}  detect {_fmt(row['detect_s'], ' s'):>8}  recover "
             f"{_fmt(row['recover_s'], ' s'):>8}  rejoin {_fmt(row['rejoin_s'], ' s'):>8}  "
             f"extra {_fmt(row['extra_s'], ' s'):>9}  overlaps {row['overlaps']}  outside "
             f"{row['outside_reservation']}  stacks lost {row['stacks_lost']} twice "
@@ -139,14 +144,15 @@ def _line(name: str, row: dict) -> str:
 
 def table(result: dict) -> str:
     """The markdown table of docs/reliability.md."""
-    lines = ["| scenario | detect | recover | rejoin | extra mission time | overlaps | "
+    lines = ["| scenario | seen | detect | recover | rejoin | extra mission time | overlaps | "
              "outside reservation | stacks lost / twice | messages lost (not recorded) | "
-             "verdicts |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, row in result.items():
         if not isinstance(row, dict):
             continue  # the machine's stamp
         lines.append(
-            f"| {name} | {_fmt(row['detect_s'], ' s')} | {_fmt(row['recover_s'], ' s')} | "
+            f"| {name} | {_seen(row)} | {_fmt(row['detect_s'], ' s')} | "
+            f"{_fmt(row['recover_s'], ' s')} | "
             f"{_fmt(row['rejoin_s'], ' s')} | {_fmt(row['extra_s'], ' s')} | "
             f"{row['overlaps']} | {row['outside_reservation']} | {row['stacks_lost']} / "
             f"{row['stacks_duplicated']} | {row['messages_lost']} "
