@@ -105,8 +105,7 @@ class FastClock:
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         self.down = down
-        for seen in self.detected:
-            seen.setdefault("recovered_wall", time.time())
+        _recovered(self.detected)
         while self.pending and self.pending[0] <= t_next:
             t = self.pending.pop(0)
             self.advance(t)
@@ -148,9 +147,7 @@ class FastClock:
             self.scheduled_down.discard(expected.vehicle)
         else:
             self.scheduled_down.add(expected.vehicle)
-        self.detected.append({"what": repr(expected), "vehicle": expected.vehicle,
-                              "up": isinstance(expected, VehicleUp), "t": expected.t,
-                              "detected_wall": time.time()})
+        self.detected.append(_sighting(expected))
         self.log.info("detected %s after %.3f s", expected, time.monotonic() - started)
         return expected
 
@@ -168,6 +165,19 @@ class FastClock:
         for subscriber in self.subscribers:
             subscriber.undeclare()
         self.publisher.undeclare()
+
+
+def _sighting(disruption: Disruption) -> dict:
+    """A fault seen, for `fleet bench faults`: what, its sim instant, and the wall clock."""
+    return {"what": repr(disruption), "vehicle": getattr(disruption, "vehicle", None),
+            "up": isinstance(disruption, VehicleUp), "t": disruption.t,
+            "detected_wall": time.time()}
+
+
+def _recovered(detected: list[dict]) -> None:
+    """The engine asks the clock again: what was seen so far has been recovered from."""
+    for seen in detected:
+        seen.setdefault("recovered_wall", time.time())
 
 
 def _who(late: list[int]) -> str:
@@ -267,8 +277,7 @@ class RealtimeClock:
         meanwhile. With nobody to decide for (every forklift left is down), wait for one to
         come back until the scenario's last instant, plus DETECT_TIMEOUT_S."""
         self._held_down(down)
-        for seen in self.detected:
-            seen.setdefault("recovered_wall", time.time())
+        _recovered(self.detected)
         target = t_next - self.lead if math.isfinite(t_next) else \
             max(self.last_instant, self.now()) + DETECT_TIMEOUT_S * self.speed
         with self.liveness.changed:  # liveliness and fault reports notify it
@@ -280,9 +289,7 @@ class RealtimeClock:
         # The new ones are down from now on; one back stays listed until it is resumed.
         self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:
-            self.detected.append({"what": repr(d), "vehicle": getattr(d, "vehicle", None),
-                                  "up": isinstance(d, VehicleUp), "t": d.t,
-                                  "detected_wall": time.time()})
+            self.detected.append(_sighting(d))
             self.log.info("noticed %s at t=%.2f", d, self.now())
         return found
 

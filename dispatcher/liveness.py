@@ -18,7 +18,6 @@ class Liveness:
     def __init__(self, session: zenoh.Session, keys: Keys) -> None:
         self.keys = keys
         self.alive: set[int] = set()
-        self.lost: set[int] = set()
         self.appeared: dict[int, int] = {}  # how many times each token came (back)
         self.service_alive = False
         self.recorder_alive = False
@@ -41,7 +40,6 @@ class Liveness:
                 self.alive.add(vehicle)
             else:
                 self.alive.discard(vehicle)
-                self.lost.add(vehicle)
             self.changed.notify_all()
 
     def _on_service(self, sample: zenoh.Sample) -> None:

@@ -589,9 +589,8 @@ def _stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
     not recorded (all of them, if no more than the messages not recorded; else none).
     `tail_unrecorded`: a dispatcher died while no recorder ran, so the last messages it sent
     are missing without a number to count them by (its successor's record has every stack)."""
-    missing = sum(h.missing for h in unrecorded if message_type(h.key) is StackDone)
-    if tail_unrecorded:
-        missing = len(unseen)
+    missing = math.inf if tail_unrecorded else \
+        sum(h.missing for h in unrecorded if message_type(h.key) is StackDone)
     if not (missing and unseen and done and isinstance(done[-1].record, dict)):
         return set()
     entries = done[-1].record.get("stacks_done", [])

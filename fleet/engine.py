@@ -290,7 +290,6 @@ class Engine:
     def run(self) -> MissionRecord:
         failed: list[int] = []  # vehicles whose plan failed since the last success, in order
         streak = 0
-        self.tried = {}
         fill = self.mission.kind is MissionKind.FILL
         p = self.options.params
         for cluster, index, t_end, vehicle in self.undelivered:  # goods the last dispatcher
