@@ -18,6 +18,7 @@ from fleet.commands import (
     plan,
     plot,
     run,
+    runs,
     service,
     services,
     train,
@@ -30,8 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts.")
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in (run, analyze, plot, compare, faults, plan, layout, train, bench, services,
-                   service, compose):
+    for module in (run, runs, analyze, plot, compare, faults, plan, layout, train, bench,
+                   services, service, compose):
         module.register(sub)
     return parser
 

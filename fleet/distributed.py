@@ -35,6 +35,7 @@ from fleet.linkproxy import LinkProxy
 from fleet.mission import Mission
 from fleet.protocol import MissionDone, Progress, ProtocolError, decode
 from fleet.recording import next_segment
+from fleet.rundir import fresh
 
 ROUTER_TIMEOUT_MS = 30_000
 RECORDED_TIMEOUT_S = 10.0
@@ -45,7 +46,8 @@ log = logging.getLogger("fleet.run")
 class RunSpec:
     mission: Mission
     vehicles: int
-    run_dir: Path  # logs/ and the reservation journal go here
+    run_dir: Path  # the recording, logs/ and the reservation journal: a new directory, or
+    # one claimed for this run a moment ago (fleet.rundir.claim); anything else is refused
     clock: str = "fast"
     speed: float = 1.0
     weights: Path | None = None
@@ -122,12 +124,9 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     launcher once every child has been started (tests use it to watch or disturb the run)."""
     endpoint = f"tcp/127.0.0.1:{spec.port or free_port()}"
     keys = Keys(spec.run)
+    fresh(spec.run_dir)  # a run directory of its own: no table, recording or log of another
     log_dir = spec.run_dir / "logs"
     journal = spec.run_dir / "reservation.journal"
-    journal.unlink(missing_ok=True)  # a new run starts from an empty table
-    spec.recording.unlink(missing_ok=True)  # and a new recording
-    for segment in spec.run_dir.glob("run-*.mcap"):  # with no segments of an older one
-        segment.unlink()
     launcher = Launcher(log_dir)
     inbox: queue.Queue[tuple[str, object]] = queue.Queue()
     session = None

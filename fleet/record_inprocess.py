@@ -118,7 +118,8 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
 
 def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:
     """Write a stream as a recording, with its Foxglove view channels. Log times are the
-    run's start (now) plus sim time, as the view channels have them."""
+    run's start (now) plus sim time, as the view channels have them. Written in a run
+    directory, it carries that run's id, as a recorder's segment does (RecordingWriter)."""
     from fleet.scene import SceneViews
 
     writer = RecordingWriter(path)

@@ -11,7 +11,8 @@ Small chunks flushed about once a second bound what a killed recorder loses; `re
 recovers every complete chunk of a truncated file and says where reading stopped. A recorder
 restarted during a run writes a new segment of the same run (run-2.mcap, run-3.mcap, ...);
 `read_recording` of the run reads every segment as one recording and says where no recorder
-was running.
+was running. Each segment carries the id of the run directory it was written in (metadata
+`segment`), so a file of another run in the directory is refused by name, never merged.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from fleet import __version__
+from fleet.errors import UserError
 from fleet.layout import Layout, layout_source, parse_layout
 from fleet.mission import Mission
 from fleet.protocol import (
@@ -62,8 +64,10 @@ from fleet.protocol import (
     decode,
 )
 from fleet.protocol import Message as WireMessage
+from fleet.rundir import MARKER, run_id_of
 
 PROFILE = "forklift-fleet"
+SEGMENT_METADATA = "segment"  # {"run_id": the run directory's}: which run a file is of
 RUN_FILE = "run.mcap"  # a run directory's recording (its first segment)
 SEGMENT_FILE = re.compile(r"run-([2-9]|[1-9]\d+)\.mcap")  # later segments: run-2.mcap, ...
 MCAP_MAGIC = b"\x89MCAP0\r\n"  # every MCAP file starts with it
@@ -192,10 +196,13 @@ class RecordingWriter:
     def __init__(self, path: Path, chunk_bytes: int = CHUNK_BYTES) -> None:
         self.path = path
         path.parent.mkdir(parents=True, exist_ok=True)
+        self.run_id = run_id_of(path.parent)  # of the run directory it is in (None: none)
         self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed by close()
         self._writer = Writer(self._file, chunk_size=chunk_bytes,
                               compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library=f"forklift-fleet {__version__}")
+        if self.run_id is not None:  # first, before any chunk: a torn file still says it
+            self._writer.add_metadata(SEGMENT_METADATA, {"run_id": self.run_id})
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.messages = 0
@@ -349,6 +356,12 @@ class Recording:
         return [r for r in self.messages if r.envelope is not None and not r.genuine]
 
     @property
+    def run_id(self) -> str | None:
+        """The id of the run it was recorded for (None: written outside a run directory,
+        or before recordings had one)."""
+        return self.metadata.get(SEGMENT_METADATA, {}).get("run_id")
+
+    @property
     def info(self) -> MissionInfo | None:
         found = self.of(MissionInfo)
         return found[-1][1] if found else None
@@ -459,6 +472,27 @@ def _check_magic(path: Path) -> None:
                          f"magic)")
 
 
+def read_description(path: Path, within_records: int = 100_000) -> dict[str, dict[str, str]]:
+    """A recording's metadata records (`segment`: its run id; `run`: the run's description)
+    without reading the rest: they come near the start, so reading stops once both are in,
+    or after `within_records` records. Cheap enough to list many runs."""
+    _check_magic(path)
+    found: dict[str, dict[str, str]] = {}
+    with open(path, "rb") as stream:
+        records = StreamReader(stream, record_size_limit=1 << 30).records
+        try:
+            for _, record in zip(range(within_records), records, strict=False):
+                if isinstance(record, Metadata):
+                    found[record.name] = dict(record.metadata)
+                    if "run" in found:  # the segment's own comes first, when it has one
+                        break
+        except Exception as exc:  # mcap raises its own, struct and decompression errors
+            if not found:
+                raise RecordingError(f"{path}: not a readable MCAP recording "
+                                     f"({type(exc).__name__})") from None
+    return found
+
+
 OVERLAP_SLACK_NS = NS  # two recorders stamp one message within this of each other
 
 
@@ -471,7 +505,9 @@ def read_recording(path: Path) -> Recording:
     if not paths:
         raise RecordingError(f"{path}: no {RUN_FILE} in this directory")
     if len(paths) == 1:
-        return _read_segment(paths[0])[0]
+        recording = _read_segment(paths[0])[0]
+        _check_one_run(_run_dir(path), [recording])
+        return recording
     parts: list[tuple[Recording, list[int]]] = []
     errors: list[RecordingError] = []
     for segment_path in paths:
@@ -483,7 +519,57 @@ def read_recording(path: Path) -> Recording:
                 segment_path, problem=f"not read: {exc}")]), []))
     if len(errors) == len(paths):
         raise errors[0]
+    _check_one_run(_run_dir(path), [part for part, _ in parts])
     return _merge(parts)
+
+
+# What a run's description says that its segments must agree on (older recordings carry no
+# run id: this still tells a segment of another mission apart).
+SAME_RUN = ("layout", "mission", "strategy", "vehicles", "seed", "clock", "speed")
+
+
+def _run_dir(path: Path) -> Path | None:
+    """The run directory a path names (itself, or its run.mcap's); None for a lone file."""
+    path = Path(path)
+    if path.is_dir():
+        return path
+    return path.parent if path.name == RUN_FILE else None
+
+
+def _check_one_run(folder: Path | None, segments: list[Recording]) -> None:
+    """Every segment read from a run directory is of the directory's run: the id of its
+    marker (fleet-run.json) or, without one, of its run.mcap; and all describe the same
+    mission. A file of another run is refused by name: merged, it would give false
+    verdicts (or no analysis at all); dropped, nobody would learn it is there."""
+    if folder is None:
+        return
+    try:
+        marked = run_id_of(folder)
+    except UserError as exc:
+        raise RecordingError(str(exc)) from None
+    read = [s for s in segments if s.metadata or s.messages]  # an unread one says nothing
+    if not read:
+        return
+    expected, source = (marked, MARKER) if marked is not None else \
+        (read[0].run_id, read[0].path.name)
+    for segment in read:
+        if segment.run_id != expected:
+            raise RecordingError(
+                f"{segment.path}: a recording of another run (run id "
+                f"{segment.run_id or 'none'}; this directory's run is {expected or 'without one'}, "
+                f"from {source}): a run directory holds one run's segments only; move "
+                f"{segment.path.name} out of {folder} to read the run")
+    described = [s for s in read if "run" in s.metadata]
+    for segment in described[1:]:
+        first, this = described[0].metadata["run"], segment.metadata["run"]
+        differ = [f"{k} {this.get(k)!r}, not {first.get(k)!r}" for k in SAME_RUN
+                  if this.get(k) != first.get(k)]
+        if differ:
+            raise RecordingError(
+                f"{segment.path}: a recording of another run than "
+                f"{described[0].path.name} ({'; '.join(differ)}): a run directory holds one "
+                f"run's segments only; move {segment.path.name} out of {folder} to read the "
+                f"run")
 
 
 def _merge(parts: list[tuple[Recording, list[int]]]) -> Recording:

@@ -8,7 +8,8 @@ its status on fleet/<run>/recorder/status at every flush and once the mission's 
 the file (and answers queries there), so `fleet run` knows when it may stop the recorder.
 A recorder started mid-run (a restarted one writes the run's next segment, run-N.mcap:
 fleet.recording.next_segment) asks the dispatcher what the run is, so its file is described
-too.
+too. Every segment carries the run id of the run directory it is written in (its marker,
+fleet/rundir.py), so a restarted recorder's segments are of the same run.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
+import re
 import socket
 import threading
 import time
@@ -28,6 +30,7 @@ from fleet.errors import UserError
 from fleet.layout import parse_layout
 from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
 from fleet.recording import RUN_FILE, Recorded, RecordingWriter, next_segment
+from fleet.rundir import claim_new
 
 log = logging.getLogger("fleet.recorder")
 SENDER = "recorder"
@@ -202,10 +205,13 @@ def serve(args: argparse.Namespace) -> int:
 
 def output_in(folder: Path, host: str, now: time.struct_time) -> Path:
     """Where a recorder with --out-dir writes: the next segment of this host's latest run
-    directory (a restarted recorder), else a new directory named for now and the host."""
-    mine = sorted(folder.glob(f"*-{host}")) if folder.is_dir() else []
+    directory (a restarted recorder: the segment takes the directory's run id), else a new
+    run directory claimed for now and the host (DATE-TIME-HOST, -2 after it if taken)."""
+    named = re.compile(rf"(\d{{8}}-\d{{6}})-{re.escape(host)}(?:-(\d+))?")
+    mine = []  # (date-time, suffix number), directory
+    if folder.is_dir():
+        mine = sorted(((m[1], int(m[2] or 1)), p) for p in folder.iterdir()
+                      if p.is_dir() and (m := named.fullmatch(p.name)))
     if mine:
-        return next_segment(mine[-1])
-    run_dir = folder / f"{time.strftime('%Y%m%d-%H%M%S', now)}-{host}"
-    run_dir.mkdir(parents=True)
-    return run_dir / RUN_FILE
+        return next_segment(mine[-1][1])
+    return claim_new(folder, f"{time.strftime('%Y%m%d-%H%M%S', now)}-{host}").path / RUN_FILE

@@ -2,7 +2,8 @@
 read as one recording, with the windows without a recorder reported as such. Messages sent
 then are not recorded, not lost; a sender that starts numbering again is a new stream; a
 segment torn by the kill is read up to its last complete chunk. Then the same with real
-processes: a recorder SIGKILLed mid-stream and a second one started on run-2.mcap."""
+processes: a recorder SIGKILLed mid-stream and a second one started on run-2.mcap, both
+segments of the run directory's run (its id, tests/test_run_dirs.py for more)."""
 
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ from fleet.recording import (
     recording_file,
     segment_paths,
 )
+from fleet.rundir import claim
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent
@@ -393,7 +395,8 @@ def test_a_recorder_killed_and_restarted_writes_a_second_segment(tmp_path):
     keys = Keys(f"seg{os.getpid()}")
     log = tmp_path / "processes.log"
     common = ["--run", keys.run, "--connect", endpoint]
-    run_dir = tmp_path / "run"
+    run = claim(tmp_path / "run")  # as fleet run claims it: its marker holds the run id
+    run_dir = run.path
     router = fleet_process(["router", "--listen", endpoint], log)
     recorders: list[subprocess.Popen] = []
     session = open_session(BusConfig("client", (endpoint,), connect_timeout_ms=30_000))
@@ -417,7 +420,6 @@ def test_a_recorder_killed_and_restarted_writes_a_second_segment(tmp_path):
 
         def start_recorder() -> Path:
             out = next_segment(run_dir)
-            run_dir.mkdir(exist_ok=True)
             alive = watch.alive
             recorders.append(fleet_process(["recorder", *common, "--out", str(out)], log))
             watch.wait(lambda: watch.alive > alive, f"the recorder writing {out}")
@@ -450,9 +452,12 @@ def test_a_recorder_killed_and_restarted_writes_a_second_segment(tmp_path):
     assert set(heard) <= set(ours) and set(more) <= set(ours)
     assert not set(unheard) & set(ours)
     assert [s.complete for s in recording.segments] == [False, True]
-    # The late recorder asked what the run is: its own segment describes it too.
+    # The late recorder asked what the run is: its own segment describes it too; both are
+    # of the directory's run.
+    assert recording.run_id == run.run_id
     for path in (first, second):
         alone = read_recording(path)
+        assert alone.run_id == run.run_id
         assert alone.metadata["run"]["layout"] == LAYOUT
         assert alone.attachments["layout.toml"].decode() == info.layout_toml
     assert recording.info == info

@@ -11,10 +11,12 @@ import shutil
 import subprocess
 import sys
 import tarfile
+import tempfile
 from pathlib import Path
 
 from fleet.deploy import MAX_VEHICLES
 from fleet.errors import UserError
+from fleet.rundir import run_id_of
 
 DEFAULT_PROJECT = "forklift-fleet"  # also in .env, which both compose tools read
 SECRETS = Path("deploy/secrets")  # compose.secure.yaml reads them here ($FLEET_SECRETS)
@@ -37,7 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "control (compose.secure.yaml), with the logins of `fleet compose secrets` "
                     "(made if there are none)")
     up.set_defaults(handler=run_up)
-    collect = actions.add_parser("collect", help="copy recordings out of the volume")
+    collect = actions.add_parser("collect", help="copy recordings out of the volume (a "
+                                 "run collected before is brought up to date; another "
+                                 "run's directory is never written over)")
     collect.add_argument("dest", type=Path, nargs="?", default=Path("runs/compose"))
     collect.add_argument("--all", action="store_true", help="every recording, not the latest")
     collect.set_defaults(handler=run_collect)
@@ -109,19 +113,50 @@ def recordings(project: str) -> list[str]:
 
 
 def collect(project: str, dest: Path, every: bool) -> list[Path]:
+    """Copy run directories out of the volume into dest/NAME: extracted beside it first,
+    then each put in place (`place_copy`)."""
     names = recordings(project)
     if not names:
         raise UserError(f"{volume(project)} holds no recording yet")
     chosen = names if every else names[-1:]
-    dest.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.Popen(in_volume(project, "tar", "-C", "/recordings", "-cf", "-", *chosen),
-                            stdout=subprocess.PIPE)
-    assert proc.stdout is not None
-    with tarfile.open(fileobj=proc.stdout, mode="r|") as archive:
-        archive.extractall(dest, filter="data")
-    if proc.wait() != 0:
-        raise UserError(f"copying out of {volume(project)} failed")
-    return [dest / name for name in chosen]
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".collect-", dir=dest))
+    except OSError as exc:
+        raise UserError(f"cannot write in {dest}: {exc.strerror}") from None
+    try:
+        proc = subprocess.Popen(in_volume(project, "tar", "-C", "/recordings", "-cf", "-",
+                                          *chosen), stdout=subprocess.PIPE)
+        assert proc.stdout is not None
+        with tarfile.open(fileobj=proc.stdout, mode="r|") as archive:
+            archive.extractall(staging, filter="data")
+        if proc.wait() != 0:
+            raise UserError(f"copying out of {volume(project)} failed")
+        return [place_copy(staging / name, dest / name) for name in chosen]
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)  # ours: what is left of the copies
+
+
+def place_copy(copy: Path, target: Path) -> Path:
+    """Put a run directory copied out of the volume at `target`. A copy collected before
+    of the same run (the same run id) is brought up to date: the volume's files replace
+    theirs (a recording only grows) and nothing else there is touched (plots stay). Another
+    run's directory there is refused by name: collect elsewhere."""
+    if not target.exists():
+        os.rename(copy, target)
+        return target
+    ours, theirs = run_id_of(copy), run_id_of(target) if target.is_dir() else None
+    if not target.is_dir() or ours != theirs:
+        what = "a file" if not target.is_dir() else \
+            f"run {theirs or 'without a run id'}, not the volume's {ours or 'without one'}"
+        raise UserError(f"{target} exists and holds {what}: nothing was copied over it; "
+                        f"collect into another directory (fleet compose collect DEST)")
+    for path in sorted(copy.rglob("*")):
+        if path.is_file():
+            there = target / path.relative_to(copy)
+            there.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, there)
+    return target
 
 
 def run_collect(args: argparse.Namespace) -> int:

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from fleet.bus import free_port
+from fleet.commands.runs import write_summary
 from fleet.distributed import RunSpec, run_processes
 from fleet.engine import EngineOptions
 from fleet.errors import UserError
@@ -21,6 +22,7 @@ from fleet.progress import ProgressBar
 from fleet.record_inprocess import recorded_run, write_recording
 from fleet.record_io import digest_of
 from fleet.recording import read_recording
+from fleet.rundir import choose
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,9 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run the in-process reference engine instead (one process, no "
                    "zenoh); fast mode gives the same record bit for bit")
     p.add_argument("--port", type=int, help="router port on 127.0.0.1 (default: a free one)")
-    p.add_argument("--out", type=Path, help="directory for the recording (run.mcap), the "
-                   "reservation journal and each process's log (default: "
-                   "runs/DATE-TIME-LAYOUT-STRATEGY)")
+    p.add_argument("--out", type=Path, metavar="DIR", help="a new or empty directory for "
+                   "the recording (run.mcap), the reservation journal and each process's log "
+                   "(default: runs/DATE-TIME-LAYOUT-STRATEGY, -2 after it if taken)")
+    p.add_argument("--force", action="store_true",
+                   help="with --out: an earlier run's directory there is replaced whole "
+                   "(never a directory that is not a run's)")
     p.add_argument("--foxglove", type=int, metavar="PORT", nargs="?", const=8765,
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
@@ -121,9 +126,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--inprocess runs the fast clock without processes: it takes neither "
                         "--clock realtime nor --foxglove nor --secure")
     scenario = fault_scenario(args.faults, mission, layout, n) if args.faults else None
-    out = args.out or Path("runs") / (f"{time.strftime('%Y%m%d-%H%M%S')}-{layout.name}-"
-                                      f"{mission.strategy.value}")
-    out.mkdir(parents=True, exist_ok=True)
+    out = choose(args.out, args.force, layout.name, mission.strategy.value,
+                 lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}")
 
     def progress(done: int, t: float, failures: int) -> None:
@@ -153,6 +157,7 @@ def _verdicts(path: Path) -> int:
     from fleet.analysis import analyze
 
     report = analyze(read_recording(path))
+    write_summary(path.parent, report)  # what `fleet runs` lists
     print(f"  recording          {path}")
     for line in report.verdict_lines():
         print(f"  {line}")
