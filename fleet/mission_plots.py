@@ -4,7 +4,8 @@ of where the forklifts were, and an animation of the whole run.
 
 They read the record as the plain dict of `fleet.record_io` (for a recording, as rebuilt by
 `fleet.recorded_mission.record_of`), so they draw any saved run; the heat map also reads the
-recorded vehicle states.
+recorded vehicle states. Each returns its figure (fleet.plotting.save_figure writes it), so
+what a reader sees can be checked on the figure itself.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ from fleet.plotting import (
     inches_per_metre,
     legend_below,
     map_figure,
-    stack_number,
+    stack_number_spot,
 )
 from fleet.protocol import VehicleState
 from fleet.record_io import held_intervals
@@ -289,15 +290,13 @@ def frame_times(record: dict, frames: int) -> list[float]:
     return [end * k / (frames - 1) for k in range(frames)]
 
 
-def _stack_numbers(ax, layout: Layout) -> PatchCollection:
-    """Each stack's number (stack_number()'s text, place and size) as a glyph outline."""
-    size = STACK_NUMBER_PT / 72 / inches_per_metre(layout)
+def _stack_numbers(layout: Layout) -> PatchCollection:
+    """Each stack's number as stack_number() draws it (place and size), as glyph outlines."""
+    size = STACK_NUMBER_PT / 72 / inches_per_metre(layout)  # in metres, on a map_figure()
     patches = []
     for stack in layout.stacks:
-        text = stack_number(ax, layout, stack, "white")  # a model to take the place from
-        x, y = text.get_position()
-        text.remove()
-        glyphs = TextPath((0, 0), text.get_text(), size=size)
+        x, y = stack_number_spot(layout, stack)
+        glyphs = TextPath((0, 0), str(stack.index), size=size)
         (gx0, gy0), (gx1, gy1) = glyphs.get_extents().get_points()
         patches.append(PathPatch(glyphs.transformed(
             Affine2D().translate(x - (gx0 + gx1) / 2, y - (gy0 + gy1) / 2))))
@@ -321,7 +320,7 @@ class _RunArtists:
             [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
         # White numbers on present stacks (the background's dark ones show on the others),
         # as glyph outlines in one collection: a frame draws them at once, not as 136 texts.
-        self.numbers = ax.add_collection(_stack_numbers(ax, layout))
+        self.numbers = ax.add_collection(_stack_numbers(layout))
         self.number_rgba = np.tile(to_rgba("white"), (len(layout.stacks), 1))
         # One square per (forklift, cell) ever held; each frame sets its alpha.
         held = held_intervals(record)

@@ -43,9 +43,10 @@ CLUSTER_LABEL = {"fontsize": 11, "weight": "bold", "color": "0.1", "ha": "center
                  "va": "center", "bbox": {"boxstyle": "round,pad=0.25", "facecolor": "white",
                                           "edgecolor": "0.4", "lw": 0.6, "alpha": 0.9}}
 
-# Drawing order: the floor and stacks, reserved cells over them, cluster names over those,
-# forklifts and trajectories on top (a forklift passing a name hides it, not the reverse).
-Z_STACK_TEXT, Z_RESERVED, Z_CLUSTER, Z_FORKLIFT, Z_FORKLIFT_TEXT = 1.1, 1.2, 1.5, 2.0, 2.1
+# Drawing order: the floor and stacks, reserved cells over them, the names of clusters and
+# stations over those, forklifts and trajectories on top (a forklift passing a name hides
+# it, not the reverse).
+Z_STACK_TEXT, Z_RESERVED, Z_LABEL, Z_FORKLIFT, Z_FORKLIFT_TEXT = 1.1, 1.2, 1.5, 2.0, 2.1
 
 MAP_WIDTH_IN, MAP_HEIGHT_IN = 11.0, 7.5  # the largest map area; figures fit the layout
 LEGEND_DROP_IN = 0.42  # the tick labels' and x label's height: the legend goes under them
@@ -72,11 +73,17 @@ def map_figure(layout: Layout, extra_width_in: float = 0.0,
 
 def legend_below(ax: Axes, handles: Sequence[Artist], ncols: int = 5, **style) -> Legend:
     """The axes' legend under them, below the x label, outside the axes: it covers no data.
-    It moves with the axes (a map's shrinks to its aspect), so no gap opens between them."""
-    below = ax.transAxes + ScaledTranslation(0, -LEGEND_DROP_IN, ax.figure.dpi_scale_trans)
-    return ax.legend(handles=list(handles), loc="upper center", bbox_to_anchor=(0.5, 0),
-                     bbox_transform=below, ncols=min(ncols, len(handles)), fontsize=8,
-                     frameon=False, **style)
+    It moves with the axes (a map's shrinks to its aspect), so no gap opens between them.
+    At most `ncols` columns, fewer if it would be wider than the figure (a narrow map)."""
+    fig = ax.figure
+    below = ax.transAxes + ScaledTranslation(0, -LEGEND_DROP_IN, fig.dpi_scale_trans)
+    renderer = fig.canvas.get_renderer()
+    for n in range(min(ncols, len(handles)), 0, -1):
+        legend = ax.legend(handles=list(handles), loc="upper center", bbox_to_anchor=(0.5, 0),
+                           bbox_transform=below, ncols=n, fontsize=8, frameon=False, **style)
+        if legend.get_window_extent(renderer).width <= 0.95 * fig.bbox.width:
+            break
+    return legend
 
 
 def save_figure(fig: Figure, path: str, dpi: float = DPI) -> None:
@@ -100,10 +107,10 @@ def draw_layout(ax: Axes, layout: Layout, filled: Iterable[Cell] | None = None,
     filled_cells = set(filled or ())
     stack_cells = {s.cell for s in layout.stacks}
     obstacle_cells = {c for o in layout.obstacles for c in o.cells}
-    station_cells = {s.cell for s in layout.stations}
+    taken = stack_cells | obstacle_cells | {s.cell for s in layout.stations}
     for c in range(layout.cols):
         for r in range(layout.rows):
-            if (c, r) not in stack_cells | obstacle_cells | station_cells:
+            if (c, r) not in taken:
                 ax.add_patch(_cell_square(layout, (c, r), **FLOOR))
     for cell in obstacle_cells:
         ax.add_patch(_cell_square(layout, cell, **OBSTACLE))
@@ -116,11 +123,11 @@ def draw_layout(ax: Axes, layout: Layout, filled: Iterable[Cell] | None = None,
         ax.add_patch(_cell_square(layout, station.cell, **STATION))
         x, y, style = station_label_spot(layout, station)
         ax.text(x, y, station.name, fontsize=7, weight="bold", rotation_mode="anchor",
-                zorder=Z_CLUSTER, **style)
+                zorder=Z_LABEL, **style)
     for cluster in layout.clusters:
         if layout.cluster_stacks(cluster.name):
             x, y, rotation = cluster_label_spot(layout, cluster.name)
-            ax.text(x, y, cluster.name, rotation=rotation, zorder=Z_CLUSTER,
+            ax.text(x, y, cluster.name, rotation=rotation, zorder=Z_LABEL,
                     gid=f"cluster/{cluster.name}", **CLUSTER_LABEL)
     x0 = layout.origin[0] - layout.cell_size / 2
     y0 = layout.origin[1] - layout.cell_size / 2
@@ -142,11 +149,16 @@ def draw_layout(ax: Axes, layout: Layout, filled: Iterable[Cell] | None = None,
     return handles
 
 
-def stack_number(ax: Axes, layout: Layout, stack: Stack, color) -> Text:
-    """A stack's place in its cluster's fill order, small, in the upper part of its cell."""
+def stack_number_spot(layout: Layout, stack: Stack) -> tuple[float, float]:
+    """Where a stack's number is centred: in the upper part of its cell."""
     x, y = layout.cell_center(stack.cell)
-    return ax.text(x, y + 0.25 * layout.cell_size, str(stack.index), ha="center", va="center",
-                   fontsize=STACK_NUMBER_PT, color=color, zorder=Z_STACK_TEXT)
+    return x, y + 0.25 * layout.cell_size
+
+
+def stack_number(ax: Axes, layout: Layout, stack: Stack, color) -> Text:
+    """A stack's place in its cluster's fill order, small."""
+    return ax.text(*stack_number_spot(layout, stack), str(stack.index), ha="center",
+                   va="center", fontsize=STACK_NUMBER_PT, color=color, zorder=Z_STACK_TEXT)
 
 
 def station_label_spot(layout: Layout, station: Station) -> tuple[float, float, dict]:
