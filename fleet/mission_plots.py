@@ -138,8 +138,9 @@ def gantt(record: dict) -> Figure:
     last = max([record["end_time_s"]] + [s["t_done"] for s in record["subtasks"]])
     ax.set_xlim(0, 1.01 * last or 1.0)
     ax.set_xlabel("simulated time [s]")
-    full = tuple(Patch(color=forklift_color(v)) for v in vehicles)
-    light = tuple(Patch(color=lighter(forklift_color(v), 0.55)) for v in vehicles)
+    swatches = vehicles or [1]  # the legend's colours: every forklift's
+    full = tuple(Patch(color=forklift_color(v)) for v in swatches)
+    light = tuple(Patch(color=lighter(forklift_color(v), 0.55)) for v in swatches)
     legend_below(ax, [full, light, Patch(color=CLAIM_COLOR), Patch(color="black"),
                        Line2D([], [], ls="none", marker="x", color="black", ms=4, mew=0.8)],
                  labels=["driving to a shelf (forklift's colour)",
