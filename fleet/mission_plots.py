@@ -4,7 +4,8 @@ of where the forklifts were, and an animation of the whole run.
 
 They read the record as the plain dict of `fleet.record_io` (for a recording, as rebuilt by
 `fleet.recorded_mission.record_of`), so they draw any saved run; the heat map also reads the
-recorded vehicle states.
+recorded vehicle states. Each returns its figure (fleet.plotting.save_figure writes it), so
+what a reader sees can be checked on the figure itself.
 """
 
 from __future__ import annotations
@@ -20,29 +21,57 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib import animation
+from matplotlib.artist import Artist
 from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, to_rgba
-from matplotlib.patches import Patch
+from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerTuple
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, PathPatch
+from matplotlib.textpath import TextPath
+from matplotlib.transforms import Affine2D
 from PIL import Image
 
 from fleet.errors import UserError
 from fleet.geometry import Cell, body_corners, cells_under
 from fleet.layout import Layout
 from fleet.maneuvers import Manner, world_pose
-from fleet.plotting import COLORS, _body, _cell_square, draw_layout
+from fleet.palette import GOODS_COLOR, forklift_color, lighter
+from fleet.plotting import (
+    STACK_NUMBER_PT,
+    Z_FORKLIFT_TEXT,
+    Z_RESERVED,
+    Z_STACK_TEXT,
+    _cell_square,
+    draw_layout,
+    forklift_handles,
+    forklift_patch,
+    inches_per_metre,
+    legend_below,
+    map_figure,
+    stack_number_spot,
+)
 from fleet.protocol import VehicleState
 from fleet.record_io import held_intervals
 from fleet.trajectory import Pose
 
 QUARTER_COLORS = ["tab:red", "tab:blue", "tab:green", "gold"]  # as in the seed's figures
+CLAIM_COLOR = "0.6"  # the Gantt chart's claiming and unloading
+SHOW_AHEAD_S = 20.0  # a snapshot shows reserved cells this far ahead
+HELD_NOW_ALPHA, HELD_SOON_ALPHA = 0.35, 0.12  # reserved cells held now, held soon
 
 
-def _save(fig, ax, path: str, record: dict, what: str) -> None:
+def heading(record: dict) -> str:
+    """Which run a plot is of, for its title."""
     m = record["mission"]
-    ax.set_title(f"{m['kind']} with {m['strategy']} on {m['layout']}, {what}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    return (f"{m['kind']} mission with the {m['strategy']} strategy on {m['layout']}, "
+            f"{len(record['starts'])} forklifts")
+
+
+def forklifts(record: dict) -> list[int]:
+    """Every forklift of the run, numbered from 1, also those that never had a subtask."""
+    return sorted(set(range(1, len(record["starts"]) + 1))
+                  | {s["vehicle"] for s in record["subtasks"]})
 
 
 def quarters(record: dict) -> list[int]:
@@ -54,47 +83,73 @@ def quarters(record: dict) -> list[int]:
     return counts
 
 
-def filling_sequence(path: str, layout: Layout, record: dict) -> None:
-    fig, ax = plt.subplots(figsize=(12, 8.5))
-    draw_layout(ax, layout)
+def filling_sequence(layout: Layout, record: dict) -> Figure:
+    """Each stack coloured by the quarter of the end time it was done in and numbered in the
+    order done (the seed's Figure 13)."""
+    fill = record["mission"]["kind"] == "fill"
+    verb = "filled" if fill else "emptied"
     end = record["end_time_s"] or 1.0
+    left = len(layout.stacks) - len(record["stacks_done"])
+    fig, ax = map_figure(layout)
+    handles = draw_layout(ax, layout, stacks_label=f"not {verb}: {left} stacks" if left else None)
     cell_of = {(s.cluster, s.index): s.cell for s in layout.stacks}
     for order, (cluster, index, t) in enumerate(record["stacks_done"], start=1):
         cell = cell_of[cluster, index]
         ax.add_patch(_cell_square(layout, cell, color=QUARTER_COLORS[min(3, int(4 * t / end))],
                                   alpha=0.8))
         x, y = layout.cell_center(cell)
-        ax.text(x, y - 0.55, str(order), ha="center", va="center", fontsize=5, color="white")
-    counts = quarters(record)
-    ax.legend(handles=[Patch(color=c, label=f"quarter {q + 1}: {n} stacks")
-                       for q, (c, n) in enumerate(zip(QUARTER_COLORS, counts, strict=True))],
-              loc="upper right", fontsize=7)
-    _save(fig, ax, path, record, f"sequence: end {record['end_time_s']:.2f} s (small "
-          f"numbers: order done)")
+        ax.text(x, y - 0.12 * layout.cell_size, str(order), ha="center", va="center",
+                fontsize=7, weight="bold", color="white", zorder=Z_STACK_TEXT)
+    by_quarter = [Patch(color=c, alpha=0.8, label=f"{verb} in quarter {q + 1} "
+                        f"({q * end / 4:.0f} to {(q + 1) * end / 4:.0f} s): {n} stacks")
+                  for q, (c, n) in enumerate(zip(QUARTER_COLORS, quarters(record), strict=True))]
+    ax.set_title(f"{'Filling' if fill else 'Emptying'} sequence: when each stack was {verb}, "
+                 f"the last at {record['end_time_s']:.2f} s\n{heading(record)}\nbold number: "
+                 f"the order {verb}; small number: the stack's place in its cluster",
+                 fontsize=10)
+    legend_below(ax, by_quarter + handles, ncols=4)
+    return fig
 
 
-def gantt(path: str, record: dict) -> None:
-    vehicles = sorted({s["vehicle"] for s in record["subtasks"]})
-    fig, ax = plt.subplots(figsize=(14, 1 + 0.6 * len(vehicles)))
+def gantt(record: dict) -> Figure:
+    """One row per forklift, its subtasks along time: driving to a shelf in the forklift's
+    colour, to a station in a lighter shade, claiming or unloading in grey, waiting (stop
+    maneuvers) in black, decision failures as crosses above the row."""
+    vehicles = forklifts(record)
+    fig, ax = plt.subplots(figsize=(14, 1.9 + 0.55 * len(vehicles)), layout="constrained")
+    row = {v: k for k, v in enumerate(vehicles)}
     for s in record["subtasks"]:
-        row = vehicles.index(s["vehicle"])
-        color = "tab:blue" if s["kind"] == "deliver" else "tab:orange"
-        ax.barh(row, s["t_end"] - s["t_i"], left=s["t_i"], color=color, height=0.6)
-        ax.barh(row, s["t_done"] - s["t_end"], left=s["t_end"], color="0.6", height=0.6)
-        stops = [st for st in s["steps"] if st[0] == "stop"]
-        for st in stops:
-            ax.barh(row, st[4] - st[3], left=st[3], color="tab:red", height=0.3)
-    for f in record["failures"]:
-        if f["vehicle"] is not None and f["vehicle"] in vehicles:
-            ax.plot(f["t"], vehicles.index(f["vehicle"]) + 0.4, "kx", ms=3)
+        y, color = row[s["vehicle"]], forklift_color(s["vehicle"])
+        ax.barh(y, s["t_end"] - s["t_i"], left=s["t_i"], height=0.6,
+                color=color if s["kind"] == "deliver" else lighter(color, 0.55))
+        ax.barh(y, s["t_done"] - s["t_end"], left=s["t_end"], color=CLAIM_COLOR, height=0.6)
+        for st in s["steps"]:
+            if st[0] == "stop":
+                ax.barh(y, st[4] - st[3], left=st[3], color="black", height=0.25)
+    failures = [(f["t"], row[f["vehicle"]] - 0.42) for f in record["failures"]
+                if f["vehicle"] in row]
+    if failures:
+        ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
     ax.set_yticks(range(len(vehicles)), [f"forklift {v}" for v in vehicles])
-    ax.set_xlabel("time [s]")
-    ax.legend(handles=[Patch(color="tab:blue", label="to a shelf"),
-                       Patch(color="tab:orange", label="to a station"),
-                       Patch(color="0.6", label="claim / unload"),
-                       Patch(color="tab:red", label="waiting (stop)")],
-              loc="upper right", fontsize=7, ncols=4)
-    _save(fig, ax, path, record, "subtasks (x: decision failures)")
+    for label, v in zip(ax.get_yticklabels(), vehicles, strict=True):
+        label.set_color(forklift_color(v))
+        label.set_fontweight("bold")
+    ax.set_ylim(len(vehicles) - 0.5, -0.6)  # forklift 1 on top, room for its crosses
+    last = max([record["end_time_s"]] + [s["t_done"] for s in record["subtasks"]])
+    ax.set_xlim(0, 1.01 * last or 1.0)
+    ax.set_xlabel("simulated time [s]")
+    swatches = vehicles or [1]  # the legend's colours: every forklift's
+    full = tuple(Patch(color=forklift_color(v)) for v in swatches)
+    light = tuple(Patch(color=lighter(forklift_color(v), 0.55)) for v in swatches)
+    legend_below(ax, [full, light, Patch(color=CLAIM_COLOR), Patch(color="black"),
+                       Line2D([], [], ls="none", marker="x", color="black", ms=4, mew=0.8)],
+                 labels=["driving to a shelf (forklift's colour)",
+                         "driving to a station (lighter)", "claiming / unloading",
+                         "waiting (stop maneuver)", "decision failure"],
+                 handler_map={tuple: HandlerTuple(ndivide=None, pad=0)})
+    ax.set_title(f"What each forklift did over time, subtask by subtask\n{heading(record)}",
+                 fontsize=10)
+    return fig
 
 
 def pose_at(record: dict, vehicle: int, t: float, layout: Layout) -> tuple[float, float, float]:
@@ -116,26 +171,39 @@ def pose_at(record: dict, vehicle: int, t: float, layout: Layout) -> tuple[float
     return x, y, pose.heading * math.pi / 2
 
 
-def snapshot(path: str, layout: Layout, record: dict, t: float, ahead: float = 20.0) -> None:
+def fleet_handles(vehicles: Iterable[int], ahead: float) -> list[Artist]:
+    """Legend entries of a map with forklifts and their reserved cells."""
+    return [*forklift_handles(vehicles),
+            Patch(color="0.3", alpha=HELD_NOW_ALPHA, label="reserved now (its colour)"),
+            Patch(color="0.3", alpha=HELD_SOON_ALPHA, label=f"reserved in the next {ahead:g} s")]
+
+
+def snapshot(layout: Layout, record: dict, t: float, ahead: float = SHOW_AHEAD_S) -> Figure:
+    """The warehouse at instant t: stacks filled or empty, each forklift and the cells it
+    holds now (dark) or will hold within `ahead` seconds (light), in its colour."""
     fill = record["mission"]["kind"] == "fill"
     cell_of = {(s.cluster, s.index): s.cell for s in layout.stacks}
     done = {cell_of[c, i] for c, i, td in record["stacks_done"] if td <= t}
     present = done if fill else {s.cell for s in layout.stacks} - done
-    fig, ax = plt.subplots(figsize=(12, 8.5))
-    draw_layout(ax, layout, present)
-    vehicles = sorted({s["vehicle"] for s in record["subtasks"]})
+    fig, ax = map_figure(layout)
+    handles = draw_layout(ax, layout, present)
+    vehicles = forklifts(record)
     held = held_intervals(record)
-    for k, v in enumerate(vehicles):
-        color = COLORS[k % len(COLORS)]
+    for v in vehicles:
+        color = forklift_color(v)
         for vehicle, cell, t0, t1 in held:
             if vehicle == v and t0 < t + ahead and t1 > t:
-                ax.add_patch(_cell_square(layout, cell, color=color,
-                                          alpha=0.35 if t0 <= t else 0.12))
+                ax.add_patch(_cell_square(
+                    layout, cell, color=color, zorder=Z_RESERVED,
+                    alpha=HELD_NOW_ALPHA if t0 <= t else HELD_SOON_ALPHA))
         x, y, th = pose_at(record, v, t, layout)
-        ax.add_patch(_body(layout, x, y, th, facecolor=color, edgecolor="black", lw=0.8))
-        ax.text(x, y, str(v), ha="center", va="center", fontsize=8, color="white")
-    _save(fig, ax, path, record, f"t = {t:.2f} s: forklifts and their reserved cells "
-          f"(dark: now, light: next {ahead:g} s)")
+        ax.add_patch(forklift_patch(layout, v, x, y, th))
+        ax.text(x, y, str(v), ha="center", va="center", fontsize=8, color="white",
+                weight="bold", zorder=Z_FORKLIFT_TEXT)
+    ax.set_title(f"The warehouse at t = {t:.2f} s: {len(done)} of {len(layout.stacks)} stacks "
+                 f"{'filled' if fill else 'emptied'}\n{heading(record)}", fontsize=10)
+    legend_below(ax, handles + fleet_handles(vehicles, ahead), ncols=5)
+    return fig
 
 
 # ----------------------------------------------------------------------------- heat map
@@ -180,14 +248,13 @@ def occupancy_seconds(layout: Layout, states: Iterable[tuple[float, VehicleState
     return seconds
 
 
-def heat_map(path: str, layout: Layout, record: dict,
-             states: Iterable[tuple[float, VehicleState]],
-             cap_s: float = STATE_GAP_CAP_S) -> None:
+def heat_map(layout: Layout, record: dict, states: Iterable[tuple[float, VehicleState]],
+             cap_s: float = STATE_GAP_CAP_S) -> Figure:
     """Cell occupancy over the run from the recorded vehicle states, over the layout."""
     seconds = {c: s for c, s in occupancy_seconds(layout, states, cap_s).items()
                if 0 <= c[0] < layout.cols and 0 <= c[1] < layout.rows and s > 0}
-    fig, ax = plt.subplots(figsize=(12, 8.5))
-    draw_layout(ax, layout)
+    fig, ax = map_figure(layout, extra_width_in=1.5)
+    handles = draw_layout(ax, layout, stacks_label="stack, never under a forklift")
     busiest = ""
     if seconds:
         values = np.array(list(seconds.values()))
@@ -199,17 +266,20 @@ def heat_map(path: str, layout: Layout, record: dict,
                                   edgecolor="none")
         squares.set_array(values)
         ax.add_collection(squares)
-        fig.colorbar(squares, ax=ax, shrink=0.8, label="seconds occupied (log scale)")
-        busiest = f"; busiest cell {hi:.0f} s"
-    _save(fig, ax, path, record, f"seconds each cell was under a forklift's body (log "
-          f"colour scale{busiest})")
+        fig.colorbar(squares, ax=ax, shrink=0.8,
+                     label="seconds some forklift's body covered the cell (log scale)")
+        busiest = f"; the busiest cell {hi:.0f} s"
+    ax.set_title(f"Where the forklifts were: seconds each cell lay under a forklift's body"
+                 f"{busiest}\n{heading(record)}", fontsize=10)
+    legend_below(ax, handles, ncols=4)
+    return fig
 
 
 # ---------------------------------------------------------------------------- animation
 
 FRAMES = 150
 FPS = 10
-GIF_DPI = 80  # 960 x 680 pixels: readable, and a paper mission stays a few megabytes
+GIF_DPI = 80  # 960 x 740 pixels for paper: readable, and a paper mission stays a few megabytes
 
 
 def frame_times(record: dict, frames: int) -> list[float]:
@@ -221,14 +291,23 @@ def frame_times(record: dict, frames: int) -> list[float]:
     return [end * k / (frames - 1) for k in range(frames)]
 
 
-def _vehicle_color(vehicle: int) -> str:
-    return COLORS[(vehicle - 1) % len(COLORS)]
+def _stack_numbers(layout: Layout) -> PatchCollection:
+    """Each stack's number as stack_number() draws it (place and size), as glyph outlines."""
+    size = STACK_NUMBER_PT / 72 / inches_per_metre(layout)  # in metres, on a map_figure()
+    patches = []
+    for stack in layout.stacks:
+        x, y = stack_number_spot(layout, stack)
+        glyphs = TextPath((0, 0), str(stack.index), size=size)
+        (gx0, gy0), (gx1, gy1) = glyphs.get_extents().get_points()
+        patches.append(PathPatch(glyphs.transformed(
+            Affine2D().translate(x - (gx0 + gx1) / 2, y - (gy0 + gy1) / 2))))
+    return PatchCollection(patches, edgecolor="none", zorder=Z_STACK_TEXT)
 
 
 class _RunArtists:
-    """The moving parts of an animation over a layout drawn once: stacks present, reserved
-    cells, the cluster names (kept readable over filled stacks, as in snapshot()), forklift
-    bodies and the title. `show(t)` updates them in place for instant t; `artists` lists them
+    """The moving parts of an animation over a layout drawn once: stacks present (with their
+    numbers), reserved cells, the cluster names (kept readable over them), forklift bodies
+    and the title. `show(t)` updates them in place for instant t; `artists` lists them
     in drawing order."""
 
     def __init__(self, ax, layout: Layout, record: dict, ahead: float) -> None:
@@ -237,9 +316,13 @@ class _RunArtists:
         done_at = {(c, i): t for c, i, t in record["stacks_done"]}
         self.stack_done = np.array([done_at.get((s.cluster, s.index), math.inf)
                                     for s in layout.stacks])
-        self.stack_rgba = np.tile(to_rgba("0.35"), (len(layout.stacks), 1))
+        self.stack_rgba = np.tile(to_rgba(GOODS_COLOR), (len(layout.stacks), 1))
         self.stacks = ax.add_collection(PatchCollection(
-            [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="none"))
+            [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
+        # White numbers on present stacks (the background's dark ones show on the others),
+        # as glyph outlines in one collection: a frame draws them at once, not as 136 texts.
+        self.numbers = ax.add_collection(_stack_numbers(layout))
+        self.number_rgba = np.tile(to_rgba("white"), (len(layout.stacks), 1))
         # One square per (forklift, cell) ever held; each frame sets its alpha.
         held = held_intervals(record)
         square: dict[tuple[int, Cell], int] = {}
@@ -248,24 +331,22 @@ class _RunArtists:
         self.held_square = np.array([square[v, tuple(c)] for v, c, _, _ in held], dtype=int)
         self.held_t0 = np.array([h[2] for h in held], dtype=float)
         self.held_t1 = np.array([h[3] for h in held], dtype=float)
-        self.held_rgba = np.array([to_rgba(_vehicle_color(v)) for v, _ in square]).reshape(-1, 4)
+        self.held_rgba = np.array([to_rgba(forklift_color(v)) for v, _ in square]).reshape(-1, 4)
         self.held = ax.add_collection(PatchCollection(
-            [_cell_square(layout, c) for _, c in square], edgecolor="none"))
-        names = {c.name for c in layout.clusters}
-        self.cluster_names = [t for t in ax.texts if t.get_text() in names]
+            [_cell_square(layout, c) for _, c in square], edgecolor="none", zorder=Z_RESERVED))
+        self.cluster_names = [t for t in ax.texts if (t.get_gid() or "").startswith("cluster/")]
         # Per-forklift records: pose_at then scans one forklift's subtasks, not the fleet's.
         self.tracks = {v: {"starts": record["starts"],
                            "subtasks": [s for s in record["subtasks"] if s["vehicle"] == v]}
                        for v in range(1, len(record["starts"]) + 1)}
-        self.bodies = [ax.add_patch(_body(layout, 0.0, 0.0, 0.0, facecolor=_vehicle_color(v),
-                                          edgecolor="black", lw=0.8))
+        self.bodies = [ax.add_patch(forklift_patch(layout, v, 0.0, 0.0, 0.0))
                        for v in self.tracks]
         self.labels = [ax.text(0.0, 0.0, str(v), ha="center", va="center", fontsize=8,
-                               color="white") for v in self.tracks]
-        m = record["mission"]
-        self.heading = f"{m['kind']} with {m['strategy']} on {m['layout']}"
+                               color="white", weight="bold", zorder=Z_FORKLIFT_TEXT)
+                       for v in self.tracks]
+        self.heading = heading(record)
         self.title = ax.set_title("", fontsize=10)
-        self.artists = [self.stacks, self.held, *self.cluster_names, *self.bodies,
+        self.artists = [self.stacks, self.numbers, self.held, *self.cluster_names, *self.bodies,
                         *self.labels, *ax.spines.values(), self.title]
         for artist in self.artists:
             artist.set_animated(True)  # left out of the background, drawn by each frame
@@ -274,12 +355,14 @@ class _RunArtists:
         done = self.stack_done <= t
         self.stack_rgba[:, 3] = done if self.fill else ~done
         self.stacks.set_facecolor(self.stack_rgba)
+        self.number_rgba[:, 3] = self.stack_rgba[:, 3]
+        self.numbers.set_facecolor(self.number_rgba)
         alive = self.held_t1 > t  # as snapshot(): dark while held, light if held soon
         now = alive & (self.held_t0 <= t)
         soon = alive & (self.held_t0 < t + self.ahead)
         alpha = np.zeros(len(self.held_rgba))
-        np.maximum.at(alpha, self.held_square[soon], 0.12)
-        np.maximum.at(alpha, self.held_square[now], 0.35)
+        np.maximum.at(alpha, self.held_square[soon], HELD_SOON_ALPHA)
+        np.maximum.at(alpha, self.held_square[now], HELD_NOW_ALPHA)
         rgba = self.held_rgba.copy()
         rgba[:, 3] = alpha
         self.held.set_facecolor(rgba)
@@ -288,9 +371,9 @@ class _RunArtists:
             x, y, th = pose_at(track, v, t, self.layout)
             body.set_xy(body_corners(x, y, th, self.layout.vehicle.dims))
             label.set_position((x, y))
-        self.title.set_text(f"{self.heading}, t = {t:7.1f} s: {int(done.sum())}/"
-                            f"{len(done)} stacks {'filled' if self.fill else 'emptied'}; "
-                            f"reserved cells dark: now, light: next {self.ahead:g} s")
+        self.title.set_text(f"The warehouse at t = {t:.1f} s: {int(done.sum())} of "
+                            f"{len(done)} stacks {'filled' if self.fill else 'emptied'}\n"
+                            f"{self.heading}")
 
 
 # The writers take each frame from the canvas as blitted, instead of matplotlib's savefig,
@@ -344,7 +427,7 @@ def movie_writer(path: str, fps: int) -> animation.AbstractMovieWriter:
 
 
 def animate(path: str, layout: Layout, record: dict, fps: int = FPS, frames: int = FRAMES,
-            ahead: float = 20.0, dpi: int = GIF_DPI,
+            ahead: float = SHOW_AHEAD_S, dpi: int = GIF_DPI,
             progress: Callable[[int, int], None] | None = None) -> int:
     """An animation of the run (GIF, or MP4 by the path's extension): each frame a snapshot()
     at one of `frames` instants spread over the mission. The layout is drawn once as the
@@ -354,15 +437,16 @@ def animate(path: str, layout: Layout, record: dict, fps: int = FPS, frames: int
         raise UserError(f"an animation needs at least one frame and one frame per second, "
                         f"not {frames} frames at {fps} fps")
     writer = movie_writer(path, fps)
-    fig, ax = plt.subplots(figsize=(12, 8.5), dpi=dpi)
+    fig, ax = map_figure(layout, dpi=dpi)
     try:
-        draw_layout(ax, layout)
+        handles = draw_layout(ax, layout, filled=())
         artists = _RunArtists(ax, layout, record, ahead)
+        legend_below(ax, handles + fleet_handles(artists.tracks, ahead), ncols=5)
         times = frame_times(record, frames)
-        artists.show(times[-1])  # the longest title, for tight_layout to make room
-        # Setting up may resize the figure (even pixel sizes for h264): background after it.
+        artists.show(times[-1])  # the longest title, for the layout to make room
+        # Setting up may resize the figure (even pixel sizes for h264): background after it,
+        # drawn once, which also fixes the layout for every frame.
         with writer.saving(fig, path, dpi):
-            fig.tight_layout()
             canvas = fig.canvas
             canvas.draw()
             background = canvas.copy_from_bbox(fig.bbox)

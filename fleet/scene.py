@@ -41,6 +41,7 @@ from foxglove.messages import (
 from fleet.execution import GOODS
 from fleet.geometry import Cell
 from fleet.layout import Layout
+from fleet.palette import GOODS_COLOR, RACK_COLOR, STATION_COLOR, forklift_color
 from fleet.protocol import Change, Message, StackDone, VehicleState
 
 FRAME = "warehouse"
@@ -61,21 +62,12 @@ View = tuple[str, Any, int]  # (topic, foxglove message, log time in ns)
 RACK_H, GOODS_H, BODY_H, CARGO_H, WALL_H, STATION_H = 0.1, 1.2, 0.5, 1.0, 3.0, 1.0
 RESERVED_H = 0.04
 
-PALETTE = ((0.12, 0.47, 0.71), (1.0, 0.50, 0.05), (0.17, 0.63, 0.17), (0.84, 0.15, 0.16),
-           (0.58, 0.40, 0.74), (0.09, 0.75, 0.81), (0.89, 0.47, 0.76), (0.74, 0.74, 0.13))
-GOODS_COLOR = (0.60, 0.40, 0.20)
-RACK_COLOR = (0.45, 0.50, 0.60)
+# Forklifts, goods, racks and stations have the plots' colours (fleet/palette.py).
 FLOOR_COLOR = (0.20, 0.20, 0.22)
 OBSTACLE_COLORS = {"firewall": (0.60, 0.15, 0.10)}  # other kinds (walls, pillars): grey
 WALL_COLOR = (0.50, 0.50, 0.50)
 PASSAGE_COLOR = (0.80, 0.75, 0.30)
-STATION_COLOR = (0.95, 0.80, 0.10)
 WHITE = (1.0, 1.0, 1.0)
-
-
-def vehicle_color(vehicle: int) -> tuple[float, float, float]:
-    """Forklift v's colour, shared by its body and its reserved cells."""
-    return PALETTE[(vehicle - 1) % len(PALETTE)]
 
 
 def _color(rgb: tuple[float, float, float], a: float = 1.0) -> Color:
@@ -252,7 +244,7 @@ class SceneViews:
         c, s = math.cos(theta), math.sin(theta)
         yaw = _yaw(theta)
         mid = (dims.front - dims.rear) / 2  # body centre ahead of the rear-axle point
-        color = _color(vehicle_color(state.vehicle))
+        color = _color(forklift_color(state.vehicle))
         cubes = [_box(x + mid * c, y + mid * s, BODY_H / 2, dims.front + dims.rear,
                       dims.width, BODY_H, color, yaw)]
         if state.loaded:
@@ -283,7 +275,7 @@ class SceneViews:
                     soon = max(iv.t0 - t, 0.0)
                     if soon < ahead.get(iv.cell, math.inf):
                         ahead[iv.cell] = soon
-        rgb = vehicle_color(vehicle)
+        rgb = forklift_color(vehicle)
         side = self.layout.cell_size * 0.9
         cubes = [CubePrimitive(pose=self._pose_of(cell), size=Vector3(x=side, y=side,
                                z=RESERVED_H), color=_color(rgb, 0.6 - 0.45 * soon / HORIZON_S))

@@ -3,20 +3,38 @@ recordings written with RecordingWriter."""
 
 import json
 import math
+import tomllib
 from collections import Counter
 from dataclasses import fields
 from importlib import resources
 from pathlib import Path
 
 import pytest
+from matplotlib.colors import to_rgb
+from matplotlib.patches import Rectangle
 from PIL import Image
 
 from fleet.cli import main
+from fleet.commands.plot import read_run
 from fleet.errors import UserError
-from fleet.layout import Layout, parse_layout
-from fleet.mission_plots import animate, occupancy_seconds, pose_at
+from fleet.layout import Layout, load_layout, parse_layout
+from fleet.mission_plots import (
+    animate,
+    filling_sequence,
+    gantt,
+    heat_map,
+    occupancy_seconds,
+    pose_at,
+    snapshot,
+)
+from fleet.palette import forklift_color
+from fleet.places import resolve
+from fleet.planner import HybridAStar
+from fleet.plotting import draw_layout, map_figure, plan_figure
 from fleet.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
 from fleet.recording import RecordingWriter, expected_sender
+from fleet.reservations import ReservationTable
+from fleet.trajectory import Trajectory
 
 STATE_PERIOD_S = 0.5  # the fast clock's state grid (vehicle_agent/driving.py)
 
@@ -39,6 +57,19 @@ def small_record(end: float = 40.0, kind: str = "fill", strategy: str = "ann") -
                         "seed": 0},
             "starts": ["4,6,S", "5,6,S"], "stacks_done": [["a", 1, end]],
             "subtasks": [subtask]}
+
+
+def two_forklift_record(end: float = 40.0, kind: str = "fill") -> dict:
+    """small_record, and forklift 2 has a subtask for stack a#2 from 10 s until the end, in
+    which it waits at its start: both forklifts have a row of bars up to the end."""
+    record = small_record(end, kind)
+    record["subtasks"].append(
+        {"vehicle": 2, "kind": "deliver", "target": "a", "stack": 2, "t_i": 10.0,
+         "t_end": end - 2.0, "t_done": end, "postponed": False,
+         "steps": [["stop", "5,6,S", "5,6,S", 10.0, end - 10.0, 0, 0]],
+         "intervals": [[5, 6, 10.0, math.inf], [5, 5, 10.0, math.inf]]})
+    record["stacks_done"].insert(0, ["a", 2, end - 1.0])
+    return record
 
 
 def write_recording(path: Path, record: dict, clock: str = "fast") -> Path:
@@ -192,3 +223,102 @@ def test_plot_mp4_needs_ffmpeg_and_says_so(tmp_path, capsys, monkeypatch):
     write_recording(tmp_path / "run.mcap", small_record())
     assert main(["plot", str(tmp_path), "--mp4", "--frames", "3"]) == 2
     assert "an MP4 needs ffmpeg" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ what a reader relies on
+
+
+def recorded(tmp_path: Path, record: dict) -> tuple[Layout, dict, list]:
+    """The layout, the mission record and the vehicle states of `record` after a trip
+    through a recording, as `fleet plot` reads them."""
+    recording, rebuilt = read_run(write_recording(tmp_path / "run.mcap", record))
+    states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
+    return recording.layout(), rebuilt, states
+
+
+def small_plan_figure(small: Layout):
+    """`fleet plan --png`'s figure: forklift 1 from its start to stack a#1 on `small`."""
+    table = ReservationTable()
+    start, goals = resolve(small, "4,6,S", set())[0], resolve(small, "a#1", set())
+    traj = HybridAStar(small.grid_map(), small.vehicle.dims).plan(1, start, 0.0, goals, table)
+    assert isinstance(traj, Trajectory)
+    table.commit(1, traj.intervals, release_from=traj.t_start)
+    return plan_figure(small, traj, [], table.reservations(), set(), "plan")
+
+
+def test_every_map_is_drawn_in_the_layouts_metres(tmp_path, small):
+    layout, record, states = recorded(tmp_path, two_forklift_record())
+    bounds = tomllib.loads(layout_source("small"))["bounds"]
+    figures = {"filling": filling_sequence(layout, record), "heat map":
+               heat_map(layout, record, states), "snapshot": snapshot(layout, record, 12.0),
+               "plan": small_plan_figure(small)}
+    for name, fig in figures.items():
+        ax = fig.axes[0]
+        assert (ax.get_xlabel(), ax.get_ylabel()) == ("x [m]", "y [m]"), name
+        # The axes span the layout's bounds as its file gives them, in metres.
+        assert ax.get_xlim() == pytest.approx(bounds["x"]), name
+        assert ax.get_ylim() == pytest.approx(bounds["y"]), name
+        assert ax.get_title(), name
+
+
+def test_the_gantt_legend_covers_no_bar(tmp_path):
+    # Both forklifts work up to the end: upper right, where the legend used to be, is full.
+    _, record, _ = recorded(tmp_path, two_forklift_record())
+    fig = gantt(record)
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    legend = ax.get_legend().get_window_extent()
+    bars = [p for p in ax.patches if isinstance(p, Rectangle)]
+    assert len(bars) >= 4
+    assert not [b for b in bars if legend.overlaps(b.get_window_extent())]
+    assert ax.get_xlabel() == "simulated time [s]"
+
+
+@pytest.mark.parametrize("kind", ["fill", "empty"])
+def test_a_snapshot_has_legend_entries_for_filled_and_empty_stacks(tmp_path, kind):
+    layout, record, _ = recorded(tmp_path, two_forklift_record(kind=kind))
+    fig = snapshot(layout, record, 39.5)  # a#2 done at 39, a#1 at 40
+    ax = fig.axes[0]
+    entries = dict(zip([t.get_text() for t in ax.get_legend().get_texts()],
+                       ax.get_legend().legend_handles, strict=True))
+    squares = {p.get_gid(): p for p in ax.patches if p.get_gid()}
+    done, waiting = ("stack, filled", "stack, empty")[:: 1 if kind == "fill" else -1]
+    # A reader matches a stack to its legend entry by colour.
+    assert to_rgb(squares["stack/a#2"].get_facecolor()) == to_rgb(
+        entries[done].get_facecolor())
+    assert to_rgb(squares["stack/a#1"].get_facecolor()) == to_rgb(
+        entries[waiting].get_facecolor())
+    assert to_rgb(entries["stack, filled"].get_facecolor()) != to_rgb(
+        entries["stack, empty"].get_facecolor())
+    for v in (1, 2):
+        assert to_rgb(entries[f"forklift {v}"].get_facecolor()) == pytest.approx(
+            forklift_color(v))
+
+
+@pytest.mark.parametrize("name", ["small", "paper", "hall"])
+def test_cluster_names_hide_no_stack(name):
+    layout = load_layout(name)
+    fig, ax = map_figure(layout)
+    draw_layout(ax, layout, filled=())
+    fig.canvas.draw()
+    names = {t.get_gid(): t for t in ax.texts if (t.get_gid() or "").startswith("cluster/")}
+    assert set(names) == {f"cluster/{c.name}" for c in layout.clusters}
+    stacks = [p.get_window_extent() for p in ax.patches
+              if (p.get_gid() or "").startswith("stack/")]
+    assert len(stacks) == len(layout.stacks)
+    for gid, text in names.items():
+        box = text.get_bbox_patch().get_window_extent()  # the name with its white box
+        assert text.get_fontweight() == "bold"
+        # Touching a stack's edge is allowed; covering any of it by more than a pixel is not.
+        covered = [s for s in stacks if min(box.x1, s.x1) - max(box.x0, s.x0) > 1
+                   and min(box.y1, s.y1) - max(box.y0, s.y0) > 1]
+        assert not covered, gid
+
+
+def test_plan_png_draws_each_vehicle_in_its_forklift_colour(small):
+    fig = small_plan_figure(small)
+    ax = fig.axes[0]
+    (path,) = [line for line in ax.lines if len(line.get_xdata()) > 1]
+    assert to_rgb(path.get_color()) == pytest.approx(forklift_color(1))
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "vehicle 1 (planned)" in labels and "stack, empty" in labels

@@ -13,14 +13,19 @@ import struct
 import pytest
 from foxglove.messages import FrameTransforms, SceneEntity, SceneUpdate
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from matplotlib.colors import to_rgb
+from matplotlib.patches import Rectangle
 from mcap.reader import make_reader
+from test_recording_plots import recorded, two_forklift_record
 from websockets.sync.client import connect
 
 from fleet.geometry import body_corners
 from fleet.layout import load_layout
+from fleet.mission_plots import gantt, snapshot
+from fleet.palette import GOODS_COLOR, forklift_color
 from fleet.protocol import Change, Progress, StackDone, VehicleState
 from fleet.recording import RecordingWriter, read_recording
-from fleet.scene import FRAME, GOODS_COLOR, HORIZON_S, SceneViews, vehicle_color
+from fleet.scene import FRAME, HORIZON_S, SceneViews
 from recorder.live import LiveView
 
 BASE = 1_700_000_000 * 10**9
@@ -169,7 +174,7 @@ def test_forklift_is_its_body_rectangle_at_the_pose(paper, theta):
     assert (arrow.pose.position.x, arrow.pose.position.y) == pytest.approx((x, y))
     assert same_angle(yaw(arrow.pose.orientation), theta)
     assert forklift.texts[0].text == "3"
-    assert body.color.r == pytest.approx(vehicle_color(3)[0])
+    assert body.color.r == pytest.approx(forklift_color(3)[0])
 
 
 def test_loaded_forklift_carries_goods_on_its_forks(paper):
@@ -223,6 +228,38 @@ def test_the_static_scene_comes_again_every_ten_seconds(paper):
     assert [static[0] in t for t in topics] == [False, False, True, False, True]
 
 
+def test_a_forklift_has_one_colour_in_the_gantt_chart_a_snapshot_and_foxglove(tmp_path):
+    layout, record, states = recorded(tmp_path, two_forklift_record())
+    chart = gantt(record).axes[0]
+    picture = snapshot(layout, record, 20.0).axes[0]
+    views = SceneViews(layout, BASE, vehicles=2)
+    shown = []
+    for t, s in states:
+        if t == 20.0:
+            shown += views.on_message(STATE_KEY.format(s.vehicle), s, t)
+    scene = {e.id: e for e in views_by_topic(shown)["/view/forklifts"][0][0].entities}
+    rows = {label.get_text(): (y, label) for y, label in zip(
+        chart.get_yticks(), chart.get_yticklabels(), strict=True)}
+    bodies = {p.get_gid(): p for p in picture.patches if p.get_gid()}
+    seen = []
+    for v in (1, 2):
+        (subtask,) = [s for s in record["subtasks"] if s["vehicle"] == v]
+        y, label = rows[f"forklift {v}"]
+        # The bar of its subtask's drive (a "deliver": the forklift's own colour), its row's
+        # name, its body in the snapshot and its body in Foxglove.
+        (bar,) = [p for p in chart.patches if isinstance(p, Rectangle)
+                  and p.get_x() == pytest.approx(subtask["t_i"])
+                  and p.get_width() == pytest.approx(subtask["t_end"] - subtask["t_i"])
+                  and abs(p.get_y() + p.get_height() / 2 - y) < 1e-9]
+        body = scene[f"forklift/{v}"].cubes[0].color
+        colours = [to_rgb(bar.get_facecolor()), to_rgb(label.get_color()),
+                   to_rgb(bodies[f"forklift/{v}"].get_facecolor()), (body.r, body.g, body.b)]
+        for colour in colours[1:]:
+            assert colour == pytest.approx(colours[0], abs=1e-6), v
+        seen.append(colours[0])
+    assert seen[0] != pytest.approx(seen[1], abs=0.05)  # and two forklifts are told apart
+
+
 # ------------------------------------------------------------------------ reservations
 
 
@@ -245,7 +282,7 @@ def test_reserved_cells_ahead_follow_the_table(paper):
                                  release_from=5.0), 5.0)
     cells, ent = reserved_cells(views, paper, 2, 4.0)
     assert cells == {(8, 10), (9, 10), (8, 9), (8, 8)}
-    assert all(c.color.r == pytest.approx(vehicle_color(2)[0]) and 0 < c.color.a < 1
+    assert all(c.color.r == pytest.approx(forklift_color(2)[0]) and 0 < c.color.a < 1
                for c in ent.cubes)
     assert reserved_cells(views, paper, 2, 10.0)[0] == {(8, 8)}  # (8, 7) is 20 s ahead
     assert reserved_cells(views, paper, 2, 30.0 - HORIZON_S + 1.0)[0] == {(8, 8), (8, 7)}

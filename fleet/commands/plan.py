@@ -137,12 +137,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"no trajectory: {result.reason.value}: {result.detail}")
     print(f"search: {result.expansions} expansions, {wall_ms:.1f} ms")
     if args.png:
-        from fleet.plotting import save_plan_figure
+        from fleet.plotting import plan_figure, save_figure
 
         traj = result if isinstance(result, Trajectory) else None
-        save_plan_figure(str(args.png), layout, traj, scene.others, table.reservations(),
-                         scene.filled, f"{layout.name}: vehicle {args.vehicle} {args.start} -> "
-                         f"{args.goal}" + ("" if traj else f" ({result.reason.value})"))
+        outcome = (f"arrives at t = {traj.t_end:.2f} s" if traj
+                   else f"no trajectory: {result.reason.value}")
+        title = (f"Plan of vehicle {args.vehicle} from {args.start} to {args.goal} on "
+                 f"{layout.name}, starting at t = {args.at:g} s: {outcome}\n"
+                 f"among {len(scene.others)} other vehicles' plans and reservations")
+        save_figure(plan_figure(layout, traj, scene.others, table.reservations(),
+                                scene.filled, title), str(args.png))
         print(f"wrote {args.png}")
     return 0 if isinstance(result, Trajectory) else 1
 

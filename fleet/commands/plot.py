@@ -61,6 +61,7 @@ def read_run(path: Path) -> tuple[Recording, dict]:
 
 def run(args: argparse.Namespace) -> int:
     from fleet import mission_plots
+    from fleet.plotting import save_figure
     from fleet.protocol import VehicleState
 
     if args.frames < 1 or args.fps < 1:
@@ -77,17 +78,17 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     end = record["end_time_s"]
     written = [out / "filling.png", out / "gantt.png"]
-    mission_plots.filling_sequence(str(written[0]), layout, record)
-    mission_plots.gantt(str(written[1]), record)
+    save_figure(mission_plots.filling_sequence(layout, record), str(written[0]))
+    save_figure(mission_plots.gantt(record), str(written[1]))
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
     if states:
         written.append(out / "heatmap.png")
-        mission_plots.heat_map(str(written[-1]), layout, record, states)
+        save_figure(mission_plots.heat_map(layout, record, states), str(written[-1]))
     else:
         print(f"note: {recording.path} holds no vehicle states: no heat map", file=sys.stderr)
     for t in args.at or [end / 4, end / 2, 3 * end / 4]:
         path = out / f"snapshot_{t:08.2f}.png"
-        mission_plots.snapshot(str(path), layout, record, t)
+        save_figure(mission_plots.snapshot(layout, record, t), str(path))
         written.append(path)
     if args.gif or args.mp4:
         written.append(out / ("run.mp4" if args.mp4 else "run.gif"))
