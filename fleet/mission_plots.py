@@ -92,9 +92,9 @@ def gantt(path: str, record: dict) -> None:
     ax.legend(handles=[Patch(color="tab:blue", label="to a shelf"),
                        Patch(color="tab:orange", label="to a station"),
                        Patch(color="0.6", label="claim / unload"),
-                       Patch(color="tab:red", label="waiting (stop)")],
+                       Patch(color="tab:red", label="stopped")],
               loc="upper right", fontsize=7, ncols=4)
-    _save(fig, ax, path, record, "subtasks (x: decision failures)")
+    _save(fig, ax, path, record, "subtasks (x: plans failed)")
 
 
 def pose_at(record: dict, vehicle: int, t: float, layout: Layout) -> tuple[float, float, float]:
