@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import random
 import statistics
-import sys
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -117,10 +116,3 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         "setup_p50_ms": round(statistics.median(setup_ms), 3),
     }
 
-
-def print_progress(done: int, total: int) -> None:
-    if done == total or done % 10 == 0:
-        sys.stderr.write(f"\rplanner bench: {done}/{total} queries")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()

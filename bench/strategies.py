@@ -63,9 +63,9 @@ def table(result: dict) -> str:
         bound = result["lower_bound_s"][kind]
         lines.append(f"\n{kind}: lower bound {bound:.2f} s")
         lines.append(f"  {'strategy':<14} {'end time s':>10} {'x bound':>8} {'failures':>8} "
-                     f"{'wait s':>8} {'wall s':>7}")
+                     f"{'waiting s':>9} {'wall s':>7}")
         for name, row in result[kind].items():
             lines.append(f"  {name:<14} {row['end_time_s']:>10.2f} "
                          f"{row['ratio_to_bound']:>8.3f} {row['failures']:>8} "
-                         f"{row['wait_s']:>8.1f} {row['wall_s']:>7.1f}")
+                         f"{row['wait_s']:>9.1f} {row['wall_s']:>7.1f}")
     return "\n".join(lines)

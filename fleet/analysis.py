@@ -13,7 +13,6 @@ transit, and what the verdicts could not check there is listed as not verified.
 from __future__ import annotations
 
 import bisect
-import functools
 import itertools
 import math
 import re
@@ -22,9 +21,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fleet.maneuvers import Manner, local_pose
+from fleet.forklift_time import VehicleStats, time_use
 from fleet.protocol import (
     Change,
+    DecisionFailure,
     Halt,
     MissionDone,
     Resume,
@@ -51,21 +51,10 @@ from fleet.safety import (
 )
 from vehicle_agent.driving import state_period
 
-IDLE, WAITING, BUSY = "idle", "waiting", "busy"
 # A stream whose numbers fall this far below the highest seen is a restarted sender whose
 # first messages were not recorded (a stream shared by threads may swap a few neighbours).
 RESTART_DROP = 16
 GOODS_OWNER = 0  # the reservation table's owner of stacks with goods (fleet.execution.GOODS)
-
-
-@dataclass
-class VehicleStats:
-    vehicle: int
-    distance_m: float = 0.0
-    busy_s: float = 0.0  # driving a maneuver
-    waiting_s: float = 0.0  # a stop maneuver inside a trajectory
-    idle_s: float = 0.0  # the rest of the mission: at rest, claiming, unloading
-    subtasks: int = 0
 
 
 @dataclass(frozen=True)
@@ -142,14 +131,20 @@ class Report:
     finished: bool  # the dispatcher's result is in the recording
     mission_error: str
     end_time_s: float
+    all_parked_s: float  # the last trajectory's end
     stacks_expected: int
     stacks_done: int
     stacks_duplicated: list[str]
     stacks_lost: list[str]
     subtasks: int
+    # The dispatcher's count (docs/metrics.md): a chosen forklift given no goal it accepts, or
+    # a decided trajectory that could not be planned. Only the latter and the dispatches that
+    # ended with no decision at all are announced, one dispatch.failure message each.
     decision_failures: int
+    plans_failed: int
+    undecided: int  # dispatches without a decision (each iter_dispatch choices without a goal)
     commit_conflicts: int
-    vehicles: list[VehicleStats]
+    vehicles: list[VehicleStats]  # fleet.forklift_time: where each forklift's time went
     messages: dict[str, int]  # per message type
     messages_lost: int
     gaps: list[Gap]
@@ -228,6 +223,39 @@ class Report:
             + f"{self.malformed} malformed, {self.foreign} foreign",
         ]
 
+    def numbers_lines(self) -> list[str]:
+        """End time, subtasks, decision failures and waiting: as `fleet run` and `fleet analyze`
+        print them (docs/metrics.md)."""
+        no_goal = self.decision_failures - self.plans_failed
+        stopped = sum(v.stopped_s for v in self.vehicles)
+        postponed = sum(v.postponed_s for v in self.vehicles)
+        return [
+            f"  end time           {self.end_time_s:.2f} s (last stack done); every forklift "
+            f"parked at {self.all_parked_s:.2f} s",
+            f"  stacks             {self.stacks_done} of {self.stacks_expected}",
+            f"  subtasks           {self.subtasks}",
+            f"  decision failures  {self.decision_failures}: {self.plans_failed} plans failed, "
+            f"{no_goal} choices without a goal"
+            + (f" ({self.undecided} dispatches without a decision)" if self.undecided else ""),
+            f"  waiting            {stopped + postponed:.2f} s in all: {stopped:.2f} s stopped, "
+            f"{postponed:.2f} s postponed",
+        ]
+
+    def vehicle_lines(self, distance: bool = False) -> list[str]:
+        """Each forklift's time (fleet.forklift_time), with its distance if asked; a down
+        column only when some forklift was down."""
+        down = any(v.down_s for v in self.vehicles)
+        head = "  forklift" + (" distance m" if distance else "") + \
+            " busy s stopped s postponed s handling s" + (" down s" if down else "") + \
+            " idle s busy %"
+        out = [head]
+        for v in self.vehicles:
+            out.append(f"  {v.vehicle:>8}" + (f" {v.distance_m:10.1f}" if distance else "")
+                       + f" {v.busy_s:6.1f} {v.stopped_s:9.1f} {v.postponed_s:11.1f}"
+                       f" {v.handling_s:10.1f}" + (f" {v.down_s:6.1f}" if down else "")
+                       + f" {v.idle_s:6.1f} {v.utilisation:6.0%}")
+        return out
+
     def lines(self) -> list[str]:
         m = self.mission
         out = [f"recording {self.path}"]
@@ -249,15 +277,10 @@ class Report:
             f"{m.get('clock')}, seed {m.get('seed')}",
             f"  finished           {'yes' if self.finished else 'no'}"
             + (f" ({self.mission_error})" if self.mission_error else ""),
-            f"  end time           {self.end_time_s:.2f} s",
-            f"  subtasks           {self.subtasks}",
-            f"  decision failures  {self.decision_failures}",
+            *self.numbers_lines(),
             f"  commit conflicts   {self.commit_conflicts}",
-            "  forklift  distance m   busy s   wait s   idle s  subtasks",
+            *self.vehicle_lines(distance=True),
         ]
-        for v in self.vehicles:
-            out.append(f"  {v.vehicle:>8} {v.distance_m:11.1f} {v.busy_s:8.1f} "
-                       f"{v.waiting_s:8.1f} {v.idle_s:8.1f} {v.subtasks:9d}")
         out.append("  messages           " + ", ".join(
             f"{k} {n}" for k, n in sorted(self.messages.items())))
         for gap in self.gaps[:10]:
@@ -364,14 +387,20 @@ def analyze(recording: Recording) -> Report:
         finished=bool(done) and done[-1].ok,
         mission_error=done[-1].error if done else "",
         end_time_s=record["end_time_s"],
+        all_parked_s=record["all_parked_s"],
         stacks_expected=len(expected),
         stacks_done=len(seen | from_record),
         stacks_duplicated=sorted(f"{c}#{i}" for (c, i), n in stacks.items() if n > 1),
         stacks_lost=sorted(f"{c}#{i}" for c, i in expected - seen - from_record),
         subtasks=len(record["subtasks"]),
         decision_failures=record["decision_failures"],
+        plans_failed=sum(m.stage == "plan" for _, m in recording.of(DecisionFailure)),
+        undecided=sum(m.stage == "dispatch" for _, m in recording.of(DecisionFailure)),
         commit_conflicts=len(done[-1].rejections) if done else 0,
-        vehicles=vehicle_stats(record, layout.cell_size),
+        vehicles=time_use(record["subtasks"], [m for _, m in recording.of(Halt)],
+                          [m for _, m in recording.of(Resume)], info.vehicles,
+                          max(record["end_time_s"], record["all_parked_s"]), info.kind,
+                          layout.cell_size),
         messages=dict(Counter(r.envelope.message.TYPE for r in recording.messages
                               if r.genuine)),
         messages_lost=sum(g.missing for g in gaps), gaps=gaps,
@@ -599,30 +628,3 @@ def _stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
         if isinstance(entries, list) else set()
     explained = claimed & unseen
     return explained if len(explained) <= missing else set()
-
-
-def vehicle_stats(record: dict[str, Any], cell_size: float) -> list[VehicleStats]:
-    """Distance and time per activity from the maneuvers each forklift committed: busy
-    driving, waiting in a stop maneuver, idle the rest of the mission."""
-    stats = {int(v): VehicleStats(int(v)) for v in record["busy_s"]}
-    for s in record["subtasks"]:
-        st = stats.setdefault(s["vehicle"], VehicleStats(s["vehicle"]))
-        st.subtasks += 1
-        for label, _, _, t0, t1, *_ in s["steps"]:
-            if label == "stop":
-                st.waiting_s += t1 - t0
-            else:
-                st.busy_s += t1 - t0
-                st.distance_m += maneuver_length(label) * cell_size
-    end = max(record["end_time_s"], record["all_parked_s"])
-    for st in stats.values():
-        st.idle_s = max(0.0, end - st.busy_s - st.waiting_s)
-    return [stats[v] for v in sorted(stats)]
-
-
-@functools.cache
-def maneuver_length(label: str) -> float:
-    """Path length of a maneuver in cells (its rear-axle point's arc, finely sampled)."""
-    manner = Manner.from_label(label)
-    points = [local_pose(manner, k / 200)[:2] for k in range(201)]
-    return sum(math.dist(a, b) for a, b in itertools.pairwise(points))

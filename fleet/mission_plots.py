@@ -114,7 +114,7 @@ def filling_sequence(layout: Layout, record: dict) -> Figure:
 def gantt(record: dict) -> Figure:
     """One row per forklift, its subtasks along time: driving to a shelf in the forklift's
     colour, to a station in a lighter shade, claiming or unloading in grey, waiting (stop
-    maneuvers) in black, decision failures as crosses above the row."""
+    maneuvers) in black, failed plans as crosses above the row."""
     vehicles = forklifts(record)
     fig, ax = plt.subplots(figsize=(14, 1.9 + 0.55 * len(vehicles)), layout="constrained")
     row = {v: k for k, v in enumerate(vehicles)}
@@ -145,7 +145,7 @@ def gantt(record: dict) -> Figure:
                        Line2D([], [], ls="none", marker="x", color="black", ms=4, mew=0.8)],
                  labels=["driving to a shelf (forklift's colour)",
                          "driving to a station (lighter)", "claiming / unloading",
-                         "waiting (stop maneuver)", "decision failure"],
+                         "stopped (a stop maneuver)", "plan failed"],
                  handler_map={tuple: HandlerTuple(ndivide=None, pad=0)})
     ax.set_title(f"What each forklift did over time, subtask by subtask\n{heading(record)}",
                  fontsize=10)

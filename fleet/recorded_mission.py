@@ -24,14 +24,11 @@ def record_of(recording: Recording) -> dict[str, Any]:
     for s in subtasks:
         for label, _, _, t0, t1, *_ in s["steps"]:
             (wait if label == "stop" else busy)[str(s["vehicle"])] += t1 - t0
-    # Failures inside a decision are counted, not announced one by one: the last progress
-    # report has the count so far, the dispatcher's result the final one.
-    failure_count = max([m.failures for _, m in recording.of(Progress)]
-                        + [sum(f["stage"] == "plan" for f in failures)])
     done = [m for _, m in recording.of(MissionDone) if m.ok and m.record]
     account = _dispatcher_account(done[-1].record) if done else None
     if account:  # the dispatcher's own, which also counts postponements as waiting
-        busy, wait, failure_count = account
+        busy, wait, _ = account
+    failure_count = decision_failures(recording, account[2] if account else None)
     return {
         "mission": {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
                     "vehicles": info.vehicles, "seed": info.seed},
@@ -45,6 +42,22 @@ def record_of(recording: Recording) -> dict[str, Any]:
         "failures": failures,
         "subtasks": subtasks,
     }
+
+
+def decision_failures(recording: Recording, final: int | None) -> int:
+    """The dispatcher's count of decision failures (docs/metrics.md). Failures inside a
+    decision are counted, not announced one by one: each progress report has the count so
+    far, the dispatcher's result (`final`) the last one. A restarted dispatcher counts from 0
+    again (its reports are numbered from 1 again): the counts of each are added."""
+    counts: list[int] = []
+    for r, m in recording.of(Progress):
+        if not counts or r.envelope.seq == 1:
+            counts.append(0)
+        counts[-1] = max(counts[-1], m.failures)
+    if final is not None:
+        counts[-1:] = [max([final, *counts[-1:]])]
+    plans = sum(m.stage == "plan" for _, m in recording.of(DecisionFailure))
+    return max(sum(counts), plans)
 
 
 def _dispatcher_account(record: dict) -> tuple[dict, dict, int] | None:

@@ -208,11 +208,15 @@ def test_compare_json_gives_both_runs_and_the_differences(tmp_path, capsys):
     assert data["diff"]["end_time_s"] == pytest.approx(10.0)
     assert data["ratio"]["end_time_s"] == pytest.approx(1.25)
     for key in ("mission", "strategy", "layout", "vehicles", "clock", "stacks_done",
-                "subtasks", "decision_failures", "wait_s", "mean_utilisation", "busy_s"):
+                "subtasks", "decision_failures", "plans_failed", "waiting_s", "stopped_s",
+                "postponed_s", "mean_utilisation", "busy_s"):
         assert key in data["a"] and key in data["b"], key
     assert data["a"]["clock"] == "fast" and data["a"]["stacks_done"] == 1
-    # Forklift 1 waits 10 s longer in B (its stop lasts to end - 5); its busy time is equal.
-    assert data["diff"]["wait_s"] == pytest.approx(10.0)
+    # Forklift 1 waits 10 s longer in B (its stop lasts to end - 5), stopped, not postponed;
+    # its busy time is equal.
+    assert data["diff"]["waiting_s"] == pytest.approx(10.0)
+    assert data["diff"]["stopped_s"] == pytest.approx(10.0)
+    assert data["diff"]["postponed_s"] == 0
     assert data["diff"]["busy_s"]["1"] == pytest.approx(0.0)
 
 

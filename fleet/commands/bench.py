@@ -8,6 +8,8 @@ import platform
 import sys
 from pathlib import Path
 
+from fleet.progress import ProgressBar
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run a benchmark")
@@ -84,8 +86,12 @@ def run_planner(args: argparse.Namespace) -> int:
 
     if args.queries < 1:
         raise ValueError("--queries must be at least 1")
-    result = planner.run(args.layout, args.queries, args.seed,
-                         None if args.json else planner.print_progress)
+    bar = ProgressBar(args.queries, "planner bench", unit="queries", enabled=not args.json)
+    try:
+        result = planner.run(args.layout, args.queries, args.seed,
+                             lambda done, _: bar.update(done))
+    finally:
+        bar.close()
     if emitted_json(result, args.json):
         return 0
     print(f"planner on {result['layout']}: {result['queries']} queries (seed {result['seed']})")
@@ -102,7 +108,6 @@ def run_planner(args: argparse.Namespace) -> int:
 def run_strategies(args: argparse.Namespace) -> int:
     from bench import strategies
     from fleet.mission import MissionKind
-    from fleet.progress import ProgressBar
 
     kinds = tuple(MissionKind) if args.mission == "both" else (MissionKind(args.mission),)
     bars: dict[str, ProgressBar] = {}
@@ -111,8 +116,8 @@ def run_strategies(args: argparse.Namespace) -> int:
         if label not in bars:
             for bar in bars.values():
                 bar.close()
-            bars[label] = ProgressBar(total, f"{label:<20}")
-        bars[label].update(done, "stacks")
+            bars[label] = ProgressBar(total, label, unit="stacks")
+        bars[label].update(done)
 
     result = strategies.run(args.layout, kinds, args.weights, progress)
     for bar in bars.values():

@@ -59,7 +59,10 @@ FIELDS: tuple[Field, ...] = (
     Field("stacks_done", "stacks done", "d"),
     Field("subtasks", "subtasks", "d"),
     Field("decision_failures", "decision failures", "d"),
-    Field("wait_s", "waiting time [s]", ".2f"),
+    Field("plans_failed", "  plans failed", "d"),
+    Field("waiting_s", "waiting [s]", ".2f"),
+    Field("stopped_s", "  stopped [s]", ".2f"),
+    Field("postponed_s", "  postponed [s]", ".2f"),
     Field("mean_utilisation", "mean utilisation", ".1%"),
     Field("overlaps", "overlaps", "d", ratio=False),
     Field("outside_reservation", "outside reservation", "d", ratio=False),
@@ -72,12 +75,12 @@ FIELDS: tuple[Field, ...] = (
 
 
 def summarize(recording: Recording, record: dict) -> dict[str, Any]:
-    """What is compared of one run, as JSON-able data."""
+    """What is compared of one run, as JSON-able data: the numbers as `fleet analyze` has
+    them (docs/metrics.md)."""
     m = record["mission"]
-    end = record["end_time_s"]
-    busy = {v: record["busy_s"][v] for v in sorted(record["busy_s"], key=int)}
     info = recording.info
     report = analyze(recording)
+    vehicles = report.vehicles
     return {
         "path": str(recording.path),
         "complete": recording.complete,
@@ -87,15 +90,17 @@ def summarize(recording: Recording, record: dict) -> dict[str, Any]:
         "layout": m["layout"],
         "vehicles": m["vehicles"],
         "clock": info.clock if info is not None else "",
-        "end_time_s": end,
-        "all_parked_s": record["all_parked_s"],
-        "stacks_done": len(record["stacks_done"]),
-        "subtasks": len(record["subtasks"]),
-        "decision_failures": record["decision_failures"],
-        "wait_s": sum(record["wait_s"].values()),
-        # Utilisation as `fleet run` prints it: busy time over the end time.
-        "mean_utilisation": mean(b / end for b in busy.values()) if end and busy else 0.0,
-        "busy_s": busy,
+        "end_time_s": report.end_time_s,
+        "all_parked_s": report.all_parked_s,
+        "stacks_done": report.stacks_done,
+        "subtasks": report.subtasks,
+        "decision_failures": report.decision_failures,
+        "plans_failed": report.plans_failed,
+        "waiting_s": sum(v.waiting_s for v in vehicles),
+        "stopped_s": sum(v.stopped_s for v in vehicles),
+        "postponed_s": sum(v.postponed_s for v in vehicles),
+        "mean_utilisation": mean(v.utilisation for v in vehicles) if vehicles else 0.0,
+        "busy_s": {str(v.vehicle): v.busy_s for v in vehicles},
         "overlaps": len(report.overlaps),
         "outside_reservation": len(report.outside_reservation),
         "stacks_duplicated": len(report.stacks_duplicated),

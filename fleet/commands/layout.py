@@ -57,7 +57,7 @@ def run_show(args: argparse.Namespace) -> int:
 
 def run_check(args: argparse.Namespace) -> int:
     layout = load_layout(args.file)  # structural errors raise LayoutError naming the element
-    bar = ProgressBar(len(layout.stacks), "reachability")
+    bar = ProgressBar(len(layout.stacks), "reachability", unit="stacks")
     problems = reachability_problems(layout, lambda done, total: bar.update(done))
     bar.close()
     if problems:

@@ -92,11 +92,11 @@ def run(args: argparse.Namespace) -> int:
         written.append(path)
     if args.gif or args.mp4:
         written.append(out / ("run.mp4" if args.mp4 else "run.gif"))
-        bar = ProgressBar(args.frames, written[-1].name)
+        bar = ProgressBar(args.frames, written[-1].name, unit="frames")
         try:
             mission_plots.animate(str(written[-1]), layout, record, fps=args.fps,
                                   frames=args.frames,
-                                  progress=lambda done, _: bar.update(done, "frames"))
+                                  progress=lambda done, _: bar.update(done))
         finally:
             bar.close()
     print(f"stacks per quarter of the end time: {mission_plots.quarters(record)}")

@@ -4,11 +4,13 @@ summary."""
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fleet.bus import free_port
 from fleet.commands.runs import write_summary
@@ -18,11 +20,14 @@ from fleet.errors import UserError
 from fleet.faults import Scenario, check_against, load_scenario
 from fleet.layout import Layout, load_layout
 from fleet.mission import Mission, MissionKind, Strategy
-from fleet.progress import ProgressBar
+from fleet.progress import MissionProgress, ProgressBar
 from fleet.record_inprocess import recorded_run, write_recording
 from fleet.record_io import digest_of
 from fleet.recording import read_recording
 from fleet.rundir import choose
+
+if TYPE_CHECKING:
+    from fleet.analysis import Report
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", metavar="SCENARIO",
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
                    "faults list) or a TOML file (docs/faults.md)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress: only the summary and errors")
+    p.add_argument("--json", action="store_true",
+                   help="no progress; print the summary as one JSON object (docs/metrics.md)")
     p.set_defaults(handler=run)
 
 
@@ -87,28 +96,46 @@ def engine_options(mission: Mission, layout: Layout, weights: Path | None,
     return EngineOptions(mlp=mlp, progress=progress)
 
 
-def summary_lines(rec: dict[str, Any], wall_s: float, digest: str) -> list[str]:
-    """The summary of a mission record (record_io.record_to_dict)."""
-    m = rec["mission"]
-    end = rec["end_time_s"]
-    lines = [
+def summary_lines(report: Report, wall_s: float, digest: str) -> list[str]:
+    """The summary of a run: its recording's numbers as `fleet analyze` has them
+    (docs/metrics.md), the wall time, the record's digest and the verdicts."""
+    m = report.mission
+    return [
         f"mission {m['kind']} on {m['layout']} with {m['vehicles']} forklifts, "
         f"strategy {m['strategy']}",
-        f"  end time           {end:.2f} s (last stack done); every forklift parked at "
-        f"{rec['all_parked_s']:.2f} s",
-        f"  stacks             {len(rec['stacks_done'])}",
-        f"  subtasks           {len(rec['subtasks'])}",
-        f"  decision failures  {rec['decision_failures']}",
-        f"  waiting time       {sum(rec['wait_s'].values()):.2f} s in all",
+        *report.numbers_lines(),
         f"  wall time          {wall_s:.1f} s",
         f"  record digest      {digest[:16]}",
-        "  forklift  busy s   wait s   utilisation",
+        *report.vehicle_lines(),
+        f"  recording          {report.path}",
+        *(f"  {line}" for line in report.verdict_lines()),
+        f"  look closer: fleet analyze {report.path} ; fleet plot {report.path}",
     ]
-    for v in sorted(rec["busy_s"], key=int):
-        busy = rec["busy_s"][v]
-        lines.append(f"  {v:>8} {busy:8.1f} {rec['wait_s'].get(v, 0.0):8.1f}   "
-                     f"{busy / end if end else 0:.0%}")
-    return lines
+
+
+def summary_json(report: Report, wall_s: float, digest: str) -> dict[str, Any]:
+    """The summary as one JSON object (`fleet run --json`)."""
+    vehicles = report.vehicles
+    return {
+        "mission": report.mission,
+        "end_time_s": report.end_time_s,
+        "all_parked_s": report.all_parked_s,
+        "stacks_done": report.stacks_done,
+        "stacks_expected": report.stacks_expected,
+        "subtasks": report.subtasks,
+        "decision_failures": report.decision_failures,
+        "plans_failed": report.plans_failed,
+        "undecided": report.undecided,
+        "waiting_s": sum(v.waiting_s for v in vehicles),
+        "stopped_s": sum(v.stopped_s for v in vehicles),
+        "postponed_s": sum(v.postponed_s for v in vehicles),
+        "vehicles": [asdict(v) for v in vehicles],
+        "wall_s": wall_s,
+        "digest": digest,
+        "recording": report.path,
+        "verdicts": {"safety": report.safe, "work": report.work_done,
+                     "messages": report.messages_lost == 0, "passed": report.passed},
+    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -128,11 +155,9 @@ def run(args: argparse.Namespace) -> int:
     scenario = fault_scenario(args.faults, mission, layout, n) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
-    bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}")
-
-    def progress(done: int, t: float, failures: int) -> None:
-        bar.update(done, f"stacks  t={t:7.1f} s  failures {failures}")
-
+    bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}",
+                      unit="stacks", enabled=not (args.quiet or args.json))
+    progress = MissionProgress(bar)
     t0 = time.perf_counter()
     try:
         if args.inprocess:
@@ -144,25 +169,26 @@ def run(args: argparse.Namespace) -> int:
     if record is None:
         print(f"fleet run: logs and what was recorded are in {out}", file=sys.stderr)
         return 1
-    print("\n".join(summary_lines(record, time.perf_counter() - t0, digest_of(record))))
-    return _verdicts(out / "run.mcap")
+    wall_s = time.perf_counter() - t0
+    report = _report(out / "run.mcap")
+    if args.json:
+        print(json.dumps(summary_json(report, wall_s, digest_of(record))))
+    else:
+        print("\n".join(summary_lines(report, wall_s, digest_of(record))))
+    return 0 if report.passed else 1  # a failed verdict fails the run
 
 
 def command_line() -> str:
     return " ".join(["fleet", *sys.argv[1:]])
 
 
-def _verdicts(path: Path) -> int:
-    """Analyze the recording; a failed verdict fails the run."""
+def _report(path: Path) -> Report:
+    """The analysis of the run's recording: its numbers and verdicts."""
     from fleet.analysis import analyze
 
     report = analyze(read_recording(path))
     write_summary(path.parent, report)  # what `fleet runs` lists
-    print(f"  recording          {path}")
-    for line in report.verdict_lines():
-        print(f"  {line}")
-    print(f"  look closer: fleet analyze {path} ; fleet plot {path}")
-    return 0 if report.passed else 1
+    return report
 
 
 def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int) -> Scenario:
@@ -191,11 +217,12 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
 
     signal.signal(signal.SIGTERM, interrupted)
     port = args.port or free_port()
-    print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with: fleet table "
-          f"--connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)
-    if args.foxglove is not None:
-        print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
-              file=sys.stderr)
+    if not (args.quiet or args.json):
+        print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with\n"
+              f"  fleet table --connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)
+        if args.foxglove is not None:
+            print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
+                  file=sys.stderr)
     spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
                    faults_source=args.faults or "", secure=args.secure)

@@ -36,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
         if bar is None:
             for old in bars.values():
                 old.close()
-            bar = bars[cycle] = ProgressBar(total, f"cycle {cycle}/{cycles}")
-        bar.update(done, "stacks")
+            bar = bars[cycle] = ProgressBar(total, f"cycle {cycle}/{cycles}", unit="stacks")
+        bar.update(done)
 
     mlps, reports = train(layout, args.cycles, args.seed, args.lm_steps, progress)
     for bar in bars.values():
