@@ -4,6 +4,7 @@ the texts that several commands share (the strategies)."""
 from __future__ import annotations
 
 import argparse
+import re
 import textwrap
 
 # One line each, for `fleet run --help` (docs/dispatching.md has the equations).
@@ -28,7 +29,8 @@ def strategies_epilog() -> str:
 
 class HelpFormatter(argparse.HelpFormatter):
     """Options show their default unless their help already says it; descriptions and
-    epilogs keep their paragraphs, and an indented paragraph (a list) stays as written."""
+    epilogs keep their paragraphs, and an indented paragraph is a list of `term  text`
+    items, each wrapped under its text."""
 
     def __init__(self, prog: str, max_help_position: int = 30, **kwargs) -> None:
         super().__init__(prog, max_help_position=max_help_position, **kwargs)
@@ -36,8 +38,9 @@ class HelpFormatter(argparse.HelpFormatter):
     def _fill_text(self, text: str, width: int, indent: str) -> str:
         paragraphs = []
         for paragraph in textwrap.dedent(text).strip().split("\n\n"):
-            if any(line.startswith(" ") for line in paragraph.splitlines()[1:]):
-                paragraphs.append(textwrap.indent(paragraph, indent))
+            lines = paragraph.splitlines()
+            if any(line.startswith(" ") for line in lines[1:]):
+                paragraphs.append("\n".join(_list_item(line, width, indent) for line in lines))
             else:
                 paragraphs.append(textwrap.fill(" ".join(paragraph.split()), width,
                                                 initial_indent=indent,
@@ -57,6 +60,15 @@ class HelpFormatter(argparse.HelpFormatter):
         if shows_default(action) and "default" not in text:
             text += " (default %(default)s)"
         return text
+
+
+def _list_item(line: str, width: int, indent: str) -> str:
+    item = re.match(r"(\s+\S+\s+)(.*)", line)
+    if item is None:  # the list's heading
+        return indent + line
+    head = indent + item[1]
+    return textwrap.fill(item[2], width, initial_indent=head,
+                         subsequent_indent=" " * len(head))
 
 
 def shows_default(action: argparse.Action) -> bool:

@@ -49,7 +49,7 @@ def sim_seconds(text: str) -> float:
     """A simulated time in seconds: from 0 to MAX_SIM_SECONDS."""
     value = finite_float(text)
     if not 0 <= value <= MAX_SIM_SECONDS:
-        raise _refuse(text, f"must be a time from 0 to {MAX_SIM_SECONDS:g} seconds")
+        raise _refuse(text, f"must be a time from 0 to {MAX_SIM_SECONDS:.0f} seconds")
     return value
 
 

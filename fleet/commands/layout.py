@@ -103,7 +103,10 @@ def run_generate(args: argparse.Namespace) -> int:
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    args.out.write_text(text)
+    try:
+        args.out.write_text(text)
+    except OSError as exc:  # a full disk, a device: say which file
+        raise UserError(f"--out {args.out}: {exc.strerror}") from None
     print(f"wrote {args.out}: {shape.cols} x {shape.rows} cells, "
           f"{4 * shape.aisles * shape.depth * shape.lane_depth} stacks, "
           f"{shape.vehicles} vehicles; check it with: fleet layout check {args.out}")

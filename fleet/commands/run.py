@@ -80,7 +80,7 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
                    "fill)")
     p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
                    help="how the dispatcher picks each forklift's next goal (default ann; "
-                   "fleet run --help describes each)")
+                   "each is described below)")
     p.add_argument("--vehicles", type=positive_int, default=None,
                    help="fleet size (default: every start pose of the layout)")
     p.add_argument("--seed", type=integer, default=0,

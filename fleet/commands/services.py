@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fleet.cli_help import strategies_epilog
 from fleet.errors import UserError
 
 # What each process is for, as its user reads it (its module's docstring is its design).
@@ -53,7 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                          ("agent", agent_process), ("dispatcher", dispatcher_process),
                          ("recorder", recorder_process)):
         summary, description = PROCESSES[name]
-        p = sub.add_parser(name, help=summary, description=description)
+        p = sub.add_parser(name, help=summary, description=description,
+                           epilog=strategies_epilog() if name == "dispatcher" else None)
         module.add_arguments(p)
         p.set_defaults(handler=_serve(module))
     t = sub.add_parser("table", help="show the reservation service's table, or follow it",
