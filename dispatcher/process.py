@@ -34,6 +34,7 @@ from fleet.bus import (
     open_session,
     stop_on_signals,
 )
+from fleet.cli_types import positive_float, scenario_arg
 from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.engine import Engine, MissionStuck
 from fleet.errors import UserError
@@ -64,17 +65,21 @@ RECORDED_WAIT_S = 10.0
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
     add_mission_args(p)
-    p.add_argument("--clock", choices=["fast", "realtime"], default="fast")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--clock", choices=["fast", "realtime"], default="fast",
+                   help="fast: discrete events, deterministic; realtime: sim time = speed x "
+                   "wall time (default fast)")
+    p.add_argument("--speed", type=positive_float, default=1.0,
                    help="real-time clock: sim seconds per wall second (default 1)")
-    p.add_argument("--startup-timeout", type=float, default=120.0,
-                   help="seconds to wait for the reservation service and every agent")
+    p.add_argument("--startup-timeout", type=positive_float, default=120.0, metavar="SECONDS",
+                   help="seconds to wait for the reservation service and every agent "
+                   "(default 120)")
     p.add_argument("--command", default="",
                    help="the command line that started the run, for its recording (default: "
                    "this process's)")
-    p.add_argument("--faults", help="fault scenario (docs/faults.md): the fast clock stops "
-                   "at its instants until each fault is detected; the real-time clock "
-                   "closes its zones when their time comes")
+    p.add_argument("--faults", metavar="SCENARIO", type=scenario_arg,
+                   help="fault scenario (docs/faults.md): the fast clock stops at its "
+                   "instants until each fault is detected; the real-time clock closes its "
+                   "zones when their time comes (default: no faults)")
     p.add_argument("--recorded", action="store_true",
                    help="fast clock: hold sim time while no recorder runs, so a recorder "
                    "killed and restarted misses nothing that happened meanwhile")
@@ -88,13 +93,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="hand out forklift ids to agents started with --id auto; without "
                    "--vehicles the fleet is whoever claimed one before claims stopped for "
                    "--gather seconds (docs/deployment.md)")
-    p.add_argument("--gather", type=float, default=5.0,
+    p.add_argument("--gather", type=positive_float, default=5.0, metavar="SECONDS",
                    help="--claims without --vehicles: start once no new forklift has claimed "
                    "an id for this many seconds (default 5)")
     p.add_argument("--restart-marker", type=Path,
                    help="create this file when the mission starts; if it is already there, "
                    "this is a restart: pick the mission up as --recover does (a container "
-                   "keeps its files across restarts, not across re-creation)")
+                   "keeps its files across restarts, not across re-creation; default: none)")
 
 
 class Stopped(Exception):

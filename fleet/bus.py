@@ -10,6 +10,7 @@ import itertools
 import json
 import logging
 import os
+import re
 import signal
 import socket
 import sys
@@ -22,6 +23,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.access import configure_client, configure_router
+from fleet.cli_types import endpoint, positive_float
 from fleet.errors import UserError
 from fleet.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
 
@@ -30,6 +32,8 @@ DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 # mission result): the publisher waits rather than drop. Their receivers only enqueue, so
 # they drain. State streams keep zenoh's default (drop), so a stalled reader stalls no one.
 RELIABLE = zenoh.CongestionControl.BLOCK
+CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
+log = logging.getLogger("fleet.bus")
 
 
 @dataclass(frozen=True)
@@ -180,8 +184,53 @@ class BusConfig:
         return config
 
 
-def open_session(config: BusConfig) -> zenoh.Session:
-    return zenoh.open(config.zenoh_config())
+class BusError(UserError, zenoh.ZError):
+    """A session that could not be opened: no router at the endpoints, a busy listen port, a
+    refused login. The message names the endpoint; still a zenoh.ZError to whoever catches
+    those."""
+
+
+SLOW_CONNECT_S = 1.0  # a connect that takes longer says what it waits for
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A zenoh error's text without the Rust source locations it carries."""
+    text = re.sub(r" at /\S+?\.rs:\d+\.?", "", str(exc))
+    return " ".join(text.split())
+
+
+def open_session(config: BusConfig, say: Callable[[str], None] | None = None) -> zenoh.Session:
+    """A zenoh session. A client waits for its router up to `connect_timeout_ms`, says
+    through `say` (default: the log) what it is waiting for once that takes a while, and
+    fails with a BusError naming the endpoints."""
+    endpoints = ", ".join(config.connect) or "no endpoint"
+    waiting = f"waiting for a zenoh router at {endpoints}" + (
+        f" (up to {config.connect_timeout_ms / 1000:g} s)" if config.connect_timeout_ms >= 0
+        else "")
+    note = threading.Timer(SLOW_CONNECT_S, say or log.warning, (waiting,))
+    note.daemon = True
+    if config.mode != "router" and config.connect:
+        note.start()
+    try:
+        return zenoh.open(config.zenoh_config())
+    except zenoh.ZError as exc:
+        raise BusError(_open_failure(config, zenoh_message(exc))) from None
+    finally:
+        note.cancel()
+
+
+def _open_failure(config: BusConfig, text: str) -> str:
+    if "Unable to connect" in text or "Timeout" in text:
+        waited = f"{config.connect_timeout_ms / 1000:g} s"
+        if config.user:
+            return (f"no zenoh router at {', '.join(config.connect)} let {config.user} in "
+                    f"within {waited} (none is there, or it refused the login)")
+        return f"no zenoh router answers at {', '.join(config.connect)} (waited {waited})"
+    if "Address already in use" in text:
+        where = re.search(r"bound to (\S+?):? ", text)
+        return (f"cannot listen on {where[1] if where else ', '.join(config.listen)}: the "
+                f"address is in use (another process listens there)")
+    return f"zenoh: {text}"
 
 
 class Stream:
@@ -315,23 +364,32 @@ def wait_gone(session: zenoh.Session, key: str, timeout: float) -> bool:
         time.sleep(0.05)  # paces the poll
 
 
-def add_bus_arguments(p: argparse.ArgumentParser) -> None:
+def add_bus_arguments(p: argparse.ArgumentParser,
+                      connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     """The flags every process shares: which run, and how to reach the others."""
-    p.add_argument("--run", default="default", help="run name: keys live under fleet/RUN/")
+    p.add_argument("--run", default="default",
+                   help="run name: the run's keys live under fleet/RUN/ (default default)")
     p.add_argument("--mode", choices=["client", "peer"], default="client",
                    help="zenoh mode (default client of a router)")
-    p.add_argument("--connect", action="append", default=[],
-                   help=f"zenoh endpoint to connect to (default {DEFAULT_ROUTER}; repeatable)")
-    p.add_argument("--listen", action="append", default=[],
-                   help="zenoh endpoint to listen on (repeatable)")
+    p.add_argument("--connect", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help=f"zenoh endpoint to connect to, e.g. "
+                   f"tcp/HOST:PORT (default {DEFAULT_ROUTER}; repeatable)")
+    p.add_argument("--listen", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help="zenoh endpoint to listen on (default none; "
+                   "repeatable)")
+    p.add_argument("--connect-timeout", type=positive_float, default=connect_timeout_s,
+                   metavar="SECONDS", help=f"give up when no router answers at --connect "
+                   f"within this many seconds (default {connect_timeout_s:g})")
     add_login_arguments(p)
 
 
 def add_login_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--user", default="", help="log in to a router that runs access control "
-                   "as this principal (fleet run --secure makes one per process)")
-    p.add_argument("--password-file", type=Path,
-                   help="the password of --user, in a file (never on the command line)")
+                   "as this principal (fleet run --secure makes one per process; default: "
+                   "no login)")
+    p.add_argument("--password-file", type=Path, metavar="FILE",
+                   help="the password of --user, in a file (never on the command line; "
+                   "default none)")
 
 
 def login_of(args: argparse.Namespace) -> tuple[str, str]:
@@ -344,12 +402,16 @@ def login_of(args: argparse.Namespace) -> tuple[str, str]:
         return args.user, args.password_file.read_text().strip()
     except OSError as exc:
         raise UserError(f"--password-file {args.password_file}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UserError(f"--password-file {args.password_file}: not UTF-8 text") from None
 
 
 def bus_config(args: argparse.Namespace) -> BusConfig:
     connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
     user, password = login_of(args)
-    return BusConfig(args.mode, connect, tuple(args.listen), user=user, password=password)
+    timeout_ms = int(args.connect_timeout * 1000)
+    return BusConfig(args.mode, connect, tuple(args.listen), connect_timeout_ms=timeout_ms,
+                     user=user, password=password)
 
 
 def setup_logging() -> None:

@@ -1,13 +1,21 @@
-"""`fleet` command line: argument parsing only; the work lives in fleet.commands.*."""
+"""`fleet` command line: argument parsing and the one error path; the work lives in
+fleet.commands.*."""
 
 from __future__ import annotations
 
 import argparse
 import os
 import sys
+import tempfile
+import time
+import traceback
 from collections.abc import Sequence
 
+import zenoh
+
 from fleet import __version__
+from fleet.bus import RequestFailed, zenoh_message
+from fleet.cli_help import Parser
 from fleet.commands import (
     analyze,
     bench,
@@ -23,36 +31,104 @@ from fleet.commands import (
     services,
     train,
 )
-from fleet.errors import UserError
+from fleet.distributed import RunFailed
+from fleet.errors import UserError, describe
+
+EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
+# What a command may fail with for reasons outside the program: bad input, the file system,
+# the network. Each reaches the user as one line; anything else is a bug.
+EXPECTED = (UserError, ValueError, OSError, zenoh.ZError, RequestFailed, RunFailed)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts.")
+    parser = Parser(
+        prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts: "
+        "run a mission as processes on zenoh, record it, and look at the recording.",
+        epilog="`fleet help COMMAND [ACTION]` (or `fleet COMMAND --help`) says what a "
+        "command's options do and their defaults. Start with `fleet run`; README.md and "
+        "docs/ tell the rest.")
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for module in (run, runs, analyze, plot, compare, faults, plan, layout, train, bench,
                    services, service, compose):
         module.register(sub)
+    helper = sub.add_parser("help", help="say what a command does and its options (as "
+                            "COMMAND --help)",
+                            description="Print the help of a command (or of an action of "
+                            "one, e.g. `fleet help layout check`); without one, the list of "
+                            "commands.")
+    helper.add_argument("topic", nargs="*", metavar="COMMAND",
+                        help="the command, and its action if it has some")
+    helper.set_defaults(handler=lambda args: print_help(parser, args.topic))
+    _name_commands(parser)
     return parser
+
+
+def _name_commands(parser: argparse.ArgumentParser) -> None:
+    """Each parser sets `prog` to its command line (`fleet faults check`): the deepest one
+    parsed wins, so an error names the very command that failed."""
+    parser.set_defaults(prog=parser.prog)
+    for child in subcommands(parser).values():
+        _name_commands(child)
+
+
+def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """A parser's subcommands by name (empty: it has none)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def print_help(parser: argparse.ArgumentParser, topic: Sequence[str]) -> int:
+    """`fleet help CMD [ACTION]`: the same text as `fleet CMD [ACTION] --help`."""
+    for i, word in enumerate(topic):
+        choices = subcommands(parser)
+        if word not in choices:
+            where = " ".join(["fleet", *topic[:i]])
+            known = ", ".join(choices) if choices else "none"
+            raise UserError(f"{where} has no command {word!r} (its commands: {known})")
+        parser = choices[word]
+    print(parser.format_help(), end="")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command is None:  # plain `fleet`: what there is to do
+        parser.print_help()
+        return 0
     try:
         code = int(args.handler(args) or 0)
         sys.stdout.flush()  # a reader that left shows here, not in a message at exit
         return code
-    except (UserError, ValueError, FileNotFoundError) as exc:
-        print(f"fleet {args.command}: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
-        print(f"\nfleet {args.command}: interrupted", file=sys.stderr)
+        print(f"\n{args.prog}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader left (`fleet faults list | head`): nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error
         return 141
+    except EXPECTED as exc:
+        text = zenoh_message(exc) if isinstance(exc, zenoh.ZError) else describe(exc)
+        print(f"{args.prog}: error: {text}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: one line here, the traceback in a file for the report
+        path = crash_report(exc, sys.argv[1:] if argv is None else argv)
+        print(f"{args.prog}: internal error (a bug, please report it): "
+              f"{type(exc).__name__}: {describe(exc)}; the traceback is in {path}",
+              file=sys.stderr)
+        return EX_SOFTWARE
+
+
+def crash_report(exc: BaseException, argv: Sequence[str]) -> str:
+    """Write the command line and the traceback to a file in the temporary directory."""
+    fd, path = tempfile.mkstemp(prefix=f"fleet-crash-{time.strftime('%Y%m%d-%H%M%S')}-",
+                                suffix=".txt")
+    with os.fdopen(fd, "w") as out:
+        out.write(f"fleet {__version__}: fleet {' '.join(argv)}\n\n")
+        out.write("".join(traceback.format_exception(exc)))
+    return path
 
 
 if __name__ == "__main__":

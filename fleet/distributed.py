@@ -5,6 +5,7 @@ result, and stops every child when the mission ends, on Ctrl-C, or as soon as an
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import queue
@@ -27,7 +28,7 @@ from fleet.access import (
     write_dictionary,
     write_private,
 )
-from fleet.bus import BusConfig, Keys, follow_recorded, free_port, open_session, wait_alive
+from fleet.bus import BusConfig, BusError, Keys, follow_recorded, free_port, open_session
 from fleet.faults import FaultKind, Scenario
 from fleet.injector import Applied, Injector
 from fleet.launcher import Child, Launcher
@@ -38,6 +39,7 @@ from fleet.recording import next_segment
 from fleet.rundir import fresh
 
 ROUTER_TIMEOUT_MS = 30_000
+ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
 RECORDED_TIMEOUT_S = 10.0
 log = logging.getLogger("fleet.run")
 
@@ -127,8 +129,10 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     fresh(spec.run_dir)  # a run directory of its own: no table, recording or log of another
     log_dir = spec.run_dir / "logs"
     journal = spec.run_dir / "reservation.journal"
-    launcher = Launcher(log_dir)
+    # Everything this process waits for comes through one queue: the dispatcher's messages,
+    # a started child's liveliness, and each child's exit the moment it happens.
     inbox: queue.Queue[tuple[str, object]] = queue.Queue()
+    launcher = Launcher(log_dir, on_exit=lambda child: inbox.put(("exit", child)))
     session = None
     injector = None
     port = int(endpoint.rsplit(":", 1)[1])
@@ -164,22 +168,25 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         raise RunFailed(f"cannot restart a {kind} process")
 
     try:
-        launcher.start("router", ["router", "--listen", endpoint,
-                                  *(secrets.router_args() if secrets else [])])
+        router = launcher.start("router", ["router", "--listen", endpoint,
+                                           *(secrets.router_args() if secrets else [])])
         for proxy in proxies.values():
             proxy.start()
         operator = secrets.logins[OPERATOR] if secrets else None
-        session = open_session(BusConfig("client", (endpoint,),
-                                         connect_timeout_ms=ROUTER_TIMEOUT_MS,
-                                         user=operator.user if operator else "",
-                                         password=operator.password if operator else ""))
+        session = _open_when_up(BusConfig("client", (endpoint,),
+                                          user=operator.user if operator else "",
+                                          password=operator.password if operator else ""),
+                                router)
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         recorded = threading.Event()  # the recorder holds the mission's result
+        clock_started = threading.Event()  # every forklift was up: the mission runs
+        subscribers.append(session.declare_subscriber(keys.clock,
+                                                      lambda _: clock_started.set()))
         if spec.record:
             subscribers.append(follow_recorded(session, keys, recorded, log))
             recorder = launcher.start("recorder", args_of("recorder"))
-            _wait_started(session, keys.recorder_alive, launcher, recorder)
+            _wait_started(session, keys.recorder_alive, inbox, recorder)
         launcher.start("reservation", args_of("reservation"))
         for v in range(1, spec.vehicles + 1):
             launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
@@ -189,7 +196,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         launcher.start("dispatcher", args_of("dispatcher"))
         if on_ready is not None:
             on_ready(session, keys, launcher)
-        done = _follow(inbox, launcher, on_progress)
+        done = _follow(inbox, on_progress, clock_started)
         if spec.record and not recorded.wait(RECORDED_TIMEOUT_S):
             log.warning("the recorder had not recorded the mission's result within %g s",
                         RECORDED_TIMEOUT_S)
@@ -209,38 +216,67 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             proxy.close()
 
 
-def _follow(inbox: queue.Queue, launcher: Launcher,
-            on_progress: Callable[[Progress], None] | None) -> MissionDone:
+def _follow(inbox: queue.Queue, on_progress: Callable[[Progress], None] | None,
+            clock_started: threading.Event) -> MissionDone:
     while True:
-        try:
-            _, sample = inbox.get(timeout=0.5)  # the timeout only paces the liveness check
-        except queue.Empty:
-            # A forklift's death is the dispatcher's to recover from (docs/faults.md); any
-            # other process's ends the run.
-            dead = [c for c in launcher.exited() if not c.name.startswith("agent-")]
-            if dead:
-                done = _last_word(inbox)
-                if done is not None:
-                    return done  # the dispatcher's account of it, when it has one
-                child = dead[0]
-                raise RunFailed(f"{child.name} exited with status {child.proc.returncode} "
-                                f"before the mission ended; the end of {child.log}:\n"
-                                f"{launcher.tail(child)}") from None
-            continue
-        message = _from_dispatcher(sample)
+        kind, item = inbox.get()  # a message, or a child's exit, as it happens
+        if kind == "exit":
+            # A fault's kill is the injector's, a forklift's death once the mission runs the
+            # dispatcher's to recover from (docs/faults.md); any other death ends the run (a
+            # forklift that never came up would keep the dispatcher waiting for it).
+            if item.killed or (item.name.startswith("agent-") and clock_started.is_set()):
+                continue
+            done = _last_word(inbox)
+            if done is not None:
+                return done  # the dispatcher's account of it, when it has one
+            raise RunFailed(Launcher.death(item, "before the mission ended"))
+        message = _from_dispatcher(item) if kind == "sample" else None
         if isinstance(message, MissionDone):
             return message
         if isinstance(message, Progress) and on_progress is not None:
             on_progress(message)
 
 
-def _wait_started(session: zenoh.Session, token: str, launcher: Launcher, child: Child) -> None:
-    """Wait for a child's liveliness token; fail at once, with its log, if it exits."""
+def _open_when_up(config: BusConfig, router: Child) -> zenoh.Session:
+    """This process's session, once the router takes connections; at once a RunFailed that
+    says why when the router exits first (a busy port, a bad access control file). Zenoh's
+    open cannot be interrupted, so it is tried in short attempts with the router's exit
+    looked at between them."""
+    attempt = dataclasses.replace(config, connect_timeout_ms=ROUTER_ATTEMPT_MS)
     deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
-    while not wait_alive(session, token, 0.5):  # the slice only paces the exit check
-        if child.proc.poll() is not None or time.monotonic() > deadline:
-            raise RunFailed(f"{child.name} did not start; the end of {child.log}:\n"
-                            f"{launcher.tail(child)}")
+    while True:
+        try:
+            return open_session(attempt)
+        except BusError as exc:
+            if router.proc.poll() is not None:
+                raise RunFailed(Launcher.death(router, "before the run started")) from None
+            if time.monotonic() > deadline:
+                raise RunFailed(f"the router took no connection within "
+                                f"{ROUTER_TIMEOUT_MS / 1000:g} s: {exc}") from None
+
+
+def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child) -> None:
+    """Wait for a child's liveliness token; fail at once, saying why, if a child exits first
+    (nothing else comes through the inbox before the dispatcher starts)."""
+    alive = session.liveliness().declare_subscriber(
+        token, lambda sample: inbox.put(("alive", sample))
+        if sample.kind == zenoh.SampleKind.PUT else None, history=True)
+    try:
+        deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                kind, item = inbox.get(timeout=left)
+            except queue.Empty:
+                break
+            if kind == "alive":
+                return
+            if kind == "exit" and not item.killed:
+                raise RunFailed(Launcher.death(item, f"before {child.name} was up"
+                                               if item is not child else "as it started"))
+        raise RunFailed(f"{child.name} was not up within {ROUTER_TIMEOUT_MS / 1000:g} s "
+                        f"(no {token} token); its log: {child.log}")
+    finally:
+        alive.undeclare()
 
 
 def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:
@@ -249,10 +285,10 @@ def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:
     deadline = time.monotonic() + within_s
     while (left := deadline - time.monotonic()) > 0:
         try:
-            _, sample = inbox.get(timeout=left)
+            kind, item = inbox.get(timeout=left)
         except queue.Empty:
             return None
-        message = _from_dispatcher(sample)
+        message = _from_dispatcher(item) if kind == "sample" else None
         if isinstance(message, MissionDone):
             return message
     return None

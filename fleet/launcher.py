@@ -7,6 +7,8 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,9 +27,13 @@ class Child:
 
 
 class Launcher:
-    def __init__(self, log_dir: Path) -> None:
+    """`on_exit` is called (from a thread of its own) with each child the moment it exits,
+    so whoever runs the children hears of a death at once instead of polling for it."""
+
+    def __init__(self, log_dir: Path, on_exit: Callable[[Child], None] | None = None) -> None:
         self.log_dir = log_dir
         self.children: list[Child] = []
+        self.on_exit = on_exit
         log_dir.mkdir(parents=True, exist_ok=True)
 
     def start(self, name: str, fleet_args: list[str]) -> Child:
@@ -42,7 +48,14 @@ class Launcher:
                                          PARENT_ENV: str(os.getpid())})
         child = Child(name, proc, path)
         self.children.append(child)
+        if self.on_exit is not None:
+            threading.Thread(target=self._watch, args=(child,), daemon=True,
+                             name=f"watch-{name}").start()
         return child
+
+    def _watch(self, child: Child) -> None:
+        child.proc.wait()
+        self.on_exit(child)
 
     def exited(self) -> list[Child]:
         """Children that exited without being killed on purpose."""
@@ -98,3 +111,20 @@ class Launcher:
     def tail(self, child: Child, lines: int = 5) -> str:
         text = child.log.read_text(errors="replace").splitlines()
         return "\n".join(f"    {line}" for line in text[-lines:])
+
+    @staticmethod
+    def death(child: Child, when: str) -> str:
+        """How a child ended, in one line: its exit status (or signal), `when`, and its log's
+        last line (its own error message when it refused to run)."""
+        code = child.proc.returncode
+        status = f"exited with status {code}"
+        if code is not None and code < 0 and -code in signal.valid_signals():
+            status += f" (killed by {signal.Signals(-code).name})"
+        try:
+            lines = [line.strip() for line in
+                     child.log.read_text(errors="replace").splitlines() if line.strip()]
+        except OSError:
+            lines = []
+        last = f"the last line of its log ({child.log}): {lines[-1]}" if lines \
+            else f"its log ({child.log}) is empty"
+        return f"{child.name} {status} {when}; {last}"

@@ -26,10 +26,29 @@ class Problem:
         return f"{self.element}: {self.reason}"
 
 
+NO_STARTS = Problem("starts", "the layout has no start poses, so no forklift can run on it "
+                    "(give one 'col,row,H' per forklift)")
+
+
+def fleet_size(layout: Layout, vehicles: int | None) -> int:
+    """The fleet of a run on `layout`: `vehicles`, or one forklift per start pose; refused,
+    naming the limit, when the layout has no start for it."""
+    starts = len(layout.vehicle_starts)
+    if starts == 0:
+        raise LayoutError(f"layout {layout.name}: {NO_STARTS}")
+    if vehicles is None:
+        return starts
+    if not 1 <= vehicles <= starts:
+        raise LayoutError(f"--vehicles {vehicles}: layout {layout.name} has start poses for "
+                          f"1 to {starts} forklifts")
+    return vehicles
+
+
 def reachability_problems(layout: Layout,
                           progress: Callable[[int, int], None] | None = None) -> list[Problem]:
-    """Every stack, dock and start that cannot be served, with why (empty list: all good)."""
-    problems: list[Problem] = []
+    """Every stack, dock and start that cannot be served, with why (empty list: all good);
+    a layout without start poses is a problem too (no run could use it)."""
+    problems: list[Problem] = [] if layout.vehicle_starts else [NO_STARTS]
     dims = layout.vehicle.dims
     empty = HybridAStar(layout.grid_map(), dims)
     docks = {s.name: empty.component(s.dock) for s in layout.stations}

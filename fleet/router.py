@@ -14,6 +14,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.bus import BusConfig, open_session, stop_on_signals
+from fleet.cli_types import endpoint, positive_float
 from fleet.errors import UserError
 
 log = logging.getLogger("fleet.router")
@@ -22,17 +23,21 @@ LAST_OUT_S = 5.0  # how long a stopping router waits for its clients to leave
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--listen", action="append", default=[],
+    p.add_argument("--listen", action="append", default=[], type=endpoint, metavar="ENDPOINT",
                    help=f"endpoint to listen on (default {DEFAULT_LISTEN}; repeatable)")
-    p.add_argument("--connect", action="append", default=[],
-                   help="another router to connect to (repeatable)")
-    p.add_argument("--acl", type=Path, help="enforce this access control (a JSON file: the "
-                   "access_control section fleet/access.py writes); needs --users")
-    p.add_argument("--users", type=Path, help="authenticate every session against this "
-                   "user:password dictionary")
-    p.add_argument("--exit-when-idle", type=float, metavar="SECONDS",
+    p.add_argument("--connect", action="append", default=[], type=endpoint, metavar="ENDPOINT",
+                   help="another router to connect to (default none; repeatable)")
+    p.add_argument("--acl", type=Path, metavar="FILE",
+                   help="enforce this access control (a JSON file: the access_control "
+                   "section fleet/access.py writes); needs --users (default: none, everyone "
+                   "may do everything)")
+    p.add_argument("--users", type=Path, metavar="FILE",
+                   help="authenticate every session against this user:password dictionary "
+                   "(default: no logins)")
+    p.add_argument("--exit-when-idle", type=positive_float, metavar="SECONDS",
                    help="exit once sessions have come and every one has gone for this long "
-                   "(a deployment whose processes exit when the mission ends)")
+                   "(a deployment whose processes exit when the mission ends; default: run "
+                   "until stopped)")
 
 
 class Clients:

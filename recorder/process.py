@@ -26,6 +26,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.bus import Keys, Stream, add_bus_arguments, bus_config, open_session, stop_on_signals
+from fleet.cli_types import port, writable_dir, writable_file
 from fleet.errors import UserError
 from fleet.layout import parse_layout
 from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
@@ -39,21 +40,22 @@ FLUSH_PERIOD_S = 1.0
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
-    p.add_argument("--out", type=Path, default=Path("run.mcap"),
+    p.add_argument("--out", type=writable_file, default=Path("run.mcap"), metavar="FILE",
                    help="MCAP file to write (default run.mcap; never overwritten: a recorder "
                    "restarted for a run writes its next segment, RUN_DIR/run-2.mcap, ...)")
-    p.add_argument("--out-dir", type=Path,
+    p.add_argument("--out-dir", type=writable_dir, metavar="DIR",
                    help="instead of --out: write DIR/<UTC date-time>-<host name>/run.mcap, or "
                    "the next segment in this host's latest directory there when it restarts "
-                   "(a container keeps its host name across restarts)")
+                   "(a container keeps its host name across restarts; default: use --out)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="close the file and exit once the mission's result is recorded")
-    p.add_argument("--foxglove", type=int, metavar="PORT",
+    p.add_argument("--foxglove", type=port, metavar="PORT",
                    help="also serve the live view over the Foxglove WebSocket protocol on "
-                   "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove)")
-    p.add_argument("--foxglove-host", default="127.0.0.1",
+                   "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove; default: no live "
+                   "view)")
+    p.add_argument("--foxglove-host", default="127.0.0.1", metavar="HOST",
                    help="the address the live view listens on (0.0.0.0 in a container, "
-                   "whose published port is what the host reaches)")
+                   "whose published port is what the host reaches; default 127.0.0.1)")
 
 
 class Recorder:

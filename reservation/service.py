@@ -120,9 +120,10 @@ def not_theirs(key: str, message) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
     p.add_argument("--journal", type=Path, default=Path("reservation.journal"),
+                   metavar="FILE",
                    help="append-only journal (replayed on start); '{host}' in it stands for "
                    "the host name, so a restarted container replays its own journal and a "
-                   "new one starts afresh")
+                   "new one starts afresh (default reservation.journal)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit once the dispatcher publishes the mission's result")
 

@@ -20,10 +20,10 @@ from fleet.bus import (
     open_session,
     stop_on_signals,
 )
+from fleet.cli_types import layout_arg, pose, positive_float
 from fleet.errors import UserError
 from fleet.layout import load_layout
 from fleet.protocol import ClaimReply, VehicleClaim
-from fleet.trajectory import Pose
 from vehicle_agent.agent import Agent, Stopped
 
 log = logging.getLogger("fleet.agent")
@@ -49,18 +49,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--claim-as", default=socket.gethostname(),
                    help="--id auto: the name to claim under (default: the host name, which "
                    "a restarted container keeps, so it gets its forklift back)")
-    p.add_argument("--claim-timeout", type=float, default=120.0,
+    p.add_argument("--claim-timeout", type=positive_float, default=120.0, metavar="SECONDS",
                    help="--id auto: seconds to keep asking for an id (default 120)")
-    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
-    p.add_argument("--start", type=Pose.parse,
+    p.add_argument("--layout", default="paper", type=layout_arg,
+                   help="layout name or TOML file (default paper)")
+    p.add_argument("--start", type=pose, metavar="POSE",
                    help="start pose 'col,row,H' (default: the layout's start pose for --id)")
-    p.add_argument("--logins", type=Path,
+    p.add_argument("--logins", type=Path, metavar="FILE",
                    help="the forklifts' logins, a 'user:password' line each (the compose "
                    "deployment's secret): claim an id logged in as any of them, then run as "
-                   "vehicle-ID (instead of --user and --password-file)")
-    p.add_argument("--id-file", type=Path,
+                   "vehicle-ID (instead of --user and --password-file; default none)")
+    p.add_argument("--id-file", type=Path, metavar="FILE",
                    help="write the forklift's id here once it is known (a container's health "
-                   "check reads it)")
+                   "check reads it; default: nowhere)")
     p.add_argument("--exit-when-done", action="store_true",
                    help="exit once the dispatcher publishes the mission's result")
 

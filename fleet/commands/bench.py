@@ -6,70 +6,112 @@ import argparse
 import json
 import platform
 import sys
-from pathlib import Path
 
+from fleet.cli_help import strategies_epilog
+from fleet.cli_types import (
+    integer,
+    layout_arg,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    positive_ints,
+    text_file,
+)
 from fleet.progress import ProgressBar
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="run a benchmark")
+    p = sub.add_parser("bench", help="run a benchmark",
+                       description="Benchmarks: speed goals are measured here, not in timed "
+                       "tests (docs/benchmarks.md, docs/experiment.md).")
     which = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    planner = which.add_parser("planner", help="seeded station <-> stack planner queries")
-    planner.add_argument("--layout", default="paper")
-    planner.add_argument("--queries", type=int, default=240)
-    planner.add_argument("--seed", type=int, default=2026)
+    planner = which.add_parser("planner", help="seeded station <-> stack planner queries",
+                               description="Time the improved hybrid A* on seeded random "
+                               "queries between stations and stacks.")
+    planner.add_argument("--layout", default="paper", type=layout_arg,
+                         help="layout name or TOML file (default paper)")
+    planner.add_argument("--queries", type=positive_int, default=240,
+                         help="planner queries (default 240)")
+    planner.add_argument("--seed", type=integer, default=2026,
+                         help="seed of the queries (default 2026)")
     planner.add_argument("--json", action="store_true", help="print one JSON object")
     planner.set_defaults(handler=run_planner)
     strategies = which.add_parser("strategies", help="the five strategies on fill and empty "
-                                  "(Table 4 of seed 000) with a lower bound")
-    strategies.add_argument("--layout", default="paper")
-    strategies.add_argument("--mission", choices=["fill", "empty", "both"], default="both")
-    strategies.add_argument("--weights", type=Path,
+                                  "(Table 4 of seed 000) with a lower bound",
+                                  description="Run every strategy in process on the fill "
+                                  "and empty missions and compare their end times with a "
+                                  "lower bound (Table 4 of seed 000).",
+                                  epilog=strategies_epilog())
+    strategies.add_argument("--layout", default="paper", type=layout_arg,
+                            help="layout name or TOML file (default paper)")
+    strategies.add_argument("--mission", choices=["fill", "empty", "both"], default="both",
+                            help="which missions (default both)")
+    strategies.add_argument("--weights", type=text_file, metavar="FILE",
                             help="MLP weights for the ANN strategy (default: shipped)")
     strategies.add_argument("--json", action="store_true", help="print one JSON object")
     strategies.set_defaults(handler=run_strategies)
     runtime = which.add_parser("runtime", help="the distributed runtime: commit round trip, "
-                               "multi-process / in-process wall time, largest real-time fleet")
-    runtime.add_argument("--commits", type=int, default=2000)
-    runtime.add_argument("--seed", type=int, default=2026)
-    runtime.add_argument("--ratio-layout", default="paper",
+                               "multi-process / in-process wall time, largest real-time fleet",
+                               description="Measure the distributed runtime: the "
+                               "reservation commit round trip, a fill as processes against "
+                               "in process, and the largest fleet that keeps real time.")
+    runtime.add_argument("--commits", type=positive_int, default=2000,
+                         help="commits timed (default 2000)")
+    runtime.add_argument("--seed", type=integer, default=2026,
+                         help="seed of the commits (default 2026)")
+    runtime.add_argument("--ratio-layout", default="paper", type=layout_arg,
                          help="layout of the multi-process vs in-process fill (default paper)")
-    runtime.add_argument("--ratio-repeats", type=int, default=3,
+    runtime.add_argument("--ratio-repeats", type=non_negative_int, default=3,
                          help="runs of each, alternated (default 3; 0 skips)")
-    runtime.add_argument("--agents", default="25,50,100,150",
+    runtime.add_argument("--agents", type=fleet_sizes, default="25,50,100,150",
                          help="fleet sizes to try in real time, ascending (default "
                          "25,50,100,150; 'none' skips)")
-    runtime.add_argument("--window", type=float, default=15.0,
+    runtime.add_argument("--window", type=positive_float, default=15.0,
                          help="seconds of state messages measured per fleet (default 15)")
     runtime.add_argument("--json", action="store_true", help="print one JSON object")
     runtime.set_defaults(handler=run_runtime)
     recorder = which.add_parser("recorder", help="the recorder: messages a second without "
-                                "loss, and what recording costs a mission's wall time")
-    recorder.add_argument("--rates", default="2000,5000,10000,20000,40000",
+                                "loss, and what recording costs a mission's wall time",
+                                description="Measure the recorder: how many messages a "
+                                "second it keeps without loss, and what recording costs a "
+                                "mission's wall time.")
+    recorder.add_argument("--rates", type=positive_ints, default="2000,5000,10000,20000,40000",
                           help="target messages a second, in all (default "
                           "2000,5000,10000,20000,40000)")
-    recorder.add_argument("--seconds", type=float, default=5.0,
+    recorder.add_argument("--seconds", type=positive_float, default=5.0,
                           help="seconds of publishing per rate (default 5)")
-    recorder.add_argument("--publishers", type=int, default=4,
+    recorder.add_argument("--publishers", type=positive_int, default=4,
                           help="state streams, one per vehicle (default 4)")
-    recorder.add_argument("--repeats", type=int, default=3,
+    recorder.add_argument("--repeats", type=non_negative_int, default=3,
                           help="fills with and without the recorder, alternated (default 3; "
                           "0 skips)")
-    recorder.add_argument("--layout", default="paper",
+    recorder.add_argument("--layout", default="paper", type=layout_arg,
                           help="layout of the fills (default paper)")
     recorder.add_argument("--json", action="store_true", help="print one JSON object")
     recorder.set_defaults(handler=run_recorder)
     faults = which.add_parser("faults", help="every shipped fault scenario beside the "
                               "fault-free run: detection, recovery, extra mission time, verdicts "
-                              "(docs/reliability.md)")
+                              "(docs/reliability.md)",
+                              description="Run every shipped fault scenario (or those named) "
+                              "beside the fault-free run and report how each fault was "
+                              "detected and recovered from, the extra mission time and the "
+                              "verdicts (docs/reliability.md).")
     faults.add_argument("--scenarios", help="comma-separated shipped scenarios (default all)")
     faults.add_argument("--json", action="store_true", help="print one JSON object keyed by "
                         "scenario (a kind's own scenario is named after the kind)")
     faults.add_argument("--clock", choices=["fast", "realtime"], default="fast",
                         help="the runs' clock (default fast)")
-    faults.add_argument("--speed", type=float, default=20.0,
+    faults.add_argument("--speed", type=positive_float, default=20.0,
                         help="sim seconds per wall second with --clock realtime (default 20)")
     faults.set_defaults(handler=run_faults)
+
+
+def fleet_sizes(text: str) -> list[int]:
+    """--agents: ascending fleet sizes, or 'none'."""
+    sizes = [] if text == "none" else positive_ints(text)
+    if sizes != sorted(sizes):
+        raise argparse.ArgumentTypeError(f"{text!r} must be in ascending order, e.g. 25,50,100")
+    return sizes
 
 
 def emitted_json(result: dict, as_json: bool) -> bool:
@@ -84,8 +126,6 @@ def emitted_json(result: dict, as_json: bool) -> bool:
 def run_planner(args: argparse.Namespace) -> int:
     from bench import planner
 
-    if args.queries < 1:
-        raise ValueError("--queries must be at least 1")
     bar = ProgressBar(args.queries, "planner bench", unit="queries", enabled=not args.json)
     try:
         result = planner.run(args.layout, args.queries, args.seed,
@@ -130,12 +170,7 @@ def run_strategies(args: argparse.Namespace) -> int:
 def run_runtime(args: argparse.Namespace) -> int:
     from bench import runtime
 
-    if args.commits < 1:
-        raise ValueError("--commits must be at least 1")
-    sizes = [] if args.agents == "none" else [int(n) for n in args.agents.split(",")]
-    if sizes != sorted(sizes) or any(n < 1 for n in sizes):
-        raise ValueError(f"--agents {args.agents}: give ascending fleet sizes, e.g. 25,50,100")
-
+    sizes = args.agents
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
@@ -172,12 +207,7 @@ def run_runtime(args: argparse.Namespace) -> int:
 def run_recorder(args: argparse.Namespace) -> int:
     from bench import recorder
 
-    rates = [int(r) for r in args.rates.split(",")]
-    if any(r < 1 for r in rates):
-        raise ValueError(f"--rates {args.rates}: give positive rates, e.g. 2000,5000")
-    if args.seconds <= 0 or args.publishers < 1 or args.repeats < 0:
-        raise ValueError("--seconds must be positive, --publishers at least 1, --repeats "
-                         "at least 0")
+    rates = args.rates
 
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -201,8 +231,6 @@ def run_faults(args: argparse.Namespace) -> int:
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    if args.speed <= 0:
-        raise ValueError(f"--speed must be positive, not {args.speed}")
     result = faults.run(names, say, args.clock, args.speed)
     if not emitted_json(result, args.json):
         print(faults.table(result))

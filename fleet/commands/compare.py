@@ -21,7 +21,11 @@ from fleet.recording import RUN_FILE, Recording
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("compare", help="compare two recorded runs side by side")
+    p = sub.add_parser("compare", help="compare two recorded runs side by side",
+                       description="Put two recorded runs side by side: the mission, end "
+                       "time, stacks, decision failures, waiting time, utilisation, each "
+                       "forklift's busy time and the verdicts of each, with B - A and B / A "
+                       "for the numbers.")
     p.add_argument("a", type=Path, help=f"run A: an MCAP recording, or a directory holding "
                    f"{RUN_FILE}")
     p.add_argument("b", type=Path, help="run B, compared with A (differences are B - A)")

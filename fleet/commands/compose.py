@@ -14,6 +14,7 @@ import tarfile
 import tempfile
 from pathlib import Path
 
+from fleet.cli_types import positive_int, writable_dir
 from fleet.deploy import MAX_VEHICLES
 from fleet.errors import UserError
 from fleet.rundir import run_id_of
@@ -25,15 +26,19 @@ CONTAINER_UID = 1000  # the image's user (the Dockerfile's UID argument)
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compose", help="run and inspect the docker compose deployment",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=__doc__)
     p.add_argument("--project", default=os.environ.get("COMPOSE_PROJECT_NAME", DEFAULT_PROJECT),
                    help=f"compose project name (default $COMPOSE_PROJECT_NAME or "
                    f"{DEFAULT_PROJECT})")
-    p.add_argument("--file", type=Path, default=Path("compose.yaml"),
+    p.add_argument("--file", type=Path, default=Path("compose.yaml"), metavar="FILE",
                    help="the compose file (default compose.yaml here)")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
-    up = actions.add_parser("up", help="run a mission with N forklifts, then analyse it")
-    up.add_argument("--vehicles", type=int, default=4, help="forklift containers (default 4)")
+    up = actions.add_parser("up", help="run a mission with N forklifts, then analyse it",
+                            description="Run `docker compose up` with N forklift containers "
+                            "in the foreground until the mission ends, then analyse its "
+                            "recording.")
+    up.add_argument("--vehicles", type=positive_int, default=4,
+                    help="forklift containers (default 4)")
     up.add_argument("--build", action="store_true", help="build the image first")
     up.add_argument("--secure", action="store_true", help="behind the router's access "
                     "control (compose.secure.yaml), with the logins of `fleet compose secrets` "
@@ -41,17 +46,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     up.set_defaults(handler=run_up)
     collect = actions.add_parser("collect", help="copy recordings out of the volume (a "
                                  "run collected before is brought up to date; another "
-                                 "run's directory is never written over)")
-    collect.add_argument("dest", type=Path, nargs="?", default=Path("runs/compose"))
+                                 "run's directory is never written over)",
+                                 description="Copy the latest recording (or all of them) out "
+                                 "of the deployment's recordings volume. A run collected before "
+                                 "is brought up to date; another run's directory is never "
+                                 "written over.")
+    collect.add_argument("dest", type=writable_dir, nargs="?", default=Path("runs/compose"),
+                         help="where the copies go (default runs/compose)")
     collect.add_argument("--all", action="store_true", help="every recording, not the latest")
     collect.set_defaults(handler=run_collect)
-    analyze = actions.add_parser("analyze", help="analyse the latest recording in the volume")
-    analyze.add_argument("--json", action="store_true")
-    analyze.add_argument("--dest", type=Path, default=Path("runs/compose"),
+    analyze = actions.add_parser("analyze", help="analyse the latest recording in the volume",
+                                 description="Copy the latest recording out of the volume "
+                                 "and run fleet analyze on it.")
+    analyze.add_argument("--json", action="store_true", help="print one JSON object")
+    analyze.add_argument("--dest", type=writable_dir, default=Path("runs/compose"),
+                         metavar="DIR",
                          help="where its copy goes (default runs/compose)")
     analyze.set_defaults(handler=run_analyze)
-    secrets = actions.add_parser("secrets", help="make the logins compose.secure.yaml uses")
-    secrets.add_argument("--out", type=Path, default=None,
+    secrets = actions.add_parser("secrets", help="make the logins compose.secure.yaml uses",
+                                 description="Make random logins for the router, the "
+                                 "services and the forklifts, in files only their owner reads "
+                                 "(compose.secure.yaml hands them to the containers).")
+    secrets.add_argument("--out", type=writable_dir, default=None, metavar="DIR",
                          help=f"where (default $FLEET_SECRETS or {SECRETS})")
     secrets.add_argument("--force", action="store_true", help="replace existing logins")
     secrets.set_defaults(handler=run_secrets)

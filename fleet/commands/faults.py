@@ -6,8 +6,10 @@ from __future__ import annotations
 import argparse
 from importlib import resources
 
+from fleet.cli_types import layout_arg, positive_int, scenario_arg
 from fleet.faults import KINDS, builtin_scenarios, check_against, load_scenario
 from fleet.layout import load_layout
+from fleet.layout_check import fleet_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,13 +17,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fault scenarios (docs/faults.md): TOML files listing "
                        "faults at simulation times, applied by fleet run --faults.")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
-    actions.add_parser("list", help="the fault kinds and the shipped scenarios")
-    show = actions.add_parser("show", help="print a shipped scenario (a start for your own)")
-    show.add_argument("scenario", choices=builtin_scenarios())
-    check = actions.add_parser("check", help="check a scenario against a layout and fleet")
-    check.add_argument("scenario", help="a shipped scenario's name or a TOML file")
-    check.add_argument("--layout", default="paper")
-    check.add_argument("--vehicles", type=int, help="fleet size (default: every start pose)")
+    actions.add_parser("list", help="the fault kinds and the shipped scenarios",
+                       description="List the fault kinds with their fields, and the shipped "
+                       "scenarios with what each does.")
+    show = actions.add_parser("show", help="print a shipped scenario (a start for your own)",
+                              description="Print a shipped scenario's TOML, to copy and edit.")
+    show.add_argument("scenario", choices=builtin_scenarios(), help="the scenario's name")
+    check = actions.add_parser("check", help="check a scenario against a layout and fleet",
+                               description="Check a scenario the way fleet run --faults "
+                               "does before it starts anything: every field, and every "
+                               "forklift and cell it names against the layout and fleet.")
+    check.add_argument("scenario", type=scenario_arg,
+                       help="a shipped scenario's name or a TOML file")
+    check.add_argument("--layout", default="paper", type=layout_arg,
+                       help="layout name or TOML file (default paper)")
+    check.add_argument("--vehicles", type=positive_int,
+                       help="fleet size (default: every start pose of the layout)")
     p.set_defaults(handler=run)
 
 
@@ -42,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     scenario = load_scenario(args.scenario)
     layout = load_layout(args.layout)
-    vehicles = args.vehicles or len(layout.vehicle_starts)
+    vehicles = fleet_size(layout, args.vehicles)
     check_against(scenario, layout, vehicles)
     print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
           f"with {vehicles} forklifts")

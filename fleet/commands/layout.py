@@ -4,38 +4,59 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
+from fleet.cli_types import layout_arg, positive_int, writable_file
 from fleet.errors import UserError
-from fleet.layout import builtin_names, load_layout
+from fleet.layout import MAX_MAP_CELLS, builtin_names, load_layout
 from fleet.layout_check import reachability_problems
 from fleet.layout_generator import Shape, generate_toml
 from fleet.progress import ProgressBar
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("layout", help="list, show, check or generate warehouse layouts")
+    p = sub.add_parser("layout", help="list, show, check or generate warehouse layouts",
+                       description="Warehouse layouts are data: TOML files with the map's "
+                       "bounds, clusters of stacks and their fill order, stations, obstacles, "
+                       "passages and the forklifts' start poses, and a drawing the loader "
+                       "checks against them (docs/layouts.md). Built-in layouts go by name.")
     which = p.add_subparsers(dest="layout_command", required=True, metavar="ACTION")
-    which.add_parser("list", help="the built-in layouts").set_defaults(handler=run_list)
-    show = which.add_parser("show", help="print a layout's drawing and summary")
-    show.add_argument("name", help="built-in layout name or TOML file")
+    which.add_parser("list", help="the built-in layouts",
+                     description="List the built-in layouts: stacks, forklifts and what "
+                     "each is.").set_defaults(handler=run_list)
+    show = which.add_parser("show", help="print a layout's drawing and summary",
+                            description="Print a layout's drawing (its legend is in "
+                            "docs/layouts.md) and a summary of its clusters, stations and "
+                            "start poses.")
+    show.add_argument("name", type=layout_arg, help="built-in layout name or TOML file")
     show.set_defaults(handler=run_show)
     check = which.add_parser("check", help="validate a layout file: structure, drawing, and "
-                             "that every stack can be served in fill order")
-    check.add_argument("file", help="TOML file (or built-in layout name)")
+                             "that every stack can be served in fill order",
+                             description="Validate a layout as fleet run would load it: its "
+                             "structure and drawing (the first error, naming the element), "
+                             "that it has start poses, and that every stack can be served "
+                             "from every station in fill order and every start reaches a "
+                             "dock (every problem, one a line). Exit 1 on problems, 2 on a "
+                             "structural error.")
+    check.add_argument("file", type=layout_arg, help="TOML file (or built-in layout name)")
     check.set_defaults(handler=run_check)
-    gen = which.add_parser("generate", help="write a large parametric warehouse layout")
+    gen = which.add_parser("generate", help="write a large parametric warehouse layout",
+                           description="Write a parametric warehouse: AISLES horizontal "
+                           "aisles off a vertical main passage, DEPTH lanes of LANE_DEPTH "
+                           "stacks on each side, stations at both ends of the main passage "
+                           "and parking starts for the forklifts.")
     defaults = Shape()
-    gen.add_argument("--aisles", type=int, default=defaults.aisles,
+    gen.add_argument("--aisles", type=positive_int, default=defaults.aisles,
                      help=f"horizontal aisles (default {defaults.aisles})")
-    gen.add_argument("--depth", type=int, default=defaults.depth,
-                     help=f"lanes per side of the main passage (default {defaults.depth})")
-    gen.add_argument("--lane-depth", type=int, default=defaults.lane_depth,
+    gen.add_argument("--depth", type=positive_int, default=defaults.depth,
+                     help=f"lanes per side of the main passage, at least 2 (default "
+                     f"{defaults.depth})")
+    gen.add_argument("--lane-depth", type=positive_int, default=defaults.lane_depth,
                      help=f"stacks per lane (default {defaults.lane_depth})")
-    gen.add_argument("--vehicles", type=int, default=defaults.vehicles,
+    gen.add_argument("--vehicles", type=positive_int, default=defaults.vehicles,
                      help=f"forklifts and their parking starts (default {defaults.vehicles})")
     gen.add_argument("--name", help="layout name (default generated-AxD)")
-    gen.add_argument("--out", type=Path, help="write here (default: print to stdout)")
+    gen.add_argument("--out", type=writable_file, metavar="FILE",
+                     help="write here (default: print to stdout)")
     gen.set_defaults(handler=run_generate)
 
 
@@ -74,13 +95,18 @@ def run_check(args: argparse.Namespace) -> int:
 def run_generate(args: argparse.Namespace) -> int:
     shape = Shape(aisles=args.aisles, depth=args.depth, lane_depth=args.lane_depth,
                   vehicles=args.vehicles)
+    if shape.cols * shape.rows > MAX_MAP_CELLS:
+        raise UserError(f"--aisles {args.aisles} --depth {args.depth} --lane-depth "
+                        f"{args.lane_depth}: a map of {shape.cols} x {shape.rows} cells is "
+                        f"more than a layout may have ({MAX_MAP_CELLS} cells)")
     text = generate_toml(shape, args.name)
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    if args.out.exists() and args.out.is_dir():
-        raise UserError(f"--out {args.out} is a directory; give a file name")
-    args.out.write_text(text)
+    try:
+        args.out.write_text(text)
+    except OSError as exc:  # a full disk, a device: say which file
+        raise UserError(f"--out {args.out}: {exc.strerror}") from None
     print(f"wrote {args.out}: {shape.cols} x {shape.rows} cells, "
           f"{4 * shape.aisles * shape.depth * shape.lane_depth} stacks, "
           f"{shape.vehicles} vehicles; check it with: fleet layout check {args.out}")

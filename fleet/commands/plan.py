@@ -9,6 +9,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fleet.cli_types import layout_arg, png_file, positive_int, sim_seconds, text_file
 from fleet.errors import UserError
 from fleet.layout import Layout, load_layout
 from fleet.maneuvers import body_cells_at_rest
@@ -22,14 +23,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plan", help="plan one trajectory with the improved hybrid A*",
                        description="Plan one query. Places: a pose 'col,row,H' (H in E N W S),"
                        " a station name (its docking pose) or a stack 's1#5' (forks at it).")
-    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
+    p.add_argument("--layout", default="paper", type=layout_arg,
+                   help="layout name or TOML file (default paper)")
     p.add_argument("--from", dest="start", required=True, help="start place")
     p.add_argument("--to", dest="goal", required=True, help="goal place")
-    p.add_argument("--at", type=float, default=0.0, help="start time in seconds (default 0)")
-    p.add_argument("--vehicle", type=int, default=1, help="vehicle id (default 1)")
-    p.add_argument("--reserved", type=Path,
-                   help="TOML file of other vehicles' plans and reservations (docs/planning.md)")
-    p.add_argument("--png", type=Path, help="draw the plan into this PNG file")
+    p.add_argument("--at", type=sim_seconds, default=0.0,
+                   help="start time in seconds (default 0)")
+    p.add_argument("--vehicle", type=positive_int, default=1, help="vehicle id (default 1)")
+    p.add_argument("--reserved", type=text_file, metavar="FILE",
+                   help="TOML file of other vehicles' plans and reservations "
+                   "(docs/planning.md; default: none, only the planning vehicle is there)")
+    p.add_argument("--png", type=png_file, metavar="FILE",
+                   help="draw the plan into this PNG file (default: no drawing)")
     p.set_defaults(handler=run)
 
 

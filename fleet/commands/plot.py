@@ -7,6 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from fleet.cli_types import positive_int, sim_seconds, writable_dir
 from fleet.errors import UserError
 from fleet.progress import ProgressBar
 from fleet.recording import RUN_FILE, Recording, RecordingError, read_recording, recording_file
@@ -16,13 +17,19 @@ FPS = 10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("plot", help="draw a recorded run (its MCAP recording)")
+    p = sub.add_parser("plot", help="draw a recorded run (its MCAP recording)",
+                       description="Draw a recorded run from its recording: the filling "
+                       "sequence (filling.png), a Gantt chart of every forklift's subtasks "
+                       "(gantt.png), a heat map of where the forklifts were (heatmap.png), "
+                       "snapshots of the warehouse at some times (snapshot_T.png) and an "
+                       "animation of the whole run (run.gif or run.mp4).")
     p.add_argument("recording", type=Path,
                    help=f"the run's MCAP recording, or the directory holding {RUN_FILE} (and "
                    f"the later segments of a restarted recorder: read as one)")
-    p.add_argument("--out", type=Path, help="directory for the files (default: beside the "
-                   "recording)")
-    p.add_argument("--at", type=float, action="append", default=[],
+    p.add_argument("--out", type=writable_dir, metavar="DIR",
+                   help="directory for the files (default: beside the recording)")
+    p.add_argument("--at", type=sim_seconds, action="append", default=[],
+                   metavar="SECONDS",
                    help="also draw a snapshot at this time in seconds (repeatable; default: "
                    "at a quarter, half and three quarters of the end time)")
     p.add_argument("--gif", action=argparse.BooleanOptionalAction, default=True,
@@ -30,10 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "mission); --no-gif skips it")
     p.add_argument("--mp4", action="store_true",
                    help="write the animation as run.mp4 instead (needs ffmpeg)")
-    p.add_argument("--frames", type=int, default=FRAMES,
+    p.add_argument("--frames", type=positive_int, default=FRAMES,
                    help=f"frames of the animation, spread evenly over the run (default "
                    f"{FRAMES})")
-    p.add_argument("--fps", type=int, default=FPS,
+    p.add_argument("--fps", type=positive_int, default=FPS,
                    help=f"frames per second of the animation (default {FPS})")
     p.set_defaults(handler=run)
 
@@ -64,11 +71,6 @@ def run(args: argparse.Namespace) -> int:
     from fleet.plotting import save_figure
     from fleet.protocol import VehicleState
 
-    if args.frames < 1 or args.fps < 1:
-        raise UserError(f"--frames {args.frames} --fps {args.fps}: both must be at least 1")
-    for t in args.at:
-        if t < 0:
-            raise UserError(f"--at {t}: time must not be negative")
     recording, record = read_run(args.recording)
     try:
         layout = recording.layout()

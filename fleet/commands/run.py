@@ -13,12 +13,25 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from fleet.bus import free_port
+from fleet.cli_help import strategies_epilog
+from fleet.cli_types import (
+    integer,
+    layout_arg,
+    port,
+    port_problem,
+    positive_float,
+    positive_int,
+    scenario_arg,
+    text_file,
+    writable_dir,
+)
 from fleet.commands.runs import write_summary
 from fleet.distributed import RunSpec, run_processes
 from fleet.engine import EngineOptions
 from fleet.errors import UserError
 from fleet.faults import Scenario, check_against, load_scenario
 from fleet.layout import Layout, load_layout
+from fleet.layout_check import fleet_size
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.progress import MissionProgress, ProgressBar
 from fleet.record_inprocess import recorded_run, write_recording
@@ -35,24 +48,25 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Run a mission: a zenoh router, the reservation service, "
                        "one agent process per forklift and the dispatcher, on this machine. "
                        "The dispatcher assigns subtasks; every forklift plans with the "
-                       "improved hybrid A* against the shared reservation table.")
+                       "improved hybrid A* against the shared reservation table.",
+                       epilog=strategies_epilog())
     add_mission_args(p)
     p.add_argument("--clock", choices=["fast", "realtime"], default="fast",
                    help="fast: discrete events, deterministic (default); realtime: sim time "
                    "= speed x wall time")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--speed", type=positive_float, default=1.0,
                    help="sim seconds per wall second with --clock realtime (default 1)")
     p.add_argument("--inprocess", action="store_true",
                    help="run the in-process reference engine instead (one process, no "
                    "zenoh); fast mode gives the same record bit for bit")
-    p.add_argument("--port", type=int, help="router port on 127.0.0.1 (default: a free one)")
-    p.add_argument("--out", type=Path, metavar="DIR", help="a new or empty directory for "
-                   "the recording (run.mcap), the reservation journal and each process's log "
-                   "(default: runs/DATE-TIME-LAYOUT-STRATEGY, -2 after it if taken)")
+    p.add_argument("--port", type=port, help="router port on 127.0.0.1 (default: a free one)")
+    p.add_argument("--out", type=writable_dir, metavar="DIR", help="a new or empty directory "
+                   "for the recording (run.mcap), the reservation journal and each process's "
+                   "log (default: runs/DATE-TIME-LAYOUT-STRATEGY, -2 after it if taken)")
     p.add_argument("--force", action="store_true",
                    help="with --out: an earlier run's directory there is replaced whole "
                    "(never a directory that is not a run's)")
-    p.add_argument("--foxglove", type=int, metavar="PORT", nargs="?", const=8765,
+    p.add_argument("--foxglove", type=port, metavar="PORT", nargs="?", const=8765,
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
     p.add_argument("--secure", action="store_true",
@@ -60,9 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "credentials made for this run (kept in OUT/secrets): a forklift may "
                    "publish only as itself and commit only its own reservations, only the "
                    "dispatcher assigns tasks, the recorder only reads (docs/faults.md)")
-    p.add_argument("--faults", metavar="SCENARIO",
+    p.add_argument("--faults", metavar="SCENARIO", type=scenario_arg,
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
-                   "faults list) or a TOML file (docs/faults.md)")
+                   "faults list) or a TOML file (docs/faults.md; default: no faults)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress: only the summary and errors")
     p.add_argument("--json", action="store_true",
@@ -71,14 +85,24 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_mission_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
-    p.add_argument("--mission", choices=[k.value for k in MissionKind], default="fill")
-    p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann")
-    p.add_argument("--vehicles", type=int, default=None,
+    p.add_argument("--layout", default="paper", type=layout_arg,
+                   help="layout name or TOML file (default paper)")
+    p.add_argument("--mission", choices=[k.value for k in MissionKind], default="fill",
+                   help="fill: goods from the stations to the stacks, in each cluster's fill "
+                   "order; empty: from the stacks back to the stations, in reverse (default "
+                   "fill)")
+    p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
+                   help="how the dispatcher picks each forklift's next goal (default ann; "
+                   "each is described below)")
+    p.add_argument("--vehicles", type=positive_int, default=None,
                    help="fleet size (default: every start pose of the layout)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--weights", type=Path, help="MLP weights for --strategy ann "
-                   "(default: the weights shipped for the layout)")
+    p.add_argument("--seed", type=integer, default=0,
+                   help="the mission's seed, kept in its record (the dispatching itself "
+                   "draws no random numbers: a mission gives the same record every time; "
+                   "default 0)")
+    p.add_argument("--weights", type=text_file, metavar="FILE",
+                   help="MLP weights for --strategy ann (default: the weights shipped for the "
+                   "layout)")
 
 
 def mission_from_args(args: argparse.Namespace) -> Mission:
@@ -141,12 +165,14 @@ def summary_json(report: Report, wall_s: float, digest: str) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     mission = mission_from_args(args)
     layout = load_layout(mission.layout)
-    n = mission.vehicles if mission.vehicles is not None else len(layout.vehicle_starts)
-    if not 1 <= n <= len(layout.vehicle_starts):
-        raise ValueError(f"--vehicles {n}: layout {layout.name} has start poses for 1 to "
-                         f"{len(layout.vehicle_starts)} forklifts")
-    if args.speed <= 0:
-        raise ValueError(f"--speed must be positive, not {args.speed}")
+    n = fleet_size(layout, mission.vehicles)
+    if args.force and args.out is None:
+        raise UserError("--force replaces the directory given with --out DIR; without --out "
+                        "a run gets a new directory of its own and replaces nothing")
+    for flag, number in (("--port", args.port), ("--foxglove", args.foxglove)):
+        busy = port_problem(number) if number is not None and not args.inprocess else None
+        if busy:
+            raise UserError(f"{flag} {number}: {busy}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
     if args.inprocess and (args.clock != "fast" or args.foxglove is not None or args.secure):

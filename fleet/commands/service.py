@@ -29,8 +29,11 @@ HEALTH_TIMEOUT_S = 3.0
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("service", help="run one service of the compose deployment, set up "
                        "from FLEET_* environment variables",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("name", choices=SERVICES)
+                       description="What each container of the compose deployment runs: "
+                       "the service's process, set up from FLEET_* environment variables "
+                       "(fleet/deploy.py, docs/deployment.md); --health is the container's "
+                       "health check.")
+    p.add_argument("name", choices=SERVICES, help="the service")
     p.add_argument("--health", action="store_true",
                    help="check that the service is up (exit 0) instead of running it")
     p.add_argument("--print", action="store_true",

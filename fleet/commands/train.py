@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fleet.cli_types import integer, layout_arg, positive_int, writable_file
 from fleet.layout import load_layout
 from fleet.progress import ProgressBar
 
@@ -14,12 +15,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Cycle 1 fills with the comprehensive strategy, later "
                        "cycles with the ANN strategy; after each, the per-cluster networks are "
                        "refitted by Levenberg-Marquardt on every sample so far.")
-    p.add_argument("--layout", default="paper", help="layout name or TOML file (default paper)")
-    p.add_argument("--cycles", type=int, default=3, help="filling cycles (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the initial weights")
-    p.add_argument("--lm-steps", type=int, default=50,
+    p.add_argument("--layout", default="paper", type=layout_arg,
+                   help="layout name or TOML file (default paper)")
+    p.add_argument("--cycles", type=positive_int, default=3, help="filling cycles (default 3)")
+    p.add_argument("--seed", type=integer, default=0,
+                   help="seed of the initial weights (default 0)")
+    p.add_argument("--lm-steps", type=positive_int, default=50,
                    help="Levenberg-Marquardt steps per fit (default 50)")
-    p.add_argument("--out", type=Path, help="weights file to write "
+    p.add_argument("--out", type=writable_file, metavar="FILE", help="weights file to write "
                    "(default LAYOUT.weights.json in the current directory)")
     p.set_defaults(handler=run)
 
