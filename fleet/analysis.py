@@ -24,7 +24,6 @@ from typing import Any
 from fleet.forklift_time import VehicleStats, time_use
 from fleet.protocol import (
     Change,
-    DecisionFailure,
     Halt,
     MissionDone,
     Resume,
@@ -32,7 +31,7 @@ from fleet.protocol import (
     StackReopened,
     VehicleState,
 )
-from fleet.recorded_mission import record_of
+from fleet.recorded_mission import RESTART_DROP, dispatcher_restarts, record_of
 from fleet.recording import (
     NS,
     Recorded,
@@ -51,9 +50,6 @@ from fleet.safety import (
 )
 from vehicle_agent.driving import state_period
 
-# A stream whose numbers fall this far below the highest seen is a restarted sender whose
-# first messages were not recorded (a stream shared by threads may swap a few neighbours).
-RESTART_DROP = 16
 GOODS_OWNER = 0  # the reservation table's owner of stacks with goods (fleet.execution.GOODS)
 
 
@@ -167,6 +163,10 @@ class Report:
     # Stacks counted done from the dispatcher's final record: their dispatch/stack message
     # was sent while no recorder was running.
     stacks_not_recorded: list[str] = field(default_factory=list)
+    # Why the numbers (subtasks, decision failures, end time, each forklift's time) leave
+    # something out: what a dispatcher announced that neither a recorder nor its final record
+    # kept (fleet.recorded_mission). Empty: they are whole.
+    incomplete: list[str] = field(default_factory=list)
 
     @property
     def safe(self) -> bool:
@@ -239,7 +239,15 @@ class Report:
             + (f" ({self.undecided} dispatches without a decision)" if self.undecided else ""),
             f"  waiting            {stopped + postponed:.2f} s in all: {stopped:.2f} s stopped, "
             f"{postponed:.2f} s postponed",
+            *self.incomplete_lines(),
         ]
+
+    def incomplete_lines(self) -> list[str]:
+        """That the numbers are not whole, and why (nothing when they are)."""
+        if not self.incomplete:
+            return []
+        return ["  incomplete         these figures miss what no recorder or record kept:",
+                *(f"                     {why}" for why in self.incomplete)]
 
     def vehicle_lines(self, distance: bool = False) -> list[str]:
         """Each forklift's time (fleet.forklift_time), with its distance if asked; a down
@@ -375,9 +383,8 @@ def analyze(recording: Recording) -> Report:
     booked = [not any(_unknown(unverified, v, d.t0, d.t1) for v in d.vehicles)
               for d in bookings]
     seen = set(stacks) & expected
-    restarted = sum(r.envelope.seq == 1 for r, _ in recording.of(StackDone)) > 1
-    from_record = _stacks_not_recorded(done, unrecorded, expected - seen,
-                                       restarted and bool(recording.gaps))
+    from_record = _stacks_not_recorded(done, unrecorded, expected - seen, any(
+        x.unrecorded for x in dispatcher_restarts(recording)))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
@@ -394,8 +401,8 @@ def analyze(recording: Recording) -> Report:
         stacks_lost=sorted(f"{c}#{i}" for c, i in expected - seen - from_record),
         subtasks=len(record["subtasks"]),
         decision_failures=record["decision_failures"],
-        plans_failed=sum(m.stage == "plan" for _, m in recording.of(DecisionFailure)),
-        undecided=sum(m.stage == "dispatch" for _, m in recording.of(DecisionFailure)),
+        plans_failed=sum(f["stage"] == "plan" for f in record["failures"]),
+        undecided=sum(f["stage"] == "dispatch" for f in record["failures"]),
         commit_conflicts=len(done[-1].rejections) if done else 0,
         vehicles=time_use(record["subtasks"], [m for _, m in recording.of(Halt)],
                           [m for _, m in recording.of(Resume)], info.vehicles,
@@ -425,6 +432,7 @@ def analyze(recording: Recording) -> Report:
         double_bookings_unverified=[d for d, ok in zip(bookings, booked, strict=True)
                                     if not ok],
         stacks_not_recorded=sorted(f"{c}#{i}" for c, i in from_record),
+        incomplete=record["incomplete"],
     )
 
 

@@ -1,15 +1,37 @@
 """One definition per number (docs/metrics.md): `fleet run`'s summary and `fleet analyze` of
 its recording give the same figures, computed from the recording alone, and they agree with
-the dispatcher's own accounting where both count the same thing."""
+the dispatcher's own accounting where both count the same thing. A recording with a window
+without a recorder gives the figures of the run recorded whole (what it missed is in the
+dispatcher's record), or says they are incomplete; a restarted dispatcher's counts add up."""
 
+import dataclasses
 import json
+from collections import Counter
+from pathlib import Path
 
 import pytest
 
+from fleet.analysis import Report, analyze
 from fleet.cli import main
+from fleet.commands.run import engine_options
 from fleet.forklift_time import maneuver_length, time_use
-from fleet.protocol import Halt, MissionDone, Resume
-from fleet.recording import read_recording
+from fleet.layout import load_layout
+from fleet.mission import Mission, MissionKind, Strategy
+from fleet.protocol import (
+    DecisionFailure,
+    Halt,
+    MissionDone,
+    MissionInfo,
+    Progress,
+    Resume,
+    StackDone,
+    SubtaskEvent,
+    encode,
+)
+from fleet.record_inprocess import Outgoing, recorded_run
+from fleet.record_io import subtask_dict
+from fleet.recorded_mission import dispatcher_restarts
+from fleet.recording import NS, RecordingWriter, read_recording
 
 PER_FORKLIFT = ("busy_s", "stopped_s", "postponed_s", "handling_s", "down_s", "idle_s")
 
@@ -155,3 +177,175 @@ def test_a_forklift_down_part_way_finishes_its_maneuver_after_the_resume():
     assert (v.busy_s, v.postponed_s, v.down_s, v.handling_s, v.idle_s) == \
         pytest.approx((20.0, 0.0, 26.0, 10.0, 4.0))
     assert v.distance_m == pytest.approx(2 * 2.0 * maneuver_length("forward"))
+
+
+# -- a run recorded in segments: what no recorder heard is taken from the dispatcher's record
+
+BASE_NS = 1_700_000_000 * NS  # the first message's receive time; one message a millisecond
+Item = tuple[Outgoing, int, int]  # a message, its stream's number, its receive time
+FIGURES = ("subtasks", "decision_failures", "plans_failed", "undecided", "end_time_s",
+           "all_parked_s", "vehicles", "stacks_done")
+
+
+@pytest.fixture(scope="module")
+def greedy_small() -> list[Item]:
+    """What a fault-free greedy fill of small puts on the wire, numbered per stream (10
+    decision failures: 4 plans failed, 6 choices without a goal)."""
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    layout = load_layout("small")
+    stream = recorded_run(mission, layout, engine_options(mission, layout, None))[1]
+    count: Counter = Counter()
+    items = []
+    for k, o in enumerate(stream):
+        count[o.key, o.sender] += 1
+        items.append((o, count[o.key, o.sender], BASE_NS + k * 1_000_000))
+    return items
+
+
+def write(path: Path, items: list[Item]) -> Path:
+    """A segment as a recorder writes it (the run's description first)."""
+    writer = RecordingWriter(path)
+    writer.describe(next(o.message for o, _, _ in items if isinstance(o.message, MissionInfo)))
+    for o, seq, log_ns in items:
+        writer.write(o.key, encode(o.message, o.sender, seq, o.sim_time), log_ns, o.sim_time)
+    writer.close()
+    return path
+
+
+def recorded(run_dir: Path, items: list[Item], unheard: range | None = None) -> Report:
+    """The analysis of the items as recorded; `unheard`: positions sent while no recorder
+    ran (the first recorder killed before them, the next started after)."""
+    if unheard is None:
+        write(run_dir / "run.mcap", items)
+    else:
+        write(run_dir / "run.mcap", items[:unheard.start])
+        info = items[0][0]  # a later recorder asks the dispatcher what the run is
+        write(run_dir / "run-2.mcap", [(info, 0, items[unheard.stop][2] - 1),
+                                       *items[unheard.stop:]])
+    return analyze(read_recording(run_dir))
+
+
+def figures(report: Report) -> dict:
+    return {k: getattr(report, k) for k in FIGURES}
+
+
+def position(items: list[Item], cls: type, nth: int = 0, start: int = 0) -> int:
+    return [k for k, (o, _, _) in enumerate(items) if isinstance(o.message, cls)
+            and k >= start][nth]
+
+
+def kinds(items: list[Item]) -> set[type]:
+    return {type(o.message) for o, _, _ in items}
+
+
+def test_a_window_without_a_recorder_takes_the_dispatchers_record(greedy_small, tmp_path):
+    items = greedy_small
+    whole = recorded(tmp_path / "whole", items)
+    start = position(items, DecisionFailure, 1) - 30
+    unheard = range(start, start + 200)
+    assert {SubtaskEvent, StackDone, DecisionFailure, Progress} <= \
+        kinds(items[unheard.start:unheard.stop])
+    split = recorded(tmp_path / "split", items, unheard)
+    assert split.recorder_gaps and split.messages_not_recorded > 0
+    assert figures(split) == figures(whole) and split.incomplete == []
+    assert (whole.decision_failures, whole.plans_failed) == (10, 4)
+    assert split.numbers_lines() == whole.numbers_lines()
+    # Without the dispatcher's result, nothing tells what was sent then: the analysis says so.
+    cut = [it for it in items if not isinstance(it[0].message, MissionDone)]
+    lost = {cls: sum(isinstance(o.message, cls) for o, _, _ in items[unheard.start:unheard.stop])
+            for cls in (SubtaskEvent, DecisionFailure, StackDone)}
+    unfinished = recorded(tmp_path / "unfinished", cut, unheard)
+    assert lost[DecisionFailure] == 1 and lost[SubtaskEvent] > 1 and lost[StackDone] > 1
+    assert unfinished.incomplete == [f"{lost[SubtaskEvent]} subtasks not recorded",
+                                     "1 announced decision failure not recorded",
+                                     f"{lost[StackDone]} stacks done not recorded"]
+    assert unfinished.subtasks == whole.subtasks - lost[SubtaskEvent]
+    assert unfinished.numbers_lines()[-4:] == [
+        "  incomplete         these figures miss what no recorder or record kept:",
+        *(f"                     {why}" for why in unfinished.incomplete)]
+
+
+def restarted(items: list[Item], at: int) -> tuple[list[Item], int]:
+    """The dispatcher killed just before position `at` and a new one picking the mission up
+    (docs/faults.md): its messages numbered from 1 again on every key after its own mission
+    message; its record holds what it announced only, its count of decision failures starts
+    at 0. With the old one's count when it died."""
+    info = items[0][0]
+    old = [o.message.failures for o, _, _ in items[:at] if isinstance(o.message, Progress)]
+    count: Counter = Counter({info.key: 1})
+    new: list[Item] = [(info, 1, items[at][2] - 1)]
+    for o, seq, log_ns in items[at:]:
+        if o.sender == "dispatcher":
+            count[o.key] += 1
+            seq = count[o.key]
+        if isinstance(o.message, Progress):
+            o = dataclasses.replace(o, message=dataclasses.replace(
+                o.message, failures=max(0, o.message.failures - max(old))))
+        new.append((o, seq, log_ns))
+    announced = [o.message for o, _, _ in new[1:] if o.sender == "dispatcher"]
+    done = announced[-1]
+    record = dict(done.record, subtasks=[subtask_dict(m) for m in announced
+                                         if isinstance(m, SubtaskEvent)],
+                  failures=[{"t": m.t, "vehicle": m.vehicle, "stage": m.stage,
+                             "reason": m.reason} for m in announced
+                            if isinstance(m, DecisionFailure)],
+                  decision_failures=done.record["decision_failures"] - max(old))
+    o, seq, log_ns = new[-1]
+    new[-1] = (dataclasses.replace(o, message=dataclasses.replace(done, record=record)), seq,
+               log_ns)
+    return items[:at] + new, max(old)
+
+
+def test_a_restarted_dispatchers_figures_are_added(greedy_small, tmp_path):
+    items = greedy_small
+    at = position(items, Progress, 0, position(items, DecisionFailure, 2)) + 1
+    run, old_count = restarted(items, at)
+    whole = recorded(tmp_path / "whole", items)
+    (restart,) = dispatcher_restarts(read_recording(write(tmp_path / "run.mcap", run)))
+    assert restart.at_ns == run[at][2] and not restart.unrecorded
+    both = recorded(tmp_path / "both", run)
+    assert 0 < old_count < whole.decision_failures
+    assert figures(both) == figures(whole) and both.incomplete == []
+
+
+def test_a_dispatcher_that_died_while_no_recorder_ran_leaves_its_figures_incomplete(
+        greedy_small, tmp_path):
+    """The old dispatcher's last subtask and the new one's first messages, its first
+    progress report (number 1) among them, were sent while no recorder ran."""
+    items = greedy_small
+    at = position(items, Progress, 0, position(items, DecisionFailure, 2)) + 1
+    run, old_count = restarted(items, at)
+    last_old = max(k for k, (o, _, _) in enumerate(run[:at])
+                   if isinstance(o.message, SubtaskEvent))
+    unheard = range(last_old, position(run, Progress, 1, at))
+    heard = run[:unheard.start]
+    seen_count = max(o.message.failures for o, _, _ in heard if isinstance(o.message, Progress))
+    report = recorded(tmp_path / "run", run, unheard)
+    assert report.incomplete == ["dispatcher 1 of 2 died while no recorder ran"]
+    whole = recorded(tmp_path / "whole", items)
+    assert report.subtasks == whole.subtasks - 1  # the old one's last: in no record
+    # Each dispatcher's count is its own, though the new one's first report went unheard.
+    new_count = whole.decision_failures - old_count
+    assert seen_count > 0 and report.decision_failures == seen_count + new_count
+    old_unheard = sum(isinstance(o.message, DecisionFailure) for o, _, _ in run[last_old:at])
+    assert report.plans_failed == whole.plans_failed - old_unheard
+    assert report.work_done  # every stack is in the new record
+    text = "\n".join(report.numbers_lines())
+    assert "incomplete         these figures miss" in text and "dispatcher 1 of 2 died" in text
+
+
+def test_a_killed_recorder_leaves_the_numbers_of_the_run_without_faults(tmp_path, capsys):
+    """Real processes on the fast clock, the recorder killed at 400 s and another started
+    2 s (wall) later: the same mission, the same record, the same figures."""
+    reference = run_json(capsys, "--out", str(tmp_path / "reference"))
+    assert main(["run", "--layout", "small", "--json", "--faults", "kill_recorder",
+                 "--out", str(tmp_path / "killed")]) == 0
+    killed = json.loads(capsys.readouterr().out)
+    assert killed["digest"] == reference["digest"]
+    for key in ("end_time_s", "all_parked_s", "stacks_done", "subtasks", "decision_failures",
+                "plans_failed", "undecided", "waiting_s", "stopped_s", "postponed_s",
+                "vehicles"):
+        assert killed[key] == pytest.approx(reference[key]), key
+    report = analyze_json(capsys, tmp_path / "killed")
+    assert len(report["segments"]) == 2 and report["recorder_gaps"]
+    assert report["incomplete"] == [] and report["vehicles"] == killed["vehicles"]

@@ -366,3 +366,80 @@ def test_collect_updates_its_own_copy_and_never_writes_over_another_run(tmp_path
                                         rf"not the volume's {run_id_of(other)}"):
         place_copy(staged, target)
     assert files(target) == before
+
+
+def test_fleet_analyze_keeps_the_verdicts_of_a_run_directory_for_fleet_runs(tmp_path, capsys):
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    layout = load_layout("small")
+    stream = recorded_run(mission, layout, engine_options(mission, layout, None))[1]
+    runs = tmp_path / "runs"
+    unjudged = claim(runs / "unjudged").path
+    write_recording(unjudged / RUN_FILE, stream, layout)
+    by_file = claim(runs / "by-file").path
+    write_recording(by_file / RUN_FILE, stream, layout)
+    other = tmp_path / "other"  # a folder of the user's, with a recording of its own
+    other.mkdir()
+    write_recording(other / "mine.mcap", stream, layout)
+    (other / SUMMARY).write_text("the user's own notes\n")
+
+    def listed() -> dict[str, dict]:
+        assert main(["runs", str(runs), "--json"]) == 0
+        return {Path(r["directory"]).name: r
+                for r in map(json.loads, capsys.readouterr().out.splitlines())}
+
+    assert {name: r["verdict"] for name, r in listed().items()} == \
+        {"unjudged": "not analysed", "by-file": "not analysed"}
+    code, out, err = fleet(["analyze", unjudged], capsys)
+    assert code == 0 and err == "" and "work               pass" in out
+    assert fleet(["analyze", by_file / RUN_FILE, "--json"], capsys)[0] == 0
+    assert fleet(["analyze", other / "mine.mcap"], capsys)[0] == 0
+    rows = listed()
+    assert {name: r["verdict"] for name, r in rows.items()} == \
+        {"unjudged": "pass", "by-file": "pass"}
+    assert rows["unjudged"]["end_time_s"] > 0 and rows["unjudged"]["incomplete"] is False
+    summary = json.loads((unjudged / SUMMARY).read_text())
+    assert summary["run_id"] == run_id_of(unjudged) and summary["incomplete"] == []
+    assert (other / SUMMARY).read_text() == "the user's own notes\n"  # not ours: left alone
+    # Judged again, it says the same: nothing is written (a read-only copy is no trouble).
+    kept = (unjudged / SUMMARY).stat().st_mtime_ns
+    assert fleet(["analyze", unjudged], capsys)[0] == 0
+    assert (unjudged / SUMMARY).stat().st_mtime_ns == kept
+    # Where the summary cannot be written, the analysis stands, with one note.
+    (unjudged / SUMMARY).unlink()
+    (unjudged / f".{SUMMARY}.tmp").mkdir()  # in the way of the summary's temporary file
+    code, out, err = fleet(["analyze", unjudged], capsys)
+    assert code == 0 and "work               pass" in out
+    assert err.count("\n") == 1 and err.startswith("note: could not keep the run's summary")
+
+
+def test_fleet_runs_says_which_runs_have_no_result(tmp_path, capsys):
+    """An interrupted run (or one whose processes died): the recorder stopped normally, its
+    file complete, without the dispatcher's result; or nothing was recorded at all. A torn
+    file (a killed recorder) cannot tell without reading it all: not analysed."""
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    layout = load_layout("small")
+    stream = recorded_run(mission, layout, engine_options(mission, layout, None))[1]
+    half = stream[: len(stream) // 2]
+    runs = tmp_path / "runs"
+    stopped = claim(runs / "stopped").path
+    write_recording(stopped / RUN_FILE, half, layout)
+    claim(runs / "nothing")  # claimed, then stopped before a recorder wrote anything
+    torn = claim(runs / "torn").path
+    write_recording(torn / RUN_FILE, half, layout)
+    data = (torn / RUN_FILE).read_bytes()
+    (torn / RUN_FILE).write_bytes(data[: len(data) * 2 // 3])
+    finished = claim(runs / "finished").path
+    write_recording(finished / RUN_FILE, stream, layout)
+    assert main(["runs", str(runs), "--json"]) == 0
+    rows = {Path(r["directory"]).name: r
+            for r in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert {name: (r["verdict"], r["problem"]) for name, r in rows.items()} == {
+        "stopped": ("no result", "its recording ends before the mission's result: "
+                                 "interrupted, or a process died"),
+        "nothing": ("no result", "nothing was recorded"),
+        "torn": ("not analysed", ""),
+        "finished": ("not analysed", "")}
+    assert rows["stopped"]["layout"] == "small"
+    assert main(["runs", str(runs)]) == 0
+    table = capsys.readouterr().out
+    assert "no result (nothing was recorded)" in table

@@ -1,5 +1,6 @@
 """`fleet analyze RUN.mcap|DIR`: the run's numbers and its safety, work and message verdicts
-(a run directory: every segment its recorders wrote, read as one recording)."""
+(a run directory: every segment its recorders wrote, read as one recording, and the verdicts
+kept in it for `fleet runs`, as `fleet run` keeps them)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "message counts and gaps, and the verdicts: safety (no two forklifts "
                        "on one cell at once, none outside its reservation), work (every stack "
                        "exactly once) and messages (none lost). Exit status 1 when a verdict "
-                       "fails.")
+                       "fails. Of a run directory (or its run.mcap) the verdicts are kept in "
+                       "its summary.json for `fleet runs`.")
     p.add_argument("recording", type=Path, help="an MCAP file, or a run directory holding "
                    "run.mcap (and run-2.mcap, ... of a restarted recorder: read as one)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -24,10 +26,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fleet.analysis import analyze
-    from fleet.recording import read_recording, recording_file
+    from fleet.commands.runs import write_summary
+    from fleet.recording import RUN_FILE, read_recording, recording_file
 
-    recording_file(args.recording)  # refuses what is no recording, saying why
+    first = recording_file(args.recording)  # refuses what is no recording, saying why
     report = analyze(read_recording(args.recording))
+    if args.recording.is_dir() or args.recording.name == RUN_FILE:  # a run's, every segment
+        write_summary(first.parent, report)
     if args.json:
         print(json.dumps(report.to_json()))
     else:

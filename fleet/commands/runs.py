@@ -1,9 +1,12 @@
 """`fleet runs [DIR]`: the runs under runs/ (or DIR), oldest first, with their verdicts.
 
-Judging a recording means reading all of it, so `fleet run` keeps what it judged in the run
-directory (summary.json: the mission, its end time, the three verdicts and the segments it
-read); a run without one (or whose segments changed since) is described from its recording's
-metadata, which is read from the start of the file only, and listed as not analysed.
+Judging a recording means reading all of it, so `fleet run` and `fleet analyze DIR` keep
+what they judged in the run directory (summary.json: the mission, its end time, the three
+verdicts, whether the figures are whole, and the segments read); a run without one (or whose
+segments changed since) is described from its recording's metadata, which is read from the
+start of the file only, and listed as not analysed, or as "no result" when the summary
+section at the end of its recording shows no result of the dispatcher (a run stopped early,
+or one whose processes died) or nothing was recorded at all.
 """
 
 from __future__ import annotations
@@ -18,8 +21,18 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mcap.reader import make_reader
+
 from fleet.errors import UserError
-from fleet.recording import RUN_FILE, RecordingError, read_description, segment_paths
+from fleet.protocol import MissionDone
+from fleet.recording import (
+    MCAP_MAGIC,
+    RUN_FILE,
+    RecordingError,
+    message_type,
+    read_description,
+    segment_paths,
+)
 from fleet.rundir import MARKER, RUNS, marker_of, run_id_of
 
 SUMMARY = "summary.json"
@@ -31,8 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("runs", help="list past runs and their verdicts",
                        description="List the runs under a directory (default runs/), oldest "
                        "first: layout, mission, strategy, clock, fleet size, end time and "
-                       "verdicts as `fleet run` judged them (\"not analysed\" for a run it did not "
-                       "judge, or whose recording changed since: fleet analyze DIR judges it).")
+                       "verdicts as `fleet run` or `fleet analyze DIR` judged them (\"not "
+                       "analysed\" for a run neither judged, or whose recording changed since: "
+                       "fleet analyze DIR judges it; \"no result\" for a run whose recording "
+                       "ends before the mission's result, one interrupted or whose processes "
+                       "died).")
     p.add_argument("dir", nargs="?", type=Path, default=RUNS,
                    help="where to look (default runs/); a run directory lists itself")
     p.add_argument("--json", action="store_true",
@@ -51,15 +67,17 @@ class RunEntry:
     clock: str = ""
     vehicles: int | None = None
     end_time_s: float | None = None  # the mission's (sim time of the last stack done)
-    verdict: str = "not analysed"  # pass, FAIL, not analysed, unreadable
+    verdict: str = "not analysed"  # pass, FAIL, not analysed, no result, unreadable
     verdicts: dict[str, bool] = field(default_factory=dict)  # safety, work, messages
-    problem: str = ""  # why it is unreadable, or why its summary no longer holds
+    problem: str = ""  # why it is unreadable or has no result, or its summary no longer holds
+    incomplete: bool = False  # its figures miss what no recorder or record kept
 
     @property
     def verdict_text(self) -> str:
+        whole = "; figures incomplete" if self.incomplete else ""
         if self.verdict == "FAIL":
-            return "FAIL: " + ", ".join(k for k in VERDICTS if not self.verdicts.get(k))
-        return f"{self.verdict} ({self.problem})" if self.problem else self.verdict
+            return "FAIL: " + ", ".join(k for k in VERDICTS if not self.verdicts.get(k)) + whole
+        return (f"{self.verdict} ({self.problem})" if self.problem else self.verdict) + whole
 
 
 # -------------------------------------------------------------------------- the summary
@@ -71,14 +89,24 @@ def summary_of(report, run_id: str | None, segments: dict[str, int]) -> dict[str
                 "messages": report.messages_lost == 0}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,
             "finished": report.finished, "end_time_s": report.end_time_s,
-            "verdicts": verdicts, "passed": report.passed, "segments": segments}
+            "verdicts": verdicts, "passed": report.passed, "incomplete": report.incomplete,
+            "segments": segments}
 
 
 def write_summary(run_dir: Path, report) -> None:
-    """Keep the verdicts `fleet run` just gave in the run directory (written whole, then
-    renamed into place: never half a file). Failing to keep it fails nothing: `fleet runs`
-    then lists the run as not analysed."""
+    """Keep the verdicts `fleet run` or `fleet analyze` just gave in the run directory
+    (written whole, then renamed into place: never half a file). A summary.json that is not
+    one of these is left alone, and one that already says the same is not written again.
+    Failing to keep it fails nothing (one note): `fleet runs` then lists the run as not
+    analysed."""
     summary = summary_of(report, run_id_of(run_dir), _segment_sizes(run_dir))
+    if (run_dir / SUMMARY).exists():
+        kept = _summary(run_dir)
+        if kept is None:
+            return  # a file of the same name that is not ours
+        if {k: v for k, v in kept.items() if k != "judged"} == \
+                {k: v for k, v in json.loads(json.dumps(summary)).items() if k != "judged"}:
+            return  # it says so already (a read-only directory is then no trouble)
     temporary = run_dir / f".{SUMMARY}.tmp"
     try:
         temporary.write_text(json.dumps(summary, indent=1) + "\n")
@@ -128,12 +156,16 @@ def describe(run_dir: Path) -> RunEntry:
         entry.end_time_s = float(summary["end_time_s"])
         entry.verdicts = {k: bool(verdicts.get(k)) for k in VERDICTS}
         entry.verdict = "pass" if all(entry.verdicts.values()) else "FAIL"
+        entry.incomplete = bool(summary.get("incomplete"))
         return entry
     if summary is not None:
         entry.problem = "its recording changed since it was judged"
-    segments = segment_paths(run_dir)
+    segments = [p for p in segment_paths(run_dir) if p.exists()]
     if not segments:
-        entry.verdict, entry.problem = "unreadable", f"no {RUN_FILE}"
+        if mark:
+            entry.verdict, entry.problem = "no result", "nothing was recorded"
+        else:
+            entry.verdict, entry.problem = "unreadable", f"no {RUN_FILE}"
         return entry
     try:
         run = read_description(segments[0]).get("run", {})
@@ -143,7 +175,30 @@ def describe(run_dir: Path) -> RunEntry:
     entry.layout, entry.mission, entry.strategy, entry.clock = (
         run.get(k, "") for k in ("layout", "mission", "strategy", "clock"))
     entry.vehicles = int(run["vehicles"]) if run.get("vehicles", "").isdigit() else None
+    if result_recorded(segments[-1]) is False:
+        entry.verdict = "no result"
+        entry.problem = "its recording ends before the mission's result: interrupted, or a " \
+            "process died"
     return entry
+
+
+def result_recorded(segment: Path) -> bool | None:
+    """Whether a recording holds the dispatcher's result (dispatch/done), from the summary
+    section at its end alone; None when it has none (a torn file: its recorder killed)."""
+    try:
+        with open(segment, "rb") as stream:
+            stream.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            if stream.read() != MCAP_MAGIC:
+                return None
+            stream.seek(0)
+            summary = make_reader(stream).get_summary()
+    except Exception:  # OSError, and mcap's own, struct and decompression errors
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    counts = summary.statistics.channel_message_counts
+    return any(message_type(channel.topic) is MissionDone and counts.get(number, 0) > 0
+               for number, channel in summary.channels.items())
 
 
 def _summary(run_dir: Path) -> dict | None:
