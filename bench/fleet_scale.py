@@ -71,9 +71,8 @@ def measure(agents: int, layout: Path, window_s: float, startup_timeout_s: float
             # the dispatcher starts the clock once every agent is up
             while not clock_started.wait(1.0):  # the timeout paces the check on the children
                 for child in launcher.exited():
-                    raise RuntimeError(f"{agents} agents: {child.name} exited with status "
-                                       f"{child.proc.returncode} before the clock started:\n"
-                                       f"{launcher.tail(child, 15)}")
+                    raise RuntimeError(f"{agents} agents: "
+                                       f"{launcher.death(child, 'before the clock started')}")
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"{agents} agents: the clock did not start within "
                                        f"{startup_timeout_s:g} s")

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from bench.stats import percentile
+from fleet.errors import UserError
 from fleet.layout import Layout, load_layout
 from fleet.maneuvers import body_cells_at_rest
 from fleet.planner import HybridAStar
@@ -33,6 +34,19 @@ class Task:
     goals: tuple[Pose, ...]
     t_start: float
 
+
+FORKLIFTS = 4  # per query: each at its own station, serving its own cluster
+MAX_UNUSABLE_DRAWS = 1000  # in a row: the layout gives no usable query (never, in the shipped)
+
+
+def check_layout(layout: Layout) -> None:
+    """A layout the benchmark can draw queries on: enough stations and clusters."""
+    stations, clusters = len(layout.stations), len(layout.clusters)
+    if stations < FORKLIFTS or clusters < FORKLIFTS:
+        raise UserError(f"layout {layout.name} has {stations} stations and {clusters} "
+                        f"clusters; the planner benchmark needs at least {FORKLIFTS} of each "
+                        f"(its {FORKLIFTS} forklifts each start at their own station and "
+                        f"serve their own cluster)")
 
 
 def draw_scene(layout: Layout, rng: random.Random) -> tuple[set, list[Task]] | None:
@@ -67,14 +81,21 @@ def draw_scene(layout: Layout, rng: random.Random) -> tuple[set, list[Task]] | N
 def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         progress: Callable[[int, int], None] | None = None) -> dict:
     layout = load_layout(layout_name)
+    check_layout(layout)
     rng = random.Random(seed)
     times_ms, setup_ms, expansions, found_ms = [], [], [], []
     outcomes: Counter[str] = Counter()
-    done = 0
+    done = unusable = 0
     while done < queries:
         scene = draw_scene(layout, rng)
         if scene is None:
+            unusable += 1
+            if unusable == MAX_UNUSABLE_DRAWS:
+                raise UserError(f"layout {layout.name}: no usable planner query in "
+                                f"{MAX_UNUSABLE_DRAWS} draws (the forklifts' starts overlap, "
+                                f"or no pose points at the next stack)")
             continue
+        unusable = 0
         filled, tasks = scene
         t0 = time.perf_counter()
         planner = HybridAStar(layout.grid_map(filled), layout.vehicle.dims)

@@ -35,9 +35,19 @@ from fleet.distributed import RunFailed
 from fleet.errors import UserError, describe
 
 EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
-# What a command may fail with for reasons outside the program: bad input, the file system,
-# the network. Each reaches the user as one line; anything else is a bug.
-EXPECTED = (UserError, ValueError, OSError, zenoh.ZError, RequestFailed, RunFailed)
+# What a command may fail with for reasons outside the program: bad input (every check of it
+# raises a UserError), the network, a run's processes. Each reaches the user as one line;
+# anything else is a bug (a ValueError too: a value the user gave is refused as a UserError).
+EXPECTED = (UserError, zenoh.ZError, RequestFailed, RunFailed)
+
+
+def expected(exc: BaseException) -> bool:
+    """Whether `exc` is a failure outside the program. An OS error is one when it names its
+    file (a path the user gave that cannot be read or written, a full disk): the line says
+    which; one about no file is a bug's."""
+    if isinstance(exc, OSError):
+        return exc.filename is not None
+    return isinstance(exc, EXPECTED)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,11 +119,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # the reader left (`fleet faults list | head`): nothing to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error
         return 141
-    except EXPECTED as exc:
-        text = zenoh_message(exc) if isinstance(exc, zenoh.ZError) else describe(exc)
-        print(f"{args.prog}: error: {text}", file=sys.stderr)
-        return 2
-    except Exception as exc:  # a bug: one line here, the traceback in a file for the report
+    except Exception as exc:
+        if expected(exc):
+            text = zenoh_message(exc) if isinstance(exc, zenoh.ZError) else describe(exc)
+            print(f"{args.prog}: error: {text}", file=sys.stderr)
+            return 2
+        # a bug: one line here, the traceback in a file for the report
         path = crash_report(exc, sys.argv[1:] if argv is None else argv)
         print(f"{args.prog}: internal error (a bug, please report it): "
               f"{type(exc).__name__}: {describe(exc)}; the traceback is in {path}",

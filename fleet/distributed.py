@@ -28,7 +28,15 @@ from fleet.access import (
     write_dictionary,
     write_private,
 )
-from fleet.bus import BusConfig, BusError, Keys, follow_recorded, free_port, open_session
+from fleet.bus import (
+    SLOW_CONNECT_S,
+    BusConfig,
+    BusError,
+    Keys,
+    follow_recorded,
+    free_port,
+    open_session,
+)
 from fleet.faults import FaultKind, Scenario
 from fleet.injector import Applied, Injector
 from fleet.launcher import Child, Launcher
@@ -243,16 +251,22 @@ def _open_when_up(config: BusConfig, router: Child) -> zenoh.Session:
     open cannot be interrupted, so it is tried in short attempts with the router's exit
     looked at between them."""
     attempt = dataclasses.replace(config, connect_timeout_ms=ROUTER_ATTEMPT_MS)
-    deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
+    start = time.monotonic()
+    said = False
     while True:
-        try:
-            return open_session(attempt)
+        try:  # each attempt quiet: its own note would give its 0.5 s as the whole wait
+            return open_session(attempt, say=lambda _: None)
         except BusError as exc:
             if router.proc.poll() is not None:
                 raise RunFailed(Launcher.death(router, "before the run started")) from None
-            if time.monotonic() > deadline:
+            waited = time.monotonic() - start
+            if waited > ROUTER_TIMEOUT_MS / 1000:
                 raise RunFailed(f"the router took no connection within "
                                 f"{ROUTER_TIMEOUT_MS / 1000:g} s: {exc}") from None
+            if not said and waited >= SLOW_CONNECT_S:
+                log.warning("waiting for the router at %s to take connections (up to %g s)",
+                            ", ".join(config.connect), ROUTER_TIMEOUT_MS / 1000)
+                said = True
 
 
 def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child) -> None:

@@ -21,7 +21,7 @@ from fleet.dispatch import Decision, Dispatcher, Target, TaskKind, VehicleView
 from fleet.errors import UserError
 from fleet.execution import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.geometry import Cell
-from fleet.layout import Layout, load_layout
+from fleet.layout import Layout, LayoutError, load_layout
 from fleet.maneuvers import Manner, world_pose
 from fleet.mission import Mission, MissionKind
 from fleet.params import DispatchParams
@@ -170,7 +170,7 @@ class Engine:
         starts = list(mission.starts or self.layout.vehicle_starts)
         n = mission.vehicles if mission.vehicles is not None else len(starts)
         if not 1 <= n <= len(starts):
-            raise ValueError(f"{n} vehicles requested but layout {self.layout.name} has "
+            raise UserError(f"{n} vehicles requested but layout {self.layout.name} has "
                              f"{len(starts)} start poses")
         self.starts = starts[:n]
         fill = mission.kind is MissionKind.FILL
@@ -600,7 +600,9 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
                 if isinstance(back, Trajectory):
                     best = min(best, out.t_end + back.t_end)
         if best == math.inf:
-            raise ValueError(f"stack {stack.cluster}#{stack.index} unreachable on an empty map")
+            raise LayoutError(f"layout {layout.name}: stack {stack.cluster}#{stack.index} cannot "
+                              f"be served from any station, even on an empty floor (fleet "
+                              f"layout check lists every such stack)")
         total += best + p.t_claim + p.t_unload
         if fill:
             present.add(stack.cell)

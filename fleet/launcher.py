@@ -108,10 +108,6 @@ class Launcher:
                 child.proc.kill()
                 child.proc.wait()
 
-    def tail(self, child: Child, lines: int = 5) -> str:
-        text = child.log.read_text(errors="replace").splitlines()
-        return "\n".join(f"    {line}" for line in text[-lines:])
-
     @staticmethod
     def death(child: Child, when: str) -> str:
         """How a child ended, in one line: its exit status (or signal), `when`, and its log's

@@ -16,6 +16,8 @@ import tomli_w
 from fleet.errors import UserError
 from fleet.layout import Layout, parse_layout
 
+MIN_DEPTH = 4  # lanes per side: fewer leave an aisle no parking slot (slots_per_aisle)
+
 
 @dataclass(frozen=True)
 class Shape:
@@ -106,14 +108,16 @@ def _starts(shape: Shape) -> list[str]:
 def _validate(shape: Shape) -> None:
     if shape.aisles < 1:
         raise UserError(f"--aisles must be at least 1, not {shape.aisles}")
-    if shape.depth < 2:
-        raise UserError(f"--depth must be at least 2, not {shape.depth}")
+    if shape.depth < MIN_DEPTH:
+        raise UserError(f"--depth must be at least {MIN_DEPTH}, not {shape.depth}: with fewer "
+                        f"lanes per side an aisle has no parking slot for a forklift")
     if shape.lane_depth < 1:
         raise UserError(f"--lane-depth must be at least 1, not {shape.lane_depth}")
     room = shape.slots_per_aisle * shape.aisles
     if not 1 <= shape.vehicles <= room:
         raise UserError(f"--vehicles must be between 1 and {room} for {shape.aisles} aisles of "
-                        f"depth {shape.depth} (parking slots), not {shape.vehicles}")
+                        f"depth {shape.depth} (their parking slots), not {shape.vehicles}: "
+                        f"give fewer --vehicles, or more --aisles or --depth")
 
 
 def generate_toml(shape: Shape, name: str | None = None) -> str:

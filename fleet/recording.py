@@ -395,8 +395,9 @@ class Recording:
         return parse_layout(text, f"{self.path}: layout.toml")
 
 
-class RecordingError(ValueError):
-    """A file that is not a readable recording; the message says why."""
+class RecordingError(UserError, ValueError):
+    """A file that is not a readable recording; the message says why. The user's to fix (a
+    UserError), and still the ValueError it always was to whoever catches that."""
 
 
 def segment_number(path: Path) -> int | None:

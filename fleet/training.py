@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from fleet.engine import EngineOptions, run_mission
+from fleet.errors import UserError
 from fleet.layout import Layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.mlp import ClusterMLPs
@@ -37,7 +38,7 @@ def train(layout: Layout, cycles: int, seed: int, lm_steps: int = 50,
           ) -> tuple[ClusterMLPs, list[CycleReport]]:
     """`cycles` warehouse-filling cycles; progress(cycle, cycles, stacks done, stacks)."""
     if cycles < 1:
-        raise ValueError("--cycles must be at least 1")
+        raise UserError("--cycles must be at least 1")
     names = tuple(c.name for c in layout.clusters)
     biggest = max(len(layout.cluster_stacks(n)) for n in names)
     mlps = ClusterMLPs.fresh(names, biggest, seed, layout.name)

@@ -26,9 +26,9 @@ from pathlib import Path
 import zenoh
 
 from fleet.bus import Keys, Stream, add_bus_arguments, bus_config, open_session, stop_on_signals
-from fleet.cli_types import port, writable_dir, writable_file
+from fleet.cli_types import port, port_problem, writable_dir, writable_file
 from fleet.errors import UserError
-from fleet.layout import parse_layout
+from fleet.layout import LayoutError, parse_layout
 from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
 from fleet.recording import RUN_FILE, Recorded, RecordingWriter, next_segment
 from fleet.rundir import claim_new
@@ -166,7 +166,7 @@ class Recorder:
         self.writer.describe(info)
         try:
             layout = parse_layout(info.layout_toml, "the mission's layout")
-        except ValueError as exc:
+        except LayoutError as exc:
             log.warning("no Foxglove views: %s", exc)
             return
         self.views = SceneViews(layout, log_ns, kind=info.kind, vehicles=info.vehicles)
@@ -183,26 +183,52 @@ class Recorder:
 
 
 def serve(args: argparse.Namespace) -> int:
-    if args.out_dir is not None:
-        args.out = output_in(args.out_dir, socket.gethostname(), time.gmtime())
-    if args.out.exists():
-        raise UserError(f"{args.out} exists: a recording is never overwritten; give another "
-                        f"--out")
-    live = None
-    if args.foxglove is not None:
-        from recorder.live import LiveView
-
-        live = LiveView(port=args.foxglove, host=args.foxglove_host)
-        log.info("Foxglove live view on ws://%s:%d", args.foxglove_host, live.port)
-    writer = RecordingWriter(args.out)
+    # What can be refused here is, at once, not after waiting for the router.
+    if args.out_dir is None:
+        _refuse_existing(args.out)
+    busy = None if args.foxglove is None else port_problem(args.foxglove, args.foxglove_host)
+    if busy:
+        raise UserError(f"--foxglove {args.foxglove}: {busy}")
+    # Connected first, then the file: a recorder that cannot connect leaves no file (and no
+    # run directory) behind, so the same command may simply be tried again.
     session = open_session(bus_config(args))
-    recorder = Recorder(session, Keys(args.run), writer, live, args.exit_when_done)
-    stop_on_signals(recorder.stop)
+    live = None
     try:
+        if args.out_dir is not None:
+            args.out = output_in(args.out_dir, socket.gethostname(), time.gmtime())
+        _refuse_existing(args.out)
+        live = _live_view(args)
+        recorder = Recorder(session, Keys(args.run), RecordingWriter(args.out), live,
+                            args.exit_when_done)
+        live = None  # the recorder closes it
+        stop_on_signals(recorder.stop)
         recorder.run()
     finally:
+        if live is not None:
+            live.close()
         session.close()
     return 0
+
+
+def _live_view(args: argparse.Namespace):
+    """The Foxglove live view of --foxglove, or None."""
+    if args.foxglove is None:
+        return None
+    from recorder.live import LiveView
+
+    try:
+        live = LiveView(port=args.foxglove, host=args.foxglove_host)
+    except RuntimeError as exc:  # foxglove's own error: the port taken meanwhile, a bad host
+        raise UserError(f"--foxglove {args.foxglove}: cannot serve the live view on "
+                        f"{args.foxglove_host}: {exc}") from None
+    log.info("Foxglove live view on ws://%s:%d", args.foxglove_host, live.port)
+    return live
+
+
+def _refuse_existing(path: Path) -> None:
+    if path.exists():
+        raise UserError(f"{path} exists: a recording is never overwritten; give another "
+                        f"--out")
 
 
 def output_in(folder: Path, host: str, now: time.struct_time) -> Path:

@@ -25,7 +25,7 @@ from fleet.bus import free_port
 from fleet.cli import EX_SOFTWARE, build_parser, main, subcommands
 from fleet.cli_help import STRATEGIES, HelpFormatter, shows_default
 from fleet.cli_types import endpoint, finite_float, port, positive_float, sim_seconds
-from fleet.distributed import RunSpec, run_processes
+from fleet.distributed import ROUTER_TIMEOUT_MS, RunSpec, run_processes
 from fleet.errors import describe
 from fleet.layout import layout_source
 from fleet.layout_check import NO_STARTS
@@ -98,6 +98,9 @@ BAD = [
     ("run --faults nosuch", "scenario 'nosuch' is neither a shipped scenario"),
     ("run --faults {BINARY}", "argument --faults: '{BINARY}' is not UTF-8 text"),
     ("run --inprocess --clock realtime", "--inprocess runs the fast clock"),
+    ("run --inprocess --port 7447", "without a router, a live view or logins: it takes no "
+     "--port"),
+    ("run --inprocess --foxglove --secure", "it takes no --foxglove and no --secure"),
     # looking at recordings
     ("analyze {MISSING}", "{MISSING}"),
     ("analyze {FILE}", "{FILE}: not an MCAP recording"),
@@ -130,12 +133,16 @@ BAD = [
     ("plan --from p1 --to s1#1 --reserved {MISSING}", "argument --reserved: '{MISSING}'"),
     ("plan --from p1 --to s1#1 --reserved {BINARY}", "'{BINARY}' is not UTF-8 text"),
     ("plan --from p9 --to s1#1", "place 'p9' is not a pose"),
+    ("plan --layout small --from 4,6,S --to a#1 --vehicle 9",
+     "--vehicle 9: layout small has forklifts 1 to 2"),
     # layouts
     ("layout show nosuch", "layout 'nosuch' is neither a built-in layout"),
     ("layout check {MISSING}", "layout '{MISSING}' is neither a built-in layout"),
     ("layout check {NO_STARTS}", f"{{NO_STARTS}}: {NO_STARTS}", 1),
     ("layout generate --aisles 0", "argument --aisles: '0' must be at least 1"),
-    ("layout generate --depth 1", "--depth must be at least 2, not 1"),
+    ("layout generate --depth 1", "--depth must be at least 4, not 1"),
+    ("layout generate --aisles 1 --depth 2",
+     "--depth must be at least 4, not 2: with fewer lanes per side an aisle has no parking"),
     ("layout generate --out {DIR}", "argument --out: '{DIR}' is a directory; give a file name"),
     ("layout generate --out {MISSING}/x.toml", "directory {MISSING} does not exist"),
     ("layout generate --out /dev/full", "--out /dev/full: No space left on device"),
@@ -146,6 +153,8 @@ BAD = [
     ("train --out {DIR}", "argument --out: '{DIR}' is a directory; give a file name"),
     ("train --layout nosuch", "layout 'nosuch' is neither a built-in layout"),
     ("bench planner --queries 0", "argument --queries: '0' must be at least 1"),
+    ("bench planner --layout small --queries 2", "layout small has 2 stations and 2 clusters; "
+     "the planner benchmark needs at least 4 of each"),
     ("bench runtime --agents 3,2", "argument --agents: '3,2' must be in ascending order"),
     ("bench runtime --agents many", "argument --agents: 'many' is not a comma-separated list"),
     ("bench runtime --window inf", "argument --window: 'inf' is not a finite number"),
@@ -173,6 +182,8 @@ BAD = [
     ("recorder --out {DIR}", "argument --out: '{DIR}' is a directory; give a file name"),
     ("recorder --out-dir {FILE}", "argument --out-dir: '{FILE}' is a file, not a directory"),
     ("recorder --foxglove 70000", "argument --foxglove: '70000' is not a TCP port"),
+    ("recorder --out {DIR}/r.mcap --foxglove {BUSY}",
+     "--foxglove {BUSY}: port {BUSY} on 127.0.0.1 is busy"),
     ("table --connect garbage", "argument --connect: 'garbage' is not a zenoh endpoint"),
     ("table --connect tcp/:7447", "the address must be HOST:PORT"),
     ("table --connect quack/host:7447", "the protocol must be one of tcp, udp"),
@@ -204,6 +215,38 @@ def test_bad_input_is_refused_in_one_line_naming_it(row, paths, capsys):
         assert lines[-1].startswith("fleet") and ": error: " in lines[-1]
 
 
+BAD_SCENES = [  # a --reserved file of fleet plan (on paper) -> what its refusal says
+    ("extra = 1", "unknown key 'extra' (it takes filled, reservation, vehicle)"),
+    ("filled = 3", "filled must be a table of cluster = stacks filled"),
+    ("[filled]\ns1 = 'x'", "filled.s1: must be a whole number, not 'x'"),
+    ("vehicle = 3", "vehicle entries must be [[vehicle]] tables"),
+    ("[[vehicle]]\nfrom = 'p2'", "vehicle[0]: needs an integer 'id' and a 'from' place"),
+    ("[[vehicle]]\nid = 9\nfrom = 'p2'", "vehicle[0].id: layout paper has forklifts 1 to 4, not 9"),
+    ("[[vehicle]]\nid = 2\nfrom = 5", "vehicle[0].from: a place is a string, not 5"),
+    ("[[vehicle]]\nid = 2\nfrom = 'p2'\nto = 's2#1'\nat = 'x'",
+     "vehicle[0].at: must be a time in seconds, not 'x'"),
+    ("[[vehicle]]\nid = 2\nfrom = 'p2'\nto = 's2#1'\nat = nan",
+     "vehicle[0].at: must be a time from 0 to 1000000 seconds, not nan"),
+    ("[[reservation]]\ncell = 'ab'\nt0 = 1\nvehicle = 2",
+     "reservation[0].cell: a cell is [column, row], not 'ab'"),
+    ("[[reservation]]\ncell = [100, 2]\nt0 = 1\nvehicle = 2",
+     "reservation[0].cell: [100, 2] is off the 18 x 12 map"),
+    ("[[reservation]]\ncell = [1, 2]\nt0 = 5\nt1 = 1\nvehicle = 2",
+     "reservation[0]: t1 1 must be after t0 5"),
+    ("[[reservation]]\ncell = [1, 2]\nt0 = 1\nt1 = inf\nvehicle = 0",
+     "reservation[0].vehicle: layout paper has forklifts 1 to 4, not 0"),
+]
+
+
+@pytest.mark.parametrize(("text", "named"), BAD_SCENES, ids=[row[1] for row in BAD_SCENES])
+def test_a_bad_reserved_file_is_refused_naming_the_entry(text, named, tmp_path, capsys):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text + "\n")
+    code, _, err = cli(["plan", "--from", "p1", "--to", "s1#1", "--reserved", str(scene)],
+                       capsys)
+    assert (code, err) == (2, f"fleet plan: error: {scene}: {named}\n")
+
+
 def test_an_os_error_in_a_command_is_one_line_naming_the_path(tmp_path, capsys):
     (tmp_path / "users").mkdir()  # where a login file goes
     code, _, err = cli(["compose", "secrets", "--out", str(tmp_path), "--force"], capsys)
@@ -214,23 +257,45 @@ def test_an_os_error_in_a_command_is_one_line_naming_the_path(tmp_path, capsys):
     assert describe(raised.value) == f"{tmp_path}: Is a directory"
 
 
-def test_a_bug_is_one_line_with_the_traceback_in_a_file(tmp_path, capsys, monkeypatch):
+BUGS = [  # what a command's code may raise that is no fault of the user's, as the line says it
+    (KeyError("no such key"), "KeyError: 'no such key'"),
+    (ValueError("Sample larger than population"), "ValueError: Sample larger than population"),
+    (OSError(9, "Bad file descriptor"), "OSError: Bad file descriptor"),
+]
+
+
+@pytest.mark.parametrize(("bug", "said"), BUGS, ids=[type(b).__name__ for b, _ in BUGS])
+def test_a_bug_is_one_line_with_the_traceback_in_a_file(bug, said, tmp_path, capsys,
+                                                         monkeypatch):
+    """A ValueError or an OSError about no file is a bug's, never shown as bad input."""
     from fleet.commands import layout
 
     def broken(args):
-        return {}["no such key"]  # a bug, as any
+        raise bug
 
     monkeypatch.setattr(layout, "run_list", broken)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     code, _, err = cli(["layout", "list"], capsys)
     assert code == EX_SOFTWARE
     [line] = err.splitlines()
-    assert line.startswith("fleet layout list: internal error (a bug, please report it): "
-                           "KeyError: 'no such key'; the traceback is in ")
+    assert line.startswith(f"fleet layout list: internal error (a bug, please report it): "
+                           f"{said}; the traceback is in ")
     report = Path(line.rsplit(" ", 1)[1])
     assert report.parent == tmp_path
     text = report.read_text()
     assert "fleet layout list" in text and "Traceback" in text and "broken" in text
+
+
+def test_an_os_error_naming_a_file_is_the_users(tmp_path, capsys, monkeypatch):
+    from fleet.commands import layout
+
+    def full(args):
+        raise OSError(28, "No space left on device", str(tmp_path / "x.toml"))
+
+    monkeypatch.setattr(layout, "run_list", full)
+    code, _, err = cli(["layout", "list"], capsys)
+    assert (code, err) == (2, f"fleet layout list: error: {tmp_path / 'x.toml'}: No space "
+                              f"left on device\n")
 
 
 # -- properties --------------------------------------------------------------------------------
@@ -331,10 +396,46 @@ def test_a_table_at_a_dead_endpoint_fails_in_bounded_time_naming_it(capsys):
     dead = f"tcp/127.0.0.1:{free_port()}"
     start = time.monotonic()
     code, _, err = cli(["table", "--connect", dead, "--connect-timeout", "1"], capsys)
-    assert time.monotonic() - start < 5
+    assert time.monotonic() - start < 20  # it used to wait for ever: bounded, by its 1 s
     assert code == 2
     assert err.splitlines()[-1] == \
         f"fleet table: error: no zenoh router answers at {dead} (waited 1 s)"
+
+
+def test_a_recorder_that_cannot_connect_leaves_nothing_behind(tmp_path, capsys):
+    """It connects before it makes its file (or, with --out-dir, its run directory), so the
+    same command can simply be tried again."""
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    common = ["recorder", "--connect", dead, "--connect-timeout", "0.5"]
+    for where in (["--out", str(tmp_path / "rec.mcap")], ["--out-dir", str(tmp_path / "runs")]):
+        for _ in range(2):  # and again: the same refusal, not "rec.mcap exists"
+            code, _, err = cli([*common, *where], capsys)
+            assert code == 2
+            assert err.splitlines()[-1] == \
+                f"fleet recorder: error: no zenoh router answers at {dead} (waited 0.5 s)"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_waiting_for_the_router_says_the_whole_wait(tmp_path, caplog, monkeypatch):
+    """fleet run tries its connect in short attempts, to notice a dead router: what it says
+    it waits for is the router's whole timeout, not one attempt's."""
+    from fleet import distributed
+    from fleet.bus import BusConfig
+    from fleet.launcher import Child
+
+    monkeypatch.setattr(distributed, "ROUTER_TIMEOUT_MS", 2000)
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        with pytest.raises(distributed.RunFailed, match="the router took no connection within "
+                           "2 s: no zenoh router answers at"):
+            distributed._open_when_up(BusConfig("client", (dead,)),
+                                      Child("router", alive, tmp_path / "router.log"))
+    finally:
+        alive.kill()
+        alive.wait()
+    said = [r.getMessage() for r in caplog.records if "waiting" in r.getMessage()]
+    assert said == [f"waiting for the router at {dead} to take connections (up to 2 s)"]
 
 
 def test_a_table_of_an_unknown_run_names_the_runs_there(service, capsys):
@@ -359,13 +460,18 @@ def test_fleet_run_refuses_a_busy_port_before_starting_anything(busy_port, tmp_p
     assert not out.exists()  # nothing started, nothing written
 
 
+def since_last_written(log: Path) -> float:
+    """Seconds since a child last wrote its log: for one that died, since its death (so a
+    bound on it holds however slowly the run's other processes started)."""
+    return time.time() - log.stat().st_mtime
+
+
 def test_a_router_that_dies_at_start_ends_the_run_at_once_saying_why(busy_port, tmp_path):
     """Past the command line's check (the port taken in between): the router refuses the
     port and exits; the run says so within moments, not after the connect timeout."""
-    start = time.monotonic()
     outcome = run_processes(RunSpec(Mission("small", MissionKind.FILL, Strategy.TRAFFIC), 2,
                                     tmp_path, port=busy_port))
-    assert time.monotonic() - start < 10  # the connect timeout is 30 s
+    assert since_last_written(tmp_path / "logs" / "router.log") < 20 < ROUTER_TIMEOUT_MS / 1000
     assert outcome.done is None
     assert outcome.error == (
         f"router exited with status 2 before the run started; the last line of its log "
@@ -376,13 +482,14 @@ def test_a_router_that_dies_at_start_ends_the_run_at_once_saying_why(busy_port, 
 def test_a_forklift_that_dies_before_the_mission_ends_the_run_at_once(tmp_path):
     """An agent that refuses to start would keep the dispatcher waiting for it (two minutes
     by default): the run ends as soon as it exits, with its reason."""
-    start = time.monotonic()
     outcome = run_processes(RunSpec(Mission("small", MissionKind.FILL, Strategy.TRAFFIC), 2,
                                     tmp_path, extra={"agent": ["--claim-timeout", "nan"]}))
-    assert time.monotonic() - start < 30
     assert outcome.done is None
-    assert re.match(r"agent-[12] exited with status 2 before the mission ended; the last "
-                    r"line of its log", outcome.error), outcome.error
+    died = re.match(r"(agent-[12]) exited with status 2 before the mission ended; the last "
+                    r"line of its log", outcome.error)
+    assert died, outcome.error
+    startup_timeout_s = 120  # the dispatcher's default --startup-timeout
+    assert since_last_written(tmp_path / "logs" / f"{died[1]}.log") < 60 < startup_timeout_s
     assert outcome.error.endswith("fleet agent: error: argument --claim-timeout: 'nan' is "
                                   "not a finite number")
 
@@ -474,17 +581,15 @@ def test_real_processes_refuse_bad_input_without_a_traceback(busy_port, tmp_path
         ("plan", "--from", "p1", "--to", "s1#1", "--png", str(ROOT / "README.md" / "x.png")):
             "is a file, not a directory",
     }
-    start = time.monotonic()
     procs = {argv: subprocess.Popen([sys.executable, "-m", "fleet", *argv], cwd=tmp_path,
                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                     text=True) for argv in cases}
     errors = {}
-    for argv, proc in procs.items():
+    for argv, proc in procs.items():  # the dead endpoint used to wait for ever: not now
         out, errors[argv] = proc.communicate(timeout=60)
         assert proc.returncode == 2, (argv, errors[argv])
         assert "Traceback" not in out + errors[argv], errors[argv]
         assert cases[argv] in errors[argv].strip().splitlines()[-1], errors[argv]
-    assert time.monotonic() - start < 30  # the dead endpoint waited its 5 s, no more
     assert errors[("table", "--connect", dead)].startswith(  # said while it waited
         f"fleet table: waiting for a zenoh router at {dead} (up to 5 s)\n")
     assert list(tmp_path.iterdir()) == []  # no crash report: every failure was expected

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -102,6 +103,14 @@ def test_run_then_plot(tmp_path, capsys):
     assert "safety             pass: 0 overlaps, 0 moments outside a reservation" in out
     assert "work               pass: 24 of 24 stacks, 0 twice, 0 lost" in out
     assert "messages           pass" in out and "0 lost, 0 malformed" in out
+    wide = [line for line in out.splitlines() if len(line) > 80 and str(tmp_path) not in line]
+    assert wide == []  # an 80-column terminal shows it as printed (a long path stays whole)
+    end = float(re.search(r"end time +([\d.]+) s", out)[1])
+    before = sorted(tmp_path.iterdir())
+    assert main(["plot", str(tmp_path), "--at", "100", "--at", "1e6", "--no-gif"]) == 2
+    assert capsys.readouterr().err == (f"fleet plot: error: --at 1000000: the run ended at "
+                                       f"{end:.2f} s; snapshots are drawn from 0 to {end:.2f} s\n")
+    assert sorted(tmp_path.iterdir()) == before  # refused before drawing anything
     assert main(["plot", str(tmp_path), "--at", "100", "--no-gif"]) == 0
     out = capsys.readouterr().out
     for name in ("filling.png", "gantt.png", "heatmap.png", "snapshot_00100.00.png"):

@@ -17,6 +17,7 @@ from fleet.cli_types import (
     positive_ints,
     text_file,
 )
+from fleet.errors import UserError
 from fleet.progress import ProgressBar
 
 
@@ -225,7 +226,7 @@ def run_faults(args: argparse.Namespace) -> int:
     names = args.scenarios.split(",") if args.scenarios else None
     unknown = sorted(set(names or []) - set(builtin_scenarios()))
     if unknown:
-        raise ValueError(f"--scenarios: {unknown[0]!r} is not a shipped scenario "
+        raise UserError(f"--scenarios: {unknown[0]!r} is not a shipped scenario "
                          f"({', '.join(builtin_scenarios())})")
 
     def say(line: str) -> None:

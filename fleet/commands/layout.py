@@ -9,7 +9,7 @@ from fleet.cli_types import layout_arg, positive_int, writable_file
 from fleet.errors import UserError
 from fleet.layout import MAX_MAP_CELLS, builtin_names, load_layout
 from fleet.layout_check import reachability_problems
-from fleet.layout_generator import Shape, generate_toml
+from fleet.layout_generator import MIN_DEPTH, Shape, generate_toml
 from fleet.progress import ProgressBar
 
 
@@ -48,8 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     gen.add_argument("--aisles", type=positive_int, default=defaults.aisles,
                      help=f"horizontal aisles (default {defaults.aisles})")
     gen.add_argument("--depth", type=positive_int, default=defaults.depth,
-                     help=f"lanes per side of the main passage, at least 2 (default "
-                     f"{defaults.depth})")
+                     help=f"lanes per side of the main passage, at least {MIN_DEPTH}: the "
+                     f"forklifts park beside them (default {defaults.depth})")
     gen.add_argument("--lane-depth", type=positive_int, default=defaults.lane_depth,
                      help=f"stacks per lane (default {defaults.lane_depth})")
     gen.add_argument("--vehicles", type=positive_int, default=defaults.vehicles,

@@ -9,7 +9,14 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.cli_types import layout_arg, png_file, positive_int, sim_seconds, text_file
+from fleet.cli_types import (
+    MAX_SIM_SECONDS,
+    layout_arg,
+    png_file,
+    positive_int,
+    sim_seconds,
+    text_file,
+)
 from fleet.errors import UserError
 from fleet.layout import Layout, load_layout
 from fleet.maneuvers import body_cells_at_rest
@@ -29,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--to", dest="goal", required=True, help="goal place")
     p.add_argument("--at", type=sim_seconds, default=0.0,
                    help="start time in seconds (default 0)")
-    p.add_argument("--vehicle", type=positive_int, default=1, help="vehicle id (default 1)")
+    p.add_argument("--vehicle", type=positive_int, default=1,
+                   help="the planning forklift's id, one of the layout's (default 1)")
     p.add_argument("--reserved", type=text_file, metavar="FILE",
                    help="TOML file of other vehicles' plans and reservations "
                    "(docs/planning.md; default: none, only the planning vehicle is there)")
@@ -51,12 +59,7 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
                me: int, my_start: str) -> Scene:
     """Fill state and the other vehicles' plans; the planning vehicle is parked at its start
     first, so the others plan around it as they would in a fleet."""
-    data: dict = {}
-    if path is not None:
-        try:
-            data = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise UserError(f"{path}: not valid TOML: {exc}") from None
+    data = _scene_file(path, layout) if path is not None else {}
     scene = Scene()
     scene.filled = filled_counts(layout, data.get("filled", {}))
     scene.start = resolve(layout, my_start, scene.filled)[0]
@@ -66,13 +69,10 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
     starts = {}
     for i, entry in enumerate(vehicles):
         where = f"{path}: vehicle[{i}]"
-        try:
-            vid, start = int(entry["id"]), entry["from"]
-        except (KeyError, TypeError, ValueError):
-            raise UserError(f"{where}: needs an integer 'id' and a 'from' place") from None
+        vid = entry["id"]
         if vid == me:
             raise UserError(f"{where}: id {vid} is the planning vehicle itself")
-        starts[vid] = resolve(layout, start, scene.filled)[0]
+        starts[vid] = resolve(layout, entry["from"], scene.filled)[0]
         conflict = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading),
                               0.0)
         if conflict is not None:
@@ -81,25 +81,107 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
     for i, entry in enumerate(vehicles):
         if "to" not in entry:
             continue
-        vid = int(entry["id"])
+        vid = entry["id"]
         goals = resolve(layout, entry["to"], scene.filled)
-        result = planner.plan(vid, starts[vid], float(entry.get("at", 0.0)), goals, table)
+        result = planner.plan(vid, starts[vid], entry.get("at", 0.0), goals, table)
         if isinstance(result, PlanFailure):
             raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be planned: "
                             f"{result.reason.value}: {result.detail}")
         table.commit(vid, result.intervals, release_from=result.t_start)
         scene.others.append(result)
     for i, entry in enumerate(data.get("reservation", [])):
-        try:
-            iv = Interval(tuple(entry["cell"]), float(entry["t0"]),
-                          float(entry.get("t1", math.inf)))
-            vid = int(entry["vehicle"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise UserError(f"{path}: reservation[{i}]: {exc}") from None
-        conflict = table.commit(vid, [iv])
+        iv = Interval(entry["cell"], entry["t0"], entry.get("t1", math.inf))
+        conflict = table.commit(entry["vehicle"], [iv])
         if conflict is not None:
             raise UserError(f"{path}: reservation[{i}] overlaps vehicle {conflict.other}")
     return scene
+
+
+def _scene_file(path: Path, layout: Layout) -> dict:
+    """The --reserved file, every value checked (docs/planning.md): a refusal names the
+    entry and what it should be."""
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    _known(data, {"filled", "vehicle", "reservation"}, f"{path}")
+    filled = data.get("filled", {})
+    if not isinstance(filled, dict):
+        raise UserError(f"{path}: filled must be a table of cluster = stacks filled")
+    for name, count in filled.items():
+        _whole(count, f"{path}: filled.{name}")
+    forklifts = len(layout.vehicle_starts)
+
+    def forklift(value, where: str) -> int:
+        vid = _whole(value, where)
+        if not 1 <= vid <= forklifts:
+            raise UserError(f"{where}: layout {layout.name} has forklifts 1 to {forklifts}, "
+                            f"not {vid}")
+        return vid
+
+    for i, entry in enumerate(_tables(data, "vehicle", path)):
+        where = f"{path}: vehicle[{i}]"
+        _known(entry, {"id", "from", "to", "at"}, where)
+        if "id" not in entry or "from" not in entry:
+            raise UserError(f"{where}: needs an integer 'id' and a 'from' place")
+        forklift(entry["id"], f"{where}.id")
+        for key in ("from", "to"):
+            if key in entry and not isinstance(entry[key], str):
+                raise UserError(f"{where}.{key}: a place is a string, not {entry[key]!r}")
+        if "at" in entry:
+            entry["at"] = _seconds(entry["at"], f"{where}.at")
+    for i, entry in enumerate(_tables(data, "reservation", path)):
+        where = f"{path}: reservation[{i}]"
+        _known(entry, {"vehicle", "cell", "t0", "t1"}, where)
+        missing = [k for k in ("vehicle", "cell", "t0") if k not in entry]
+        if missing:
+            raise UserError(f"{where}: needs {missing[0]!r} (and vehicle, cell = [c, r], t0)")
+        forklift(entry["vehicle"], f"{where}.vehicle")
+        cell = entry["cell"]
+        if not (isinstance(cell, list) and len(cell) == 2 and
+                all(isinstance(c, int) and not isinstance(c, bool) for c in cell)):
+            raise UserError(f"{where}.cell: a cell is [column, row], not {cell!r}")
+        if not (0 <= cell[0] < layout.cols and 0 <= cell[1] < layout.rows):
+            raise UserError(f"{where}.cell: {cell} is off the {layout.cols} x {layout.rows} "
+                            f"map")
+        entry["cell"] = tuple(cell)
+        entry["t0"] = _seconds(entry["t0"], f"{where}.t0")
+        if "t1" in entry:
+            entry["t1"] = _seconds(entry["t1"], f"{where}.t1", infinite=True)
+            if entry["t1"] <= entry["t0"]:
+                raise UserError(f"{where}: t1 {entry['t1']:g} must be after t0 "
+                                f"{entry['t0']:g}")
+    return data
+
+
+def _known(table: dict, keys: set[str], where: str) -> None:
+    unknown = sorted(set(table) - keys)
+    if unknown:
+        raise UserError(f"{where}: unknown key {unknown[0]!r} (it takes "
+                        f"{', '.join(sorted(keys))})")
+
+
+def _tables(data: dict, key: str, path: Path) -> list[dict]:
+    entries = data.get(key, [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise UserError(f"{path}: {key} entries must be [[{key}]] tables")
+    return entries
+
+
+def _whole(value, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise UserError(f"{where}: must be a whole number, not {value!r}")
+    return value
+
+
+def _seconds(value, where: str, infinite: bool = False) -> float:
+    """A time in seconds: a number from 0, finite (or +inf where `infinite`)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise UserError(f"{where}: must be a time in seconds, not {value!r}")
+    if not (0 <= value <= MAX_SIM_SECONDS or (infinite and value == math.inf)):  # NaN too
+        raise UserError(f"{where}: must be a time from 0 to {MAX_SIM_SECONDS:.0f} seconds"
+                        + (" (or inf)" if infinite else "") + f", not {value!r}")
+    return float(value)
 
 
 def format_trajectory(traj: Trajectory) -> str:
@@ -117,6 +199,12 @@ def format_trajectory(traj: Trajectory) -> str:
 
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
+    forklifts = len(layout.vehicle_starts)
+    if args.vehicle > forklifts:
+        raise UserError(f"--vehicle {args.vehicle}: layout {layout.name} has forklifts 1 to "
+                        f"{forklifts}" if forklifts else
+                        f"--vehicle {args.vehicle}: layout {layout.name} has no forklifts "
+                        f"(no start poses)")
     planners: dict[frozenset, HybridAStar] = {}
 
     def planner_for(filled) -> HybridAStar:

@@ -10,7 +10,7 @@ from pathlib import Path
 from fleet.cli_types import positive_int, sim_seconds, writable_dir
 from fleet.errors import UserError
 from fleet.progress import ProgressBar
-from fleet.recording import RUN_FILE, Recording, RecordingError, read_recording, recording_file
+from fleet.recording import RUN_FILE, Recording, read_recording, recording_file
 
 FRAMES = 150
 FPS = 10
@@ -51,12 +51,9 @@ def read_run(path: Path) -> tuple[Recording, dict]:
     far as it goes, and windows without a recorder are skipped, each with a note."""
     from fleet.recorded_mission import record_of
 
-    try:
-        file = recording_file(path)
-        recording = read_recording(path)
-        record = record_of(recording)
-    except RecordingError as exc:
-        raise UserError(str(exc)) from None
+    file = recording_file(path)
+    recording = read_recording(path)
+    record = record_of(recording)
     if not recording.complete:
         print(f"note: {file if len(recording.segments) < 2 else path} is incomplete "
               f"({recording.problem}); using what it holds", file=sys.stderr)
@@ -72,13 +69,14 @@ def run(args: argparse.Namespace) -> int:
     from fleet.protocol import VehicleState
 
     recording, record = read_run(args.recording)
-    try:
-        layout = recording.layout()
-    except RecordingError as exc:
-        raise UserError(str(exc)) from None
+    layout = recording.layout()
+    end = record["end_time_s"]
+    late = [t for t in args.at if t > end]
+    if late:  # a snapshot after the end would show the end under another time's name
+        raise UserError(f"--at {late[0]:.10g}: the run ended at {end:.2f} s; snapshots are drawn "
+                        f"from 0 to {end:.2f} s")
     out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)
-    end = record["end_time_s"]
     written = [out / "filling.png", out / "gantt.png"]
     save_figure(mission_plots.filling_sequence(layout, record), str(written[0]))
     save_figure(mission_plots.gantt(record), str(written[1]))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import signal
 import sys
 import time
@@ -64,8 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "for the recording (run.mcap), the reservation journal and each process's "
                    "log (default: runs/DATE-TIME-LAYOUT-STRATEGY, -2 after it if taken)")
     p.add_argument("--force", action="store_true",
-                   help="with --out: an earlier run's directory there is replaced whole "
-                   "(never a directory that is not a run's)")
+                   help="with --out: an earlier run's directory there is replaced whole: "
+                   "everything in it is deleted, files of your own put there too (only a "
+                   "directory a fleet run made, never another)")
     p.add_argument("--foxglove", type=port, metavar="PORT", nargs="?", const=8765,
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
@@ -120,21 +122,46 @@ def engine_options(mission: Mission, layout: Layout, weights: Path | None,
     return EngineOptions(mlp=mlp, progress=progress)
 
 
+SUMMARY_WIDTH = 80  # the summary fits a terminal of 80 columns
+VALUE_COLUMN = 21  # where the value of a "  label   value" line starts
+
+
 def summary_lines(report: Report, wall_s: float, digest: str) -> list[str]:
     """The summary of a run: its recording's numbers as `fleet analyze` has them
-    (docs/metrics.md), the wall time, the record's digest and the verdicts."""
+    (docs/metrics.md), the wall time, the record's digest and the verdicts; a line longer
+    than SUMMARY_WIDTH goes on under its value (a path is never broken)."""
     m = report.mission
-    return [
+    under = " " * VALUE_COLUMN
+    labelled = [
         f"mission {m['kind']} on {m['layout']} with {m['vehicles']} forklifts, "
         f"strategy {m['strategy']}",
         *report.numbers_lines(),
         f"  wall time          {wall_s:.1f} s",
         f"  record digest      {digest[:16]}",
-        *report.vehicle_lines(),
+    ]
+    verdicts = [
         f"  recording          {report.path}",
         *(f"  {line}" for line in report.verdict_lines()),
-        f"  look closer: fleet analyze {report.path} ; fleet plot {report.path}",
+        f"  look closer        fleet analyze {report.path}",
+        f"{under}fleet plot {report.path}",
     ]
+    return [*_fitted(labelled, under), *report.vehicle_lines(), *_fitted(verdicts, under)]
+
+
+def _fitted(lines: list[str], indent: str) -> list[str]:
+    """Each line, broken after a clause (', ' or '; ') where it would pass SUMMARY_WIDTH and
+    continued at `indent`; a clause longer than that (a long path) is left whole."""
+    out = []
+    for line in lines:
+        current = ""
+        for clause in re.split(r"(?<=[;,]) ", line):
+            if current and len(current) + 1 + len(clause) > SUMMARY_WIDTH:
+                out.append(current)
+                current = indent + clause
+            else:
+                current = f"{current} {clause}" if current else clause
+        out.append(current)
+    return out
 
 
 def summary_json(report: Report, wall_s: float, digest: str) -> dict[str, Any]:
@@ -169,15 +196,19 @@ def run(args: argparse.Namespace) -> int:
     if args.force and args.out is None:
         raise UserError("--force replaces the directory given with --out DIR; without --out "
                         "a run gets a new directory of its own and replaces nothing")
+    process_only = [flag for flag, given in (
+        ("--clock realtime", args.clock != "fast"), ("--port", args.port is not None),
+        ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
+    if args.inprocess and process_only:
+        raise UserError(f"--inprocess runs the fast clock in this one process, without a "
+                        f"router, a live view or logins: it takes no "
+                        f"{' and no '.join(process_only)}")
     for flag, number in (("--port", args.port), ("--foxglove", args.foxglove)):
-        busy = port_problem(number) if number is not None and not args.inprocess else None
+        busy = port_problem(number) if number is not None else None
         if busy:
             raise UserError(f"{flag} {number}: {busy}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
-    if args.inprocess and (args.clock != "fast" or args.foxglove is not None or args.secure):
-        raise UserError("--inprocess runs the fast clock without processes: it takes neither "
-                        "--clock realtime nor --foxglove nor --secure")
     scenario = fault_scenario(args.faults, mission, layout, n) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
