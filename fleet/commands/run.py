@@ -180,6 +180,7 @@ def summary_json(report: Report, wall_s: float, digest: str) -> dict[str, Any]:
         "waiting_s": sum(v.waiting_s for v in vehicles),
         "stopped_s": sum(v.stopped_s for v in vehicles),
         "postponed_s": sum(v.postponed_s for v in vehicles),
+        "incomplete": report.incomplete,  # why figures miss something; [] when they do not
         "vehicles": [asdict(v) for v in vehicles],
         "wall_s": wall_s,
         "digest": digest,
