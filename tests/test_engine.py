@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from fleet.engine import Engine, EngineOptions, lower_bound, run_mission
+from fleet.errors import UserError
 from fleet.layout import load_layout
 from fleet.mission import Mission, MissionKind, Strategy
 from fleet.record_io import digest
@@ -61,7 +62,7 @@ def test_balance_alternates_clusters_and_greedy_does_not_have_to():
 
 
 def test_fleet_size_and_start_errors():
-    with pytest.raises(ValueError, match="3 vehicles requested but layout small has 2"):
+    with pytest.raises(UserError, match="3 vehicles requested but layout small has 2"):
         Engine(Mission(layout="small", vehicles=3))
     rec = run_mission(Mission(layout="small", vehicles=1, strategy=Strategy.GREEDY))
     assert {s.vehicle for s in rec.subtasks} == {1}
