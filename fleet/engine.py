@@ -136,7 +136,8 @@ class EngineOptions:
     # After this many failures in a row the fleet may be stuck on a choice rather than on the
     # layout: a forklift then skips the targets it failed to reach since the last success.
     unstick_after: int = 300
-    progress: Callable[[int, int, float, int], None] | None = None  # done, total, t, failures
+    # After each commit: stacks done, total, the sim time the mission has reached, failures.
+    progress: Callable[[int, int, float, int], None] | None = None
     # Each subtask, stack done and decision failure as it happens, with its sim time (the
     # dispatcher publishes them; the in-process run records them).
     events: Callable[[Message, float], None] | None = None
@@ -425,8 +426,8 @@ class Engine:
                           decision.postponed)
         self.record.subtasks.append(subtask)
         self._emit(subtask_event(subtask), decision.t_i)
-        if self.options.progress:
-            self.options.progress(len(self.record.stacks_done), self.total, traj.t_end,
+        if self.options.progress:  # at the instant the clock reached, not the planned arrival
+            self.options.progress(len(self.record.stacks_done), self.total, self.now,
                                   self.record.decision_failures)
 
     # -- faults: freeze, cancel, resume (fleet/recovery.py, docs/faults.md) --------------------

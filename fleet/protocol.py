@@ -195,6 +195,9 @@ class ClockAck(Message):
 
 @dataclass(frozen=True)
 class Progress(Message):
+    """After each committed subtask: stacks done of total, the decision failures so far and
+    `t`, the sim time the mission has reached (the clock's instant of the decision)."""
+
     TYPE: ClassVar[str] = "dispatch.progress"
     done: int
     total: int

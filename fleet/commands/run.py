@@ -217,14 +217,16 @@ def run(args: argparse.Namespace) -> int:
                       unit="stacks", enabled=not (args.quiet or args.json))
     progress = MissionProgress(bar)
     t0 = time.perf_counter()
+    failure = ""  # why the mission failed, said once the bar has ended
     try:
         if args.inprocess:
             record = _run_inprocess(mission, layout, args.weights, progress, out, scenario)
         else:
-            record = _run_processes(mission, n, args, progress, out, scenario)
+            record, failure = _run_processes(mission, n, args, progress, out, scenario)
     finally:
-        bar.close()
+        bar.close()  # first: what is said next goes on lines of its own
     if record is None:
+        print(f"fleet run: the mission failed: {failure}", file=sys.stderr)
         print(f"fleet run: logs and what was recorded are in {out}", file=sys.stderr)
         return 1
     wall_s = time.perf_counter() - t0
@@ -259,17 +261,21 @@ def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int)
     return scenario
 
 
-def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None, progress,
-                   out: Path, scenario: Scenario | None) -> dict[str, Any]:
+def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
+                   progress: MissionProgress, out: Path,
+                   scenario: Scenario | None) -> dict[str, Any]:
     options = engine_options(mission, layout, weights,
                              lambda done, total, t, failures: progress(done, t, failures))
+    progress.status("planning the first subtask")
     done, stream = recorded_run(mission, layout, options, command_line(), scenario)
     write_recording(out / "run.mcap", stream, layout)
     return done.record
 
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
-                   progress, out: Path, scenario: Scenario | None) -> dict[str, Any] | None:
+                   progress: MissionProgress, out: Path,
+                   scenario: Scenario | None) -> tuple[dict[str, Any] | None, str]:
+    """The mission's record, or None and why the mission failed."""
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
@@ -284,8 +290,12 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
     spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
                    faults_source=args.faults or "", secure=args.secure)
-    outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
+    forklifts = f"{n} forklift agent{'s' if n > 1 else ''}"
+    progress.status(f"starting the router, recorder, reservation service, {forklifts} and "
+                    "dispatcher")
+    outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures),
+                            lambda *_: progress.status("all started; waiting for the first "
+                                                       "subtask"))
     if outcome.done is None or not outcome.done.ok:
-        print(f"fleet run: the mission failed: {outcome.error}", file=sys.stderr)
-        return None
-    return outcome.done.record
+        return None, outcome.error
+    return outcome.done.record, ""
