@@ -18,12 +18,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from dispatcher.clock import DETECT_TIMEOUT_S
-from fleet.analysis import analyze
-from fleet.distributed import RunOutcome, RunSpec, run_processes
-from fleet.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Halt, Resume
-from fleet.recording import Recording, read_recording
+from fleet.analysis.analyze import analyze
+from fleet.mission.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import Recording, read_recording
+from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
+from fleet.wire.protocol import Halt, Resume
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
 

@@ -16,10 +16,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.stats import percentile
-from fleet.bus import BusConfig, Keys, free_port, open_session
-from fleet.launcher import Launcher
-from fleet.layout_generator import Shape, generate_toml
-from fleet.protocol import ClockTick, ProtocolError, decode
+from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.runtime.launcher import Launcher
+from fleet.wire.protocol import ClockTick, ProtocolError, decode
+from fleet.world.generator import Shape, generate_toml
 
 STATE_HZ = 10.0
 MIN_RECEIVED = 0.9

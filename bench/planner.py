@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 from bench.stats import percentile
 from fleet.errors import UserError
-from fleet.layout import Layout, load_layout
-from fleet.maneuvers import body_cells_at_rest
-from fleet.planner import HybridAStar
-from fleet.reservations import ReservationTable
-from fleet.trajectory import Pose, Trajectory
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import Pose, Trajectory
+from fleet.world.layout import Layout, load_layout
 
 
 @dataclass(frozen=True)

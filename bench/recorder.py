@@ -47,7 +47,7 @@ STARTUP_TIMEOUT_S = 30.0
 def publish(streams: list, rate: float, seconds: float) -> tuple[int, float]:
     """Publish vehicle states round-robin from `streams` (one per vehicle) at `rate`
     messages a second in all, for at most `seconds`; how many were sent, in how long."""
-    from fleet.protocol import VehicleState
+    from fleet.wire.protocol import VehicleState
 
     n = len(streams)
     total = round(rate * seconds)
@@ -80,7 +80,7 @@ def _publisher_main(argv: list[str]) -> int:
     by closing it."""
     import threading
 
-    from fleet.bus import BusConfig, Keys, Stream, open_session
+    from fleet.runtime.bus import BusConfig, Keys, Stream, open_session
 
     p = argparse.ArgumentParser(prog="python -m bench.recorder")
     p.add_argument("--connect", required=True)
@@ -118,7 +118,7 @@ def _publisher_main(argv: list[str]) -> int:
 
 def _status(session, keys) -> int | None:
     """The recorder's message count, or None if it did not answer."""
-    from fleet.protocol import ProtocolError, RecorderStatus, decode
+    from fleet.wire.protocol import ProtocolError, RecorderStatus, decode
 
     for reply in session.get(keys.recorder_status, timeout=5.0):
         if reply.ok is None:
@@ -151,10 +151,10 @@ def _wait_drained(session, keys, sent: int) -> tuple[int | None, float]:
 def measure_rate(endpoint: str, launcher, tmp: Path, rate: int, publishers: int,
                  seconds: float, session) -> dict:
     """One target rate against a fresh recorder."""
-    from fleet.analysis import sequence_gaps
-    from fleet.bus import Keys, wait_alive
-    from fleet.protocol import VehicleState
-    from fleet.recording import read_recording
+    from fleet.analysis.analyze import sequence_gaps
+    from fleet.recording.mcapfile import read_recording
+    from fleet.runtime.bus import Keys, wait_alive
+    from fleet.wire.protocol import VehicleState
 
     keys = Keys(f"benchrec{rate}")
     out = tmp / f"rate-{rate}.mcap"
@@ -207,8 +207,8 @@ def measure_rate(endpoint: str, launcher, tmp: Path, rate: int, publishers: int,
 
 def throughput(rates: list[int], seconds: float, publishers: int,
                progress: Callable[[str], None] | None = None) -> dict:
-    from fleet.bus import BusConfig, free_port, open_session
-    from fleet.launcher import Launcher
+    from fleet.runtime.bus import BusConfig, free_port, open_session
+    from fleet.runtime.launcher import Launcher
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="fleet-bench-recorder-") as tmp_name:
@@ -248,9 +248,9 @@ def wall_cost(layout: str = "paper", repeats: int = 3, vehicles: int = 4,
     """Fast-mode ANN fills as processes with the recorder and without, alternated (the
     order flips every repeat, so a drift in the machine's speed hits both alike), with
     `vehicles` forklifts or as many as the layout has start poses."""
-    from fleet.distributed import RunSpec, run_processes
-    from fleet.layout import load_layout
-    from fleet.mission import Mission, MissionKind, Strategy
+    from fleet.mission.spec import Mission, MissionKind, Strategy
+    from fleet.runtime.local_run import RunSpec, run_processes
+    from fleet.world.layout import load_layout
 
     vehicles = min(vehicles, len(load_layout(layout).vehicle_starts))
     mission = Mission(layout=layout, kind=MissionKind.FILL, strategy=Strategy.ANN,

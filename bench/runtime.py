@@ -18,8 +18,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.stats import percentile
-from fleet.bus import BusConfig, Keys, Requester, free_port, open_session, wait_alive
-from fleet.protocol import CommitRequest
+from fleet.runtime.bus import BusConfig, Keys, Requester, free_port, open_session, wait_alive
+from fleet.wire.protocol import CommitRequest
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from fleet.bus import Keys
-from fleet.protocol import ClaimReply, ProtocolError, VehicleClaim, decode, encode
+from fleet.runtime.bus import Keys
+from fleet.wire.protocol import ClaimReply, ProtocolError, VehicleClaim, decode, encode
 
 log = logging.getLogger("fleet.dispatcher")
 SENDER = "dispatcher"

@@ -1,5 +1,5 @@
 """The one source of "now" (DESIGN.md section 3), published by the dispatcher on
-fleet/<run>/clock. Both clocks are `Pacer`s of the engine (fleet/execution.py).
+fleet/<run>/clock. Both clocks are `Pacer`s of the engine (fleet/mission/seam.py).
 
 Fast: discrete events. Before each decision the clock moves to the decision's instant and
 waits until every agent has acknowledged the tick (having published its states up to it), so
@@ -24,10 +24,17 @@ import time
 import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
-from fleet.bus import RELIABLE, Keys, received
-from fleet.faults import FaultKind, Scenario
-from fleet.protocol import ClockAck, ClockTick, VehicleFault, encode
-from fleet.recovery import BREAKDOWN, Disruption, VehicleDown, VehicleUp, ZoneClosure, scheduled_at
+from fleet.mission.faults import FaultKind, Scenario
+from fleet.mission.freeze import (
+    BREAKDOWN,
+    Disruption,
+    VehicleDown,
+    VehicleUp,
+    ZoneClosure,
+    scheduled_at,
+)
+from fleet.runtime.bus import RELIABLE, Keys, received
+from fleet.wire.protocol import ClockAck, ClockTick, VehicleFault, encode
 
 SENDER = "clock"
 ACK_TIMEOUT_S = 60.0

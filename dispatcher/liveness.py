@@ -6,8 +6,8 @@ import threading
 
 import zenoh
 
-from fleet.bus import Keys
 from fleet.errors import UserError
+from fleet.runtime.bus import Keys
 
 
 class ParticipantLost(UserError):

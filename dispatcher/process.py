@@ -21,9 +21,17 @@ from pathlib import Path
 from dispatcher.claims import Claims, Roster
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
-from dispatcher.recovery import pick_up
+from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
-from fleet.bus import (
+from fleet.commands.run import add_mission_args, engine_options, mission_from_args
+from fleet.errors import UserError
+from fleet.mission.engine import Engine, MissionStuck
+from fleet.mission.faults import load_scenario
+from fleet.mission.record import digest_of, record_to_dict
+from fleet.mission.seam import ZONE
+from fleet.recording.mcapfile import mission_info
+from fleet.runtime.argtypes import positive_float, scenario_arg
+from fleet.runtime.bus import (
     Keys,
     Requester,
     RequestFailed,
@@ -34,14 +42,7 @@ from fleet.bus import (
     open_session,
     stop_on_signals,
 )
-from fleet.cli_types import positive_float, scenario_arg
-from fleet.commands.run import add_mission_args, engine_options, mission_from_args
-from fleet.engine import Engine, MissionStuck
-from fleet.errors import UserError
-from fleet.execution import ZONE
-from fleet.faults import load_scenario
-from fleet.layout import load_layout
-from fleet.protocol import (
+from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
     MissionDone,
@@ -54,8 +55,7 @@ from fleet.protocol import (
     ZoneClosed,
     encode,
 )
-from fleet.record_io import digest_of, record_to_dict
-from fleet.recording import mission_info
+from fleet.world.layout import load_layout
 from reservation.mirror import TableMirror, follow
 
 log = logging.getLogger("fleet.dispatcher")

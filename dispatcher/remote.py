@@ -13,11 +13,15 @@ from collections.abc import Sequence
 import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
-from fleet.bus import Keys, Requester, RequestFailed
-from fleet.execution import GOODS, Task, VehicleLost, freeze_changes
-from fleet.geometry import Cell
-from fleet.maneuvers import body_cells_at_rest
-from fleet.protocol import (
+from fleet.mission.freeze import Freeze
+from fleet.mission.seam import GOODS, Task, VehicleLost, freeze_changes
+from fleet.planning.geometry import Cell
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.runtime.bus import Keys, Requester, RequestFailed
+from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
+from fleet.wire.protocol import (
     CommitRequest,
     HaltRequest,
     Message,
@@ -28,10 +32,6 @@ from fleet.protocol import (
     TaskResult,
     VehicleStatus,
 )
-from fleet.recovery import Freeze
-from fleet.reservations import Interval, ReservationTable
-from fleet.trajectory import PlanFailure, Pose, Trajectory
-from fleet.wire import result_from_wire, step_to_wire, task_to_wire
 from reservation.mirror import TableMirror
 from reservation.store import to_wire
 

@@ -14,8 +14,6 @@ from collections.abc import Sequence
 import zenoh
 
 from fleet import __version__
-from fleet.bus import RequestFailed, zenoh_message
-from fleet.cli_help import Parser
 from fleet.commands import (
     analyze,
     bench,
@@ -25,14 +23,16 @@ from fleet.commands import (
     layout,
     plan,
     plot,
+    processes,
     run,
     runs,
     service,
-    services,
     train,
 )
-from fleet.distributed import RunFailed
+from fleet.commands.helptext import Parser
 from fleet.errors import UserError, describe
+from fleet.runtime.bus import RequestFailed, zenoh_message
+from fleet.runtime.local_run import RunFailed
 
 EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
 # What a command may fail with for reasons outside the program: bad input (every check of it
@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for module in (run, runs, analyze, plot, compare, faults, plan, layout, train, bench,
-                   services, service, compose):
+                   processes, service, compose):
         module.register(sub)
     helper = sub.add_parser("help", help="say what a command does and its options (as "
                             "COMMAND --help)",

@@ -1,4 +1,4 @@
-"""The live view: a Foxglove WebSocket server carrying the view channels (fleet/scene.py) as
+"""The live view: a Foxglove WebSocket server carrying the view channels (fleet/views/scene.py) as
 they are made, for the Foxglove app to connect to (Open connection > Foxglove WebSocket,
 ws://HOST:PORT; this SDK speaks the subprotocol foxglove.sdk.v1).
 

@@ -7,9 +7,9 @@ the file about once a second, so a killed recorder loses at most about a second.
 its status on fleet/<run>/recorder/status at every flush and once the mission's result is in
 the file (and answers queries there), so `fleet run` knows when it may stop the recorder.
 A recorder started mid-run (a restarted one writes the run's next segment, run-N.mcap:
-fleet.recording.next_segment) asks the dispatcher what the run is, so its file is described
+fleet.recording.mcapfile.next_segment) asks the dispatcher what the run is, so its file is described
 too. Every segment carries the run id of the run directory it is written in (its marker,
-fleet/rundir.py), so a restarted recorder's segments are of the same run.
+fleet/recording/rundir.py), so a restarted recorder's segments are of the same run.
 """
 
 from __future__ import annotations
@@ -25,13 +25,27 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.bus import Keys, Stream, add_bus_arguments, bus_config, open_session, stop_on_signals
-from fleet.cli_types import port, port_problem, writable_dir, writable_file
 from fleet.errors import UserError
-from fleet.layout import LayoutError, parse_layout
-from fleet.protocol import MissionDone, MissionInfo, ProtocolError, RecorderStatus, decode, encode
-from fleet.recording import RUN_FILE, Recorded, RecordingWriter, next_segment
-from fleet.rundir import claim_new
+from fleet.recording.mcapfile import RUN_FILE, Recorded, RecordingWriter, next_segment
+from fleet.recording.rundir import claim_new
+from fleet.runtime.argtypes import port, port_problem, writable_dir, writable_file
+from fleet.runtime.bus import (
+    Keys,
+    Stream,
+    add_bus_arguments,
+    bus_config,
+    open_session,
+    stop_on_signals,
+)
+from fleet.wire.protocol import (
+    MissionDone,
+    MissionInfo,
+    ProtocolError,
+    RecorderStatus,
+    decode,
+    encode,
+)
+from fleet.world.layout import LayoutError, parse_layout
 
 log = logging.getLogger("fleet.recorder")
 SENDER = "recorder"
@@ -161,7 +175,7 @@ class Recorder:
             return RecorderStatus(str(self.writer.path), self.writer.messages, self.done_seen)
 
     def _describe(self, info: MissionInfo, log_ns: int) -> None:
-        from fleet.scene import SceneViews
+        from fleet.views.scene import SceneViews
 
         self.writer.describe(info)
         try:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import msgpack
 
-from fleet.protocol import Change, ProtocolError, body_of, build_message
+from fleet.wire.protocol import Change, ProtocolError, body_of, build_message
 
 
 class JournalError(ValueError):

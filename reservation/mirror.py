@@ -16,10 +16,10 @@ from contextlib import contextmanager
 
 import zenoh
 
-from fleet.bus import Keys, Requester, received
-from fleet.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
-from fleet.reservations import Reservation, ReservationTable
-from fleet.reservations import Snapshot as TableSnapshot
+from fleet.planning.reservations import Reservation, ReservationTable
+from fleet.planning.reservations import Snapshot as TableSnapshot
+from fleet.runtime.bus import Keys, Requester, received
+from fleet.wire.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
 from reservation.store import table_change
 
 MAX_BUFFERED = 10_000

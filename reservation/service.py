@@ -20,7 +20,7 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.bus import (
+from fleet.runtime.bus import (
     Keys,
     Stream,
     add_bus_arguments,
@@ -29,7 +29,7 @@ from fleet.bus import (
     received,
     stop_on_signals,
 )
-from fleet.protocol import (
+from fleet.wire.protocol import (
     Change,
     CommitRequest,
     MissionDone,

@@ -7,7 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.protocol import (
+from fleet.planning.reservations import Change as TableChange
+from fleet.planning.reservations import Interval, ReservationTable
+from fleet.wire.protocol import (
     Change,
     CommitRequest,
     Message,
@@ -18,8 +20,6 @@ from fleet.protocol import (
     WireInterval,
     body_of,
 )
-from fleet.reservations import Change as TableChange
-from fleet.reservations import Interval, ReservationTable
 from reservation.journal import Journal
 
 REMEMBERED_REQUESTS = 100_000  # replies kept for retries (the oldest are forgotten first)

@@ -8,7 +8,7 @@ from collections import Counter, defaultdict
 
 from brute_force import check_trajectory
 
-from fleet.record_io import held_intervals, record_to_dict
+from fleet.mission.record import held_intervals, record_to_dict
 
 
 def mission_problems(rec, layout) -> list[str]:

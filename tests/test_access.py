@@ -1,4 +1,4 @@
-"""Access control on a real router (fleet.access): a router process with the run's ACL and
+"""Access control on a real router (fleet.runtime.access): a router process with the run's ACL and
 user/password dictionary, a client session per principal, and proofs that it refuses what a
 principal may not do while the legitimate flows still arrive.
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.access import (
+from fleet.runtime.access import (
     DISPATCHER,
     OPERATOR,
     RECORDER,
@@ -31,7 +31,7 @@ from fleet.access import (
     vehicle_user,
     write_dictionary,
 )
-from fleet.bus import RELIABLE, BusConfig, Keys, free_port, wait_alive
+from fleet.runtime.bus import RELIABLE, BusConfig, Keys, free_port, wait_alive
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = 3
@@ -40,8 +40,8 @@ TIMEOUT_S = 10.0
 ROUTER = """
 import json, sys
 import zenoh
-from fleet.access import configure_router
-from fleet.bus import BusConfig
+from fleet.runtime.access import configure_router
+from fleet.runtime.bus import BusConfig
 endpoint, acl, dictionary = sys.argv[1:]
 config = BusConfig("router", (), (endpoint,)).zenoh_config()
 with open(acl) as f:
@@ -170,7 +170,7 @@ class Fleet:
     def stop(self) -> None:
         for declared in self.declared:
             declared.undeclare()
-        for session in self.sessions.values():  # before the router: see fleet/router.py
+        for session in self.sessions.values():  # before the router: see fleet/runtime/router.py
             session.close()
         self.router.stdin.close()
         assert self.router.wait(timeout=30) == 0
@@ -183,7 +183,7 @@ def fleet(tmp_path_factory):
         fleet.start()
         yield fleet
     finally:
-        if fleet.router.poll() is None:
+        if fleet.runtime.router.poll() is None:
             fleet.stop()
 
 

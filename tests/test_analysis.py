@@ -16,16 +16,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleet.analysis import analyze
-from fleet.bus import Keys
+from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.commands.run import engine_options
 from fleet.errors import UserError
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Change, StackDone, VehicleState, encode
-from fleet.record_inprocess import Outgoing, recorded_run, write_recording
-from fleet.recording import RecordingError, RecordingWriter, read_recording
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
+from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.runtime.bus import Keys
+from fleet.wire.protocol import Change, StackDone, VehicleState, encode
+from fleet.world.layout import load_layout
 
 LAYOUT = "small"
 

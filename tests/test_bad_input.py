@@ -21,15 +21,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from zenoh_helpers import client
 
-from fleet.bus import free_port
 from fleet.cli import EX_SOFTWARE, build_parser, main, subcommands
-from fleet.cli_help import STRATEGIES, HelpFormatter, shows_default
-from fleet.cli_types import endpoint, finite_float, port, positive_float, sim_seconds
-from fleet.distributed import ROUTER_TIMEOUT_MS, RunSpec, run_processes
+from fleet.commands.helptext import STRATEGIES, HelpFormatter, shows_default
 from fleet.errors import describe
-from fleet.layout import layout_source
-from fleet.layout_check import NO_STARTS
-from fleet.mission import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.runtime.argtypes import endpoint, finite_float, port, positive_float, sim_seconds
+from fleet.runtime.bus import free_port
+from fleet.runtime.local_run import ROUTER_TIMEOUT_MS, RunSpec, run_processes
+from fleet.world.layout import layout_source
+from fleet.world.reachability import NO_STARTS
 
 ROOT = Path(__file__).resolve().parent.parent
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,
@@ -318,7 +318,7 @@ def options():
 
 
 def test_no_option_takes_a_bare_number_or_an_unchecked_output_path():
-    """Numbers go through fleet.cli_types (finite, in range); so do files written to."""
+    """Numbers go through fleet.runtime.argtypes (finite, in range); so do files written to."""
     for path, _, action in options():
         name = " ".join(["fleet", *path, *action.option_strings[:1]])
         assert action.type not in (float, int), f"{name} takes a bare {action.type.__name__}"
@@ -419,9 +419,9 @@ def test_a_recorder_that_cannot_connect_leaves_nothing_behind(tmp_path, capsys):
 def test_waiting_for_the_router_says_the_whole_wait(tmp_path, caplog, monkeypatch):
     """fleet run tries its connect in short attempts, to notice a dead router: what it says
     it waits for is the router's whole timeout, not one attempt's."""
-    from fleet import distributed
-    from fleet.bus import BusConfig
-    from fleet.launcher import Child
+    from fleet.runtime import local_run as distributed
+    from fleet.runtime.bus import BusConfig
+    from fleet.runtime.launcher import Child
 
     monkeypatch.setattr(distributed, "ROUTER_TIMEOUT_MS", 2000)
     dead = f"tcp/127.0.0.1:{free_port()}"
@@ -535,7 +535,7 @@ def test_run_help_gives_each_strategy_a_line_and_every_default(capsys):
 def test_process_commands_describe_themselves_not_their_design(name, capsys):
     import importlib
 
-    module = importlib.import_module({"router": "fleet.router",
+    module = importlib.import_module({"router": "fleet.runtime.router",
                                       "reservation": "reservation.service",
                                       "agent": "vehicle_agent.process",
                                       "dispatcher": "dispatcher.process",

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fleet.cli import main
-from fleet.layout import parse_layout
+from fleet.world.layout import parse_layout
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 
@@ -91,7 +91,7 @@ def test_bench_planner_json(capsys):
 def parse_source(name: str) -> str:
     from importlib import resources
 
-    return resources.files("fleet.layouts").joinpath(f"{name}.toml").read_text()
+    return resources.files("fleet.world.layouts").joinpath(f"{name}.toml").read_text()
 
 
 def test_run_then_plot(tmp_path, capsys):

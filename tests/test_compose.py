@@ -15,16 +15,16 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis import analyze
-from fleet.bus import BusConfig, Keys, free_port, open_session
+from fleet.analysis.analyze import analyze
 from fleet.commands.compose import collect, compose_command, write_secrets
 from fleet.commands.run import engine_options
-from fleet.engine import run_mission
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Halt, MissionDone, Progress, Resume, decode
-from fleet.record_io import digest
-from fleet.recording import read_recording
+from fleet.mission.engine import run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
+from fleet.world.layout import load_layout
 
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"

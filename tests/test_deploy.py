@@ -12,19 +12,19 @@ from pathlib import Path
 import pytest
 
 from dispatcher.claims import Roster
-from fleet.access import generate_credentials, read_dictionary
-from fleet.analysis import analyze
-from fleet.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.analysis.analyze import analyze
 from fleet.cli import build_parser
 from fleet.commands.run import engine_options
-from fleet.deploy import DeployConfig, config_from_env, secret_files, service_args
-from fleet.engine import run_mission
 from fleet.errors import UserError
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import MissionDone
-from fleet.record_io import digest
-from fleet.recording import read_recording
+from fleet.mission.engine import run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.access import generate_credentials, read_dictionary
+from fleet.runtime.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_args
+from fleet.wire.protocol import MissionDone
+from fleet.world.layout import load_layout
 from vehicle_agent.process import claim
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,11 +1,11 @@
 """Dispatcher core: rank, Algorithm 1's altered and backup states with constructed blockages,
 and what each strategy maximises."""
 
-from fleet.dispatch import Dispatcher, Target, TaskKind, VehicleView, rank
-from fleet.gridmap import GridMap
-from fleet.mission import Strategy
-from fleet.reservations import ReservationTable
-from fleet.trajectory import Pose
+from fleet.dispatching.algorithm1 import Dispatcher, Target, TaskKind, VehicleView, rank
+from fleet.mission.spec import Strategy
+from fleet.planning.gridmap import GridMap
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import Pose
 
 # A 12 x 5 floor split by a wall at column 6 except for a one-cell gap at row 2.
 WALL = frozenset((6, r) for r in range(5) if r != 2)
@@ -56,7 +56,7 @@ def test_backup_state_postpones_by_dt_when_every_vehicle_is_blocked():
 
 def test_postponement_lets_a_temporary_blockage_clear():
     store = ReservationTable()
-    from fleet.reservations import Interval
+    from fleet.planning.reservations import Interval
 
     # The gap is held until t = 35 s: waiting inside the preliminary search cannot bridge that
     # within iter_pre, but postponing the decision can.

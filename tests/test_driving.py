@@ -4,13 +4,13 @@ import math
 
 import pytest
 
-from fleet.layout import load_layout
-from fleet.planner import HybridAStar
-from fleet.protocol import ClockTick
-from fleet.reservations import ReservationTable
-from fleet.trajectory import Pose
+from fleet.mission.driving import Drive, state_period
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import Pose
+from fleet.wire.protocol import ClockTick
+from fleet.world.layout import load_layout
 from vehicle_agent.agent import tick_problem
-from vehicle_agent.driving import Drive, state_period
 
 
 def small_trip(t_start=10.0):

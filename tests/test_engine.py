@@ -5,11 +5,11 @@ from pathlib import Path
 
 import pytest
 
-from fleet.engine import Engine, EngineOptions, lower_bound, run_mission
 from fleet.errors import UserError
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.record_io import digest
+from fleet.mission.engine import Engine, EngineOptions, lower_bound, run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.world.layout import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mission_check import mission_problems
@@ -19,7 +19,7 @@ SMALL = load_layout("small")
 
 def options_for(strategy: Strategy) -> EngineOptions:
     if strategy is Strategy.ANN:
-        from fleet.ann import load_scorer
+        from fleet.dispatching.scorer import load_scorer
 
         return EngineOptions(mlp=load_scorer(SMALL))
     return EngineOptions()
@@ -86,9 +86,9 @@ def test_a_fleet_stuck_on_one_station_tries_the_others():
     each sent back to a station it cannot reach (the preliminary A* sees cells, not turns,
     and keeps choosing it). After `unstick_after` failures in a row each forklift skips the
     stations it failed to reach since the last success, and every one gets home."""
-    from fleet.engine import MissionStuck
-    from fleet.recovery import Recovered
-    from fleet.trajectory import Pose
+    from fleet.mission.engine import MissionStuck
+    from fleet.mission.freeze import Recovered
+    from fleet.planning.trajectory import Pose
 
     layout = load_layout("paper")
     mission = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

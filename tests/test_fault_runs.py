@@ -8,17 +8,17 @@ import functools
 import pytest
 from mission_check import journal_overlaps
 
-from fleet.analysis import analyze
+from fleet.analysis.analyze import analyze
 from fleet.commands.run import engine_options
-from fleet.distributed import RunSpec, run_processes
-from fleet.engine import Engine
-from fleet.faults import builtin_scenarios, load_scenario
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Halt, Resume, StackReopened, VehicleFault, ZoneClosed
-from fleet.record_io import digest
-from fleet.recording import read_recording
-from fleet.recovery import ScheduledPacer
+from fleet.mission.engine import Engine
+from fleet.mission.faults import builtin_scenarios, load_scenario
+from fleet.mission.freeze import ScheduledPacer
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import Halt, Resume, StackReopened, VehicleFault, ZoneClosed
+from fleet.world.layout import load_layout
 from reservation.journal import Journal
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

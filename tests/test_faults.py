@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fleet.cli import main
-from fleet.faults import (
+from fleet.mission.faults import (
     FaultKind,
     ScenarioError,
     builtin_scenarios,
@@ -16,8 +16,8 @@ from fleet.faults import (
     load_scenario,
     parse_scenario,
 )
-from fleet.layout import load_layout
-from fleet.recovery import VehicleDown, VehicleUp, ZoneClosure, scheduled_at
+from fleet.mission.freeze import VehicleDown, VehicleUp, ZoneClosure, scheduled_at
+from fleet.world.layout import load_layout
 
 
 def test_every_shipped_scenario_loads_and_fits_paper_with_four_forklifts():

@@ -23,15 +23,19 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleet.ann import load_scorer
 from fleet.commands.run import engine_options
-from fleet.execution import Task
-from fleet.layout import Layout, LayoutError, load_layout, parse_layout
-from fleet.maneuvers import Manner
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.mlp import ClusterMLPs, WeightsError
-from fleet.planner import HybridAStar
-from fleet.protocol import (
+from fleet.dispatching.mlp import ClusterMLPs, WeightsError
+from fleet.dispatching.scorer import load_scorer
+from fleet.mission.seam import Task
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.planning.maneuvers import Manner
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.recording.inprocess import recorded_run
+from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
     Change,
@@ -48,11 +52,7 @@ from fleet.protocol import (
     decode,
     encode,
 )
-from fleet.record_inprocess import recorded_run
-from fleet.recording import RecordingError, RecordingWriter, read_recording
-from fleet.reservations import ReservationTable
-from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.world.layout import Layout, LayoutError, load_layout, parse_layout
 from reservation.journal import Journal, JournalError
 from reservation.store import ReservationStore
 
@@ -85,7 +85,7 @@ SYNTAX = {PoseText: WELL_FORMED_POSES, ManeuverLabel: KNOWN_LABELS,
 
 
 def valid(hint: typing.Any) -> st.SearchStrategy:
-    """Values that `fleet.protocol` accepts for a field of type `hint` (any that msgpack
+    """Values that `fleet.wire.protocol` accepts for a field of type `hint` (any that msgpack
     carries: infinities, the whole 64-bit range, any text where the field is free text)."""
     if hint in SYNTAX:
         return SYNTAX[hint]
@@ -157,7 +157,7 @@ def assert_valid(message: Message, cls: type[Message]) -> None:
     assert decode(encode(message, "again", 1, 0.0)).message == message
 
 
-# -- fleet.protocol.decode -----------------------------------------------------------------
+# -- fleet.wire.protocol.decode -----------------------------------------------------------------
 
 @FUZZ
 @given(st.sampled_from(MESSAGE_TYPES).flatmap(lambda kind: st.tuples(
@@ -286,7 +286,7 @@ def test_odd_payloads_name_what_is_wrong(payload, reason):
         decode(payload)
 
 
-# -- fleet.wire ------------------------------------------------------------------------------
+# -- fleet.wire.convert ----------------------------------------------------------------------
 
 POSES = (st.builds(lambda c, r, h: f"{c},{r},{h}", SMALL_INT, SMALL_INT,
                    st.sampled_from("ENWSenws"))
@@ -378,7 +378,7 @@ def test_a_hostile_result_becomes_a_trajectory_or_is_refused_naming_the_field(pl
         assert result.reason.value == message.failure
 
 
-# -- fleet.layout.parse_layout ---------------------------------------------------------------
+# -- fleet.world.layout.parse_layout ---------------------------------------------------------------
 
 PAPER = (ROOT / "fleet" / "layouts" / "paper.toml").read_text()
 PAPER_LINES = PAPER.split("\n")
@@ -727,7 +727,7 @@ def test_any_message_handed_to_the_store_is_answered_and_a_refusal_changes_nothi
         assert table_state(store) == before and outcome.published == []
 
 
-# -- fleet.recording.read_recording ----------------------------------------------------------
+# -- fleet.recording.mcapfile.read_recording --------------------------------------------------
 
 @pytest.fixture(scope="module")
 def recording_bytes(tmp_path_factory) -> tuple[bytes, list, int]:

@@ -21,16 +21,17 @@ from pathlib import Path
 import msgpack
 import zenoh
 
-from fleet.analysis import analyze
-from fleet.bus import Keys
+from fleet.analysis.analyze import analyze
 from fleet.commands.run import engine_options
-from fleet.distributed import RunSpec, run_processes
-from fleet.engine import run_mission
-from fleet.launcher import Launcher
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Message as WireMessage
-from fleet.protocol import (
+from fleet.mission.engine import run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import KEY_TYPES, expected_sender, message_type, read_recording
+from fleet.runtime.bus import Keys
+from fleet.runtime.launcher import Launcher
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import Message as WireMessage
+from fleet.wire.protocol import (
     MissionInfo,
     Progress,
     ProtocolError,
@@ -39,8 +40,7 @@ from fleet.protocol import (
     decode,
     encode,
 )
-from fleet.record_io import digest
-from fleet.recording import KEY_TYPES, expected_sender, message_type, read_recording
+from fleet.world.layout import load_layout
 
 MISSION = Mission("small", MissionKind.FILL, Strategy.ANN)
 VEHICLES = 2
@@ -55,7 +55,7 @@ PUBLISHED = sorted({cls for _, cls, _ in KEY_TYPES}, key=lambda cls: cls.TYPE)
 
 
 def run_keys(keys: Keys, vehicles: int) -> list[str]:
-    """Every key of the run a message can be put on: each key of fleet.bus.Keys (per vehicle
+    """Every key of the run a message can be put on: each key of fleet.runtime.bus.Keys (per vehicle
     for the per-vehicle ones), but liveliness tokens, the run's root and its wildcard."""
     out = []
     for name, attr in sorted(vars(Keys).items()):

@@ -4,10 +4,10 @@ import re
 
 import pytest
 
-from fleet.layout import LayoutError, load_layout, parse_layout
-from fleet.layout_check import check_layout, reachability_problems
-from fleet.layout_generator import Shape, generate_layout, generate_toml
-from fleet.maneuvers import fork_target
+from fleet.planning.maneuvers import fork_target
+from fleet.world.generator import Shape, generate_layout, generate_toml
+from fleet.world.layout import LayoutError, load_layout, parse_layout
+from fleet.world.reachability import check_layout, reachability_problems
 
 SMALL = load_layout("small")
 
@@ -15,7 +15,7 @@ SMALL = load_layout("small")
 def small_source() -> str:
     from importlib import resources
 
-    return resources.files("fleet.layouts").joinpath("small.toml").read_text()
+    return resources.files("fleet.world.layouts").joinpath("small.toml").read_text()
 
 
 def edited(old: str, new: str, drawing: bool = False) -> str:

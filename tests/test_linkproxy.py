@@ -1,4 +1,4 @@
-"""The link proxy (fleet/linkproxy.py): plain TCP forwarding, a silent cut, a restore; then
+"""The link proxy (fleet/runtime/linkproxy.py): plain TCP forwarding, a silent cut, a restore; then
 between a zenoh client and a real router, where a cut is noticed only by lease expiry and a
 restore lets the client reconnect and re-declare by itself."""
 
@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.bus import BusConfig, Keys, free_port, open_session
-from fleet.linkproxy import LinkProxy
+from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.runtime.linkproxy import LinkProxy
 
 ROOT = Path(__file__).resolve().parent.parent
 QUIET_S = 0.3  # how long a silent connection must stay silent to pass

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from fleet.geometry import body_corners, point_in_rectangle
-from fleet.maneuvers import Manner, end_offset, move_table, rotate
 from fleet.params import VehicleDims
+from fleet.planning.geometry import body_corners, point_in_rectangle
+from fleet.planning.maneuvers import Manner, end_offset, move_table, rotate
 
 N = 1  # heading north
 TABLE = move_table()

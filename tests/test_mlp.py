@@ -6,12 +6,12 @@ import json
 import pytest
 import torch
 
-from fleet.ann import load_scorer
-from fleet.engine import EngineOptions, run_mission
-from fleet.layout import load_layout
-from fleet.mission import Mission, Strategy
-from fleet.mlp import ClusterMLPs, WeightsError, lm_fit, make_net
-from fleet.training import train
+from fleet.dispatching.mlp import ClusterMLPs, WeightsError, lm_fit, make_net
+from fleet.dispatching.scorer import load_scorer
+from fleet.mission.engine import EngineOptions, run_mission
+from fleet.mission.spec import Mission, Strategy
+from fleet.mission.training import train
+from fleet.world.layout import load_layout
 
 
 def test_lm_step_decreases_the_loss_on_a_fixed_problem():

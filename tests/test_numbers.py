@@ -11,13 +11,16 @@ from pathlib import Path
 
 import pytest
 
-from fleet.analysis import Report, analyze
+from fleet.analysis.analyze import Report, analyze
+from fleet.analysis.time_use import maneuver_length, time_use
 from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN, engine_options
-from fleet.forklift_time import maneuver_length, time_use
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import (
+from fleet.mission.record import subtask_dict
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import Outgoing, recorded_run
+from fleet.recording.mcapfile import NS, RecordingWriter, read_recording
+from fleet.recording.mission_record import dispatcher_restarts
+from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
     MissionDone,
@@ -28,10 +31,7 @@ from fleet.protocol import (
     SubtaskEvent,
     encode,
 )
-from fleet.record_inprocess import Outgoing, recorded_run
-from fleet.record_io import subtask_dict
-from fleet.recorded_mission import dispatcher_restarts
-from fleet.recording import NS, RecordingWriter, read_recording
+from fleet.world.layout import load_layout
 
 PER_FORKLIFT = ("busy_s", "stopped_s", "postponed_s", "handling_s", "down_s", "idle_s")
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from fleet.ann import load_scorer
-from fleet.engine import EngineOptions, lower_bound, run_mission
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
+from fleet.dispatching.scorer import load_scorer
+from fleet.mission.engine import EngineOptions, lower_bound, run_mission
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.world.layout import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mission_check import mission_problems

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from fleet.gridmap import GridMap
-from fleet.maneuvers import body_cells_at_rest
 from fleet.params import SearchParams, VehicleDims
-from fleet.planner import HybridAStar, PlannerCache
-from fleet.reservations import ReservationTable
-from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.planning.gridmap import GridMap
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.planner import HybridAStar, PlannerCache
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brute_force import check_trajectory
@@ -61,7 +61,7 @@ def test_waits_for_a_crossing_vehicle():
     grid = GridMap(12, 3, frozenset((c, r) for c in range(12) for r in (0, 2) if c != 6))
     planner = HybridAStar(grid)
     table = ReservationTable()
-    from fleet.reservations import Interval
+    from fleet.planning.reservations import Interval
     # Vehicle 2 drives north through the corridor's crossing column 6 over t in [0, 30).
     crossing = [((6, 0), 0, 30), ((6, 1), 0, 30), ((6, 2), 0, 30)]
     assert table.commit(2, [Interval(c, a, b) for c, a, b in crossing]) is None

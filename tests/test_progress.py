@@ -1,4 +1,5 @@
-"""Progress as people expect it (fleet/progress.py): on a terminal a bar that fits its width
+"""Progress as people expect it (fleet/commands/progress.py): on a terminal a bar that fits its
+width
 and redraws in place; without one a plain line every few seconds, never a carriage return;
 neither runs backwards. The README's main command shows it both ways."""
 
@@ -15,7 +16,7 @@ import termios
 import threading
 from pathlib import Path
 
-from fleet.progress import MissionProgress, ProgressBar
+from fleet.commands.progress import MissionProgress, ProgressBar
 
 ROOT = Path(__file__).resolve().parent.parent
 PLAIN = re.compile(r"^fill ann: (\d+)/24 stacks, t=(\d+) s, (\d+) decision failures \[\d+ s\]$")

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet.protocol import (
+from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
     Change,

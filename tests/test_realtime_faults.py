@@ -10,12 +10,12 @@ from pathlib import Path
 from mission_check import journal_overlaps
 
 from bench.faults import timings
-from fleet.analysis import SILENT, analyze
-from fleet.distributed import RunSpec, run_processes
-from fleet.faults import load_scenario
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import Halt, Resume, VehicleState, ZoneClosed
-from fleet.recording import read_recording
+from fleet.analysis.analyze import SILENT, analyze
+from fleet.mission.faults import load_scenario
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import Halt, Resume, VehicleState, ZoneClosed
 from reservation.journal import Journal
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

@@ -17,8 +17,13 @@ from PIL import Image
 from fleet.cli import main
 from fleet.commands.plot import read_run
 from fleet.errors import UserError
-from fleet.layout import Layout, load_layout, parse_layout
-from fleet.mission_plots import (
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import Trajectory
+from fleet.recording.mcapfile import RecordingWriter, expected_sender
+from fleet.views.drawing import draw_layout, map_figure, plan_figure
+from fleet.views.palette import forklift_color
+from fleet.views.plots import (
     animate,
     filling_sequence,
     gantt,
@@ -27,20 +32,15 @@ from fleet.mission_plots import (
     pose_at,
     snapshot,
 )
-from fleet.palette import forklift_color
-from fleet.places import resolve
-from fleet.planner import HybridAStar
-from fleet.plotting import draw_layout, map_figure, plan_figure
-from fleet.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
-from fleet.recording import RecordingWriter, expected_sender
-from fleet.reservations import ReservationTable
-from fleet.trajectory import Trajectory
+from fleet.wire.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
+from fleet.world.layout import Layout, load_layout, parse_layout
+from fleet.world.places import resolve
 
-STATE_PERIOD_S = 0.5  # the fast clock's state grid (vehicle_agent/driving.py)
+STATE_PERIOD_S = 0.5  # the fast clock's state grid (fleet/mission/driving.py)
 
 
 def layout_source(name: str) -> str:
-    return resources.files("fleet.layouts").joinpath(f"{name}.toml").read_text()
+    return resources.files("fleet.world.layouts").joinpath(f"{name}.toml").read_text()
 
 
 def small_record(end: float = 40.0, kind: str = "fill", strategy: str = "ann") -> dict:

@@ -1,4 +1,4 @@
-"""Who stops, and where, when a forklift cannot follow its schedule (fleet/recovery.py), and
+"""Who stops, and where, when a forklift cannot follow its schedule (fleet/mission/freeze.py), and
 whole in-process missions with faults: safe, and every stack exactly once."""
 
 import math
@@ -8,19 +8,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet.engine import Engine, MissionStuck
-from fleet.execution import GOODS, ZONE, freeze_changes
-from fleet.faults import Fault, FaultKind, Scenario
-from fleet.layout import load_layout
-from fleet.maneuvers import Manner
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.record_inprocess import recorded_run, write_recording
-from fleet.recording import read_recording
-from fleet.recovery import Motion, ScheduledPacer, cascade, freeze_of
-from fleet.reservations import Interval, ReservationTable
-from fleet.safety import double_bookings, replay
-from fleet.trajectory import Pose, Step, Trajectory
-from fleet.velocity import Speed
+from fleet.analysis.safety import double_bookings, replay
+from fleet.mission.engine import Engine, MissionStuck
+from fleet.mission.faults import Fault, FaultKind, Scenario
+from fleet.mission.freeze import Motion, ScheduledPacer, cascade, freeze_of
+from fleet.mission.seam import GOODS, ZONE, freeze_changes
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.planning.maneuvers import Manner
+from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.trajectory import Pose, Step, Trajectory
+from fleet.planning.velocity import Speed
+from fleet.recording.inprocess import recorded_run, write_recording
+from fleet.recording.mcapfile import read_recording
+from fleet.world.layout import load_layout
 
 
 def drive_east(vehicle: int, row: int, cols: range, t0: float, dt: float = 1.0) -> Trajectory:
@@ -154,9 +154,9 @@ def test_random_faults_never_make_a_forklift_collide_or_a_stack_repeat(seed):
 
 
 def test_a_mixed_fault_mission_in_one_process_passes_every_verdict(tmp_path):
-    from fleet.analysis import analyze
+    from fleet.analysis.analyze import analyze
     from fleet.commands.run import engine_options
-    from fleet.faults import load_scenario
+    from fleet.mission.faults import load_scenario
 
     layout = load_layout("paper")
     mission = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

@@ -2,8 +2,8 @@
 
 from zenoh_helpers import client
 
-from fleet.bus import BusConfig, Requester, open_session
-from fleet.protocol import CommitRequest, ReleaseRequest, Snapshot, SnapshotRequest
+from fleet.runtime.bus import BusConfig, Requester, open_session
+from fleet.wire.protocol import CommitRequest, ReleaseRequest, Snapshot, SnapshotRequest
 from reservation.mirror import TableMirror, follow
 from reservation.store import ReservationStore
 

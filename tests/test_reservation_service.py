@@ -6,8 +6,8 @@ from concurrent.futures import ThreadPoolExecutor
 import zenoh
 from zenoh_helpers import client
 
-from fleet.bus import Requester
-from fleet.protocol import (
+from fleet.runtime.bus import Requester
+from fleet.wire.protocol import (
     CommitRequest,
     Reply,
     Snapshot,
@@ -116,7 +116,7 @@ def test_a_forklift_changes_only_its_own_reservations(service):
     """The request key names who asks: under vehicle-1's key, a commit or release for
     vehicle 2 is refused (access control keeps each forklift to its own key); the
     dispatcher's key may commit for anyone (goods, zones, freezes)."""
-    from fleet.protocol import ReleaseRequest
+    from fleet.wire.protocol import ReleaseRequest
 
     session = client(service)
     try:

@@ -7,10 +7,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet.protocol import Change, CommitRequest, ReleaseRequest, Reply, SnapshotRequest, body_of
-from fleet.protocol import build_message as build
-from fleet.reservations import Change as TableChange
-from fleet.reservations import ReservationTable
+from fleet.planning.reservations import Change as TableChange
+from fleet.planning.reservations import ReservationTable
+from fleet.wire.protocol import (
+    Change,
+    CommitRequest,
+    ReleaseRequest,
+    Reply,
+    SnapshotRequest,
+    body_of,
+)
+from fleet.wire.protocol import build_message as build
 from reservation.journal import Journal, JournalError
 from reservation.store import ReservationStore, to_intervals
 

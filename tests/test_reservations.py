@@ -7,7 +7,7 @@ import pytest
 from hypothesis import settings
 from hypothesis.stateful import RuleBasedStateMachine, invariant, rule
 
-from fleet.reservations import Interval, ReservationTable
+from fleet.planning.reservations import Interval, ReservationTable
 
 INF = math.inf
 CELLS = [(0, 0), (0, 1), (1, 0), (1, 1)]

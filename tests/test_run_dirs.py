@@ -1,4 +1,5 @@
-"""A run directory belongs to one run (fleet/rundir.py, docs/runtime.md): `fleet run --out`
+"""A run directory belongs to one run (fleet/recording/rundir.py, docs/runtime.md):
+`fleet run --out`
 never removes a file it did not write in the same run, `--force` replaces only an earlier
 run's directory, whole; default names never collide; every segment carries the run's id and
 a segment of another run is refused by name (run, analyze, plot, compare); a recorder
@@ -17,18 +18,15 @@ from pathlib import Path
 
 import pytest
 
-from fleet.analysis import analyze
+from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.commands.compose import place_copy
 from fleet.commands.run import engine_options
 from fleet.commands.runs import SUMMARY, write_summary
-from fleet.distributed import RunSpec, run_processes
 from fleet.errors import UserError
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import MissionInfo, VehicleState, encode
-from fleet.record_inprocess import Outgoing, recorded_run, write_recording
-from fleet.recording import (
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
+from fleet.recording.mcapfile import (
     RUN_FILE,
     RecordingWriter,
     mission_info,
@@ -36,7 +34,10 @@ from fleet.recording import (
     read_recording,
     segment_paths,
 )
-from fleet.rundir import MARKER, claim, claim_new, default_name, run_id_of
+from fleet.recording.rundir import MARKER, claim, claim_new, default_name, run_id_of
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import MissionInfo, VehicleState, encode
+from fleet.world.layout import load_layout
 from recorder.process import output_in
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -20,14 +20,24 @@ from mission_check import journal_overlaps, record_problems
 from test_paper_missions import check_paper_mission
 from websockets.sync.client import connect
 
-from fleet.analysis import analyze
-from fleet.bus import PARENT_ENV, BusConfig, Keys, Requester, free_port, open_session, wait_alive
+from fleet.analysis.analyze import analyze
 from fleet.commands.run import engine_options
-from fleet.distributed import RunSpec, run_processes
-from fleet.engine import run_mission
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import (
+from fleet.mission.engine import run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import vehicle_states
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.bus import (
+    PARENT_ENV,
+    BusConfig,
+    Keys,
+    Requester,
+    free_port,
+    open_session,
+    wait_alive,
+)
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import (
     Progress,
     Reply,
     StackDone,
@@ -37,9 +47,7 @@ from fleet.protocol import (
     decode,
     encode,
 )
-from fleet.record_inprocess import vehicle_states
-from fleet.record_io import digest
-from fleet.recording import read_recording
+from fleet.world.layout import load_layout
 from reservation.mirror import TableMirror, follow
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,4 +1,5 @@
-"""The independent safety verifier (fleet/safety.py) on its own: its footprint agrees with the
+"""The independent safety verifier (fleet/analysis/safety.py) on its own: its footprint agrees
+with the
 planner's geometry, its table replay with the reservation table's rules, and it shares no
 code with either."""
 
@@ -10,9 +11,7 @@ import sys
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet.geometry import body_corners, cells_under
-from fleet.params import VehicleDims
-from fleet.safety import (
+from fleet.analysis.safety import (
     TOLERANCE_M,
     Body,
     Held,
@@ -23,6 +22,8 @@ from fleet.safety import (
     overlaps,
     replay,
 )
+from fleet.params import VehicleDims
+from fleet.planning.geometry import body_corners, cells_under
 
 DIMS = VehicleDims()
 BODY = Body(DIMS.front, DIMS.rear, DIMS.width, 2.0, (0.0, 0.0))
@@ -80,8 +81,8 @@ def test_overlaps_and_excursions_at_shared_instants():
 
 
 def test_the_verifier_imports_neither_planner_nor_table_nor_their_geometry():
-    code = ("import sys, fleet.safety; print(sorted(m for m in sys.modules "
+    code = ("import sys, fleet.analysis.safety; print(sorted(m for m in sys.modules "
             "if m.startswith(('fleet.', 'reservation', 'vehicle_agent'))))")
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True).stdout
-    assert loaded.strip() == "['fleet.safety']"
+    assert loaded.strip() == "['fleet.analysis.safety']"

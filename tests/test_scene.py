@@ -1,4 +1,4 @@
-"""The Foxglove views (fleet/scene.py) and the live view server (recorder/live.py).
+"""The Foxglove views (fleet/views/scene.py) and the live view server (recorder/live.py).
 
 Foxglove messages are opaque objects, so the tests decode what they encode with the protobuf
 schema each one carries, the way Foxglove itself reads a recording."""
@@ -19,13 +19,13 @@ from mcap.reader import make_reader
 from test_recording_plots import recorded, two_forklift_record
 from websockets.sync.client import connect
 
-from fleet.geometry import body_corners
-from fleet.layout import load_layout
-from fleet.mission_plots import gantt, snapshot
-from fleet.palette import GOODS_COLOR, forklift_color
-from fleet.protocol import Change, Progress, StackDone, VehicleState
-from fleet.recording import RecordingWriter, read_recording
-from fleet.scene import FRAME, HORIZON_S, SceneViews
+from fleet.planning.geometry import body_corners
+from fleet.recording.mcapfile import RecordingWriter, read_recording
+from fleet.views.palette import GOODS_COLOR, forklift_color
+from fleet.views.plots import gantt, snapshot
+from fleet.views.scene import FRAME, HORIZON_S, SceneViews
+from fleet.wire.protocol import Change, Progress, StackDone, VehicleState
+from fleet.world.layout import load_layout
 from recorder.live import LiveView
 
 BASE = 1_700_000_000 * 10**9

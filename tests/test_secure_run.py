@@ -5,19 +5,19 @@ rule against a bare router; this proves them in a running mission)."""
 import pytest
 import zenoh
 
-from fleet.bus import BusConfig, Requester, free_port, open_session
-from fleet.distributed import RunSpec, run_processes
-from fleet.engine import run_mission
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import (
+from fleet.mission.engine import run_mission
+from fleet.mission.record import digest
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.mcapfile import read_recording
+from fleet.runtime.bus import BusConfig, Requester, free_port, open_session
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import (
     CommitRequest,
     MissionDone,
     TaskRequest,
     VehicleState,
     encode,
 )
-from fleet.record_io import digest
-from fleet.recording import read_recording
 from reservation.journal import Journal
 
 MISSION = Mission("small", MissionKind.FILL, Strategy.TRAFFIC)

@@ -19,23 +19,12 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis import analyze, sequence_gaps, sequence_holes
-from fleet.bus import BusConfig, Keys, Stream, free_port, open_session
+from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.commands.run import engine_options
-from fleet.layout import load_layout
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.protocol import (
-    Change,
-    MissionInfo,
-    RecorderStatus,
-    StackDone,
-    VehicleState,
-    decode,
-    encode,
-)
-from fleet.record_inprocess import Outgoing, recorded_run
-from fleet.recording import (
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import Outgoing, recorded_run
+from fleet.recording.mcapfile import (
     NS,
     RUN_FILE,
     RecordingWriter,
@@ -45,7 +34,18 @@ from fleet.recording import (
     recording_file,
     segment_paths,
 )
-from fleet.rundir import claim
+from fleet.recording.rundir import claim
+from fleet.runtime.bus import BusConfig, Keys, Stream, free_port, open_session
+from fleet.wire.protocol import (
+    Change,
+    MissionInfo,
+    RecorderStatus,
+    StackDone,
+    VehicleState,
+    decode,
+    encode,
+)
+from fleet.world.layout import load_layout
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent

@@ -3,9 +3,16 @@
 import hypothesis.strategies as st
 from hypothesis import given, settings
 
-from fleet.maneuvers import Kind
 from fleet.params import ManeuverTimes
-from fleet.velocity import INF, EndTimes, Speed, VelocityPlanner, fix_ending_levels, start_times
+from fleet.planning.maneuvers import Kind
+from fleet.planning.velocity import (
+    INF,
+    EndTimes,
+    Speed,
+    VelocityPlanner,
+    fix_ending_levels,
+    start_times,
+)
 
 T = ManeuverTimes()
 VP = VelocityPlanner(T)

@@ -4,14 +4,14 @@ import math
 
 import pytest
 
-from fleet.dispatch import TaskKind
-from fleet.execution import Task
-from fleet.layout import load_layout
-from fleet.planner import HybridAStar
-from fleet.protocol import ProtocolError, TaskRequest, decode, encode
-from fleet.reservations import ReservationTable
-from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.dispatching.algorithm1 import TaskKind
+from fleet.mission.seam import Task
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.wire.protocol import ProtocolError, TaskRequest, decode, encode
+from fleet.world.layout import load_layout
 
 
 def through_the_wire(message):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.runtime.bus import BusConfig, Keys, free_port, open_session, wait_alive
 
 ROOT = Path(__file__).resolve().parent.parent
 

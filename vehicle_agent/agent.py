@@ -23,12 +23,14 @@ from dataclasses import dataclass
 
 import zenoh
 
-from fleet.bus import Keys, Requester, RequestFailed, Stream, received, wait_alive
-from fleet.execution import Task
-from fleet.layout import Layout
-from fleet.maneuvers import body_cells_at_rest
-from fleet.planner import PlannerCache
-from fleet.protocol import (
+from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
+from fleet.mission.seam import Task
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.planner import PlannerCache
+from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
+from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, received, wait_alive
+from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
+from fleet.wire.protocol import (
     ClockAck,
     ClockTick,
     CommitRequest,
@@ -47,11 +49,9 @@ from fleet.protocol import (
     decode,
     encode,
 )
-from fleet.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire import result_to_wire, step_from_wire, step_to_wire, task_from_wire
+from fleet.world.layout import Layout
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
-from vehicle_agent.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 
 log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5

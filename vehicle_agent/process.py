@@ -10,8 +10,10 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.access import read_dictionary, vehicle_user
-from fleet.bus import (
+from fleet.errors import UserError
+from fleet.runtime.access import read_dictionary, vehicle_user
+from fleet.runtime.argtypes import layout_arg, pose, positive_float
+from fleet.runtime.bus import (
     Keys,
     Requester,
     RequestFailed,
@@ -20,10 +22,8 @@ from fleet.bus import (
     open_session,
     stop_on_signals,
 )
-from fleet.cli_types import layout_arg, pose, positive_float
-from fleet.errors import UserError
-from fleet.layout import load_layout
-from fleet.protocol import ClaimReply, VehicleClaim
+from fleet.wire.protocol import ClaimReply, VehicleClaim
+from fleet.world.layout import load_layout
 from vehicle_agent.agent import Agent, Stopped
 
 log = logging.getLogger("fleet.agent")

@@ -25,9 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fleet.analysis import analyze
+    from fleet.analysis.analyze import analyze
     from fleet.commands.runs import write_summary
-    from fleet.recording import RUN_FILE, read_recording, recording_file
+    from fleet.recording.mcapfile import RUN_FILE, read_recording, recording_file
 
     first = recording_file(args.recording)  # refuses what is no recording, saying why
     report = analyze(read_recording(args.recording))

@@ -7,8 +7,10 @@ import json
 import platform
 import sys
 
-from fleet.cli_help import strategies_epilog
-from fleet.cli_types import (
+from fleet.commands.helptext import strategies_epilog
+from fleet.commands.progress import ProgressBar
+from fleet.errors import UserError
+from fleet.runtime.argtypes import (
     integer,
     layout_arg,
     non_negative_int,
@@ -17,8 +19,6 @@ from fleet.cli_types import (
     positive_ints,
     text_file,
 )
-from fleet.errors import UserError
-from fleet.progress import ProgressBar
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -148,7 +148,7 @@ def run_planner(args: argparse.Namespace) -> int:
 
 def run_strategies(args: argparse.Namespace) -> int:
     from bench import strategies
-    from fleet.mission import MissionKind
+    from fleet.mission.spec import MissionKind
 
     kinds = tuple(MissionKind) if args.mission == "both" else (MissionKind(args.mission),)
     bars: dict[str, ProgressBar] = {}
@@ -221,7 +221,7 @@ def run_recorder(args: argparse.Namespace) -> int:
 
 def run_faults(args: argparse.Namespace) -> int:
     from bench import faults
-    from fleet.faults import builtin_scenarios
+    from fleet.mission.faults import builtin_scenarios
 
     names = args.scenarios.split(",") if args.scenarios else None
     unknown = sorted(set(names or []) - set(builtin_scenarios()))

@@ -1,7 +1,8 @@
 """`fleet compare A B`: two recorded runs side by side, and how B differs from A.
 
-Everything comes from each recording's mission record (fleet.recorded_mission.record_of) and
-its analysis (fleet.analysis: the verdicts), summarised by `summarize`; a row of the table is
+Everything comes from each recording's mission record (fleet.recording.mission_record.record_of) and
+its analysis (fleet.analysis.analyze: the verdicts), summarised by `summarize`; a row of the
+table is
 a `Field` naming a key of that summary, so a new comparison is one more summary key and one
 more Field.
 """
@@ -15,9 +16,9 @@ from pathlib import Path
 from statistics import mean
 from typing import Any
 
-from fleet.analysis import analyze
+from fleet.analysis.analyze import analyze
 from fleet.commands.plot import read_run
-from fleet.recording import RUN_FILE, Recording
+from fleet.recording.mcapfile import RUN_FILE, Recording
 
 
 def register(sub: argparse._SubParsersAction) -> None:

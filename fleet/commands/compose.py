@@ -14,10 +14,10 @@ import tarfile
 import tempfile
 from pathlib import Path
 
-from fleet.cli_types import positive_int, writable_dir
-from fleet.deploy import MAX_VEHICLES
 from fleet.errors import UserError
-from fleet.rundir import run_id_of
+from fleet.recording.rundir import run_id_of
+from fleet.runtime.argtypes import positive_int, writable_dir
+from fleet.runtime.deploy import MAX_VEHICLES
 
 DEFAULT_PROJECT = "forklift-fleet"  # also in .env, which both compose tools read
 SECRETS = Path("deploy/secrets")  # compose.secure.yaml reads them here ($FLEET_SECRETS)
@@ -203,8 +203,8 @@ def run_secrets(args: argparse.Namespace) -> int:
 def write_secrets(folder: Path, force: bool) -> None:
     """Random logins for one deployment, readable by the containers' user only (compose
     mounts a secret file with its owner and mode)."""
-    from fleet.access import generate_credentials, write_private
-    from fleet.deploy import secret_files
+    from fleet.runtime.access import generate_credentials, write_private
+    from fleet.runtime.deploy import secret_files
 
     if (folder / "users").exists() and not force:
         raise UserError(f"{folder} holds logins already (--force replaces them)")

@@ -6,10 +6,10 @@ from __future__ import annotations
 import argparse
 from importlib import resources
 
-from fleet.cli_types import layout_arg, positive_int, scenario_arg
-from fleet.faults import KINDS, builtin_scenarios, check_against, load_scenario
-from fleet.layout import load_layout
-from fleet.layout_check import fleet_size
+from fleet.mission.faults import KINDS, builtin_scenarios, check_against, load_scenario
+from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
+from fleet.world.layout import load_layout
+from fleet.world.reachability import fleet_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {name:<18} {load_scenario(name).description}")
         return 0
     if args.action == "show":
-        print(resources.files("fleet.scenarios").joinpath(f"{args.scenario}.toml")
+        print(resources.files("fleet.mission.scenarios").joinpath(f"{args.scenario}.toml")
               .read_text(), end="")
         return 0
     scenario = load_scenario(args.scenario)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fleet.cli_types import layout_arg, positive_int, writable_file
+from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
-from fleet.layout import MAX_MAP_CELLS, builtin_names, load_layout
-from fleet.layout_check import reachability_problems
-from fleet.layout_generator import MIN_DEPTH, Shape, generate_toml
-from fleet.progress import ProgressBar
+from fleet.runtime.argtypes import layout_arg, positive_int, writable_file
+from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
+from fleet.world.layout import MAX_MAP_CELLS, builtin_names, load_layout
+from fleet.world.reachability import reachability_problems
 
 
 def register(sub: argparse._SubParsersAction) -> None:

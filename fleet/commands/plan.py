@@ -9,7 +9,12 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.cli_types import (
+from fleet.errors import UserError
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.planner import HybridAStar
+from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.runtime.argtypes import (
     MAX_SIM_SECONDS,
     layout_arg,
     png_file,
@@ -17,13 +22,8 @@ from fleet.cli_types import (
     sim_seconds,
     text_file,
 )
-from fleet.errors import UserError
-from fleet.layout import Layout, load_layout
-from fleet.maneuvers import body_cells_at_rest
-from fleet.places import filled_counts, resolve
-from fleet.planner import HybridAStar
-from fleet.reservations import Interval, ReservationTable
-from fleet.trajectory import PlanFailure, Pose, Trajectory
+from fleet.world.layout import Layout, load_layout
+from fleet.world.places import filled_counts, resolve
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -230,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"no trajectory: {result.reason.value}: {result.detail}")
     print(f"search: {result.expansions} expansions, {wall_ms:.1f} ms")
     if args.png:
-        from fleet.plotting import plan_figure, save_figure
+        from fleet.views.drawing import plan_figure, save_figure
 
         traj = result if isinstance(result, Trajectory) else None
         outcome = (f"arrives at t = {traj.t_end:.2f} s" if traj

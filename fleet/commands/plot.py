@@ -7,10 +7,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from fleet.cli_types import positive_int, sim_seconds, writable_dir
+from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
-from fleet.progress import ProgressBar
-from fleet.recording import RUN_FILE, Recording, read_recording, recording_file
+from fleet.recording.mcapfile import RUN_FILE, Recording, read_recording, recording_file
+from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
 
 FRAMES = 150
 FPS = 10
@@ -47,9 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def read_run(path: Path) -> tuple[Recording, dict]:
     """A run's recording (every segment of it) and its mission record
-    (fleet.recorded_mission.record_of). A truncated recording (a killed recorder) is read as
+    (fleet.recording.mission_record.record_of). A truncated recording (a killed recorder) is read as
     far as it goes, and windows without a recorder are skipped, each with a note."""
-    from fleet.recorded_mission import record_of
+    from fleet.recording.mission_record import record_of
 
     file = recording_file(path)
     recording = read_recording(path)
@@ -64,9 +64,9 @@ def read_run(path: Path) -> tuple[Recording, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fleet import mission_plots
-    from fleet.plotting import save_figure
-    from fleet.protocol import VehicleState
+    from fleet.views import plots as mission_plots
+    from fleet.views.drawing import save_figure
+    from fleet.wire.protocol import VehicleState
 
     recording, record = read_run(args.recording)
     layout = recording.layout()

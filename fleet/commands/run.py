@@ -13,9 +13,18 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fleet.bus import free_port
-from fleet.cli_help import strategies_epilog
-from fleet.cli_types import (
+from fleet.commands.helptext import strategies_epilog
+from fleet.commands.progress import MissionProgress, ProgressBar
+from fleet.commands.runs import write_summary
+from fleet.errors import UserError
+from fleet.mission.engine import EngineOptions
+from fleet.mission.faults import Scenario, check_against, load_scenario
+from fleet.mission.record import digest_of
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.inprocess import recorded_run, write_recording
+from fleet.recording.mcapfile import read_recording
+from fleet.recording.rundir import choose
+from fleet.runtime.argtypes import (
     integer,
     layout_arg,
     port,
@@ -26,22 +35,13 @@ from fleet.cli_types import (
     text_file,
     writable_dir,
 )
-from fleet.commands.runs import write_summary
-from fleet.distributed import RunSpec, run_processes
-from fleet.engine import EngineOptions
-from fleet.errors import UserError
-from fleet.faults import Scenario, check_against, load_scenario
-from fleet.layout import Layout, load_layout
-from fleet.layout_check import fleet_size
-from fleet.mission import Mission, MissionKind, Strategy
-from fleet.progress import MissionProgress, ProgressBar
-from fleet.record_inprocess import recorded_run, write_recording
-from fleet.record_io import digest_of
-from fleet.recording import read_recording
-from fleet.rundir import choose
+from fleet.runtime.bus import free_port
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.world.layout import Layout, load_layout
+from fleet.world.reachability import fleet_size
 
 if TYPE_CHECKING:
-    from fleet.analysis import Report
+    from fleet.analysis.analyze import Report
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -116,7 +116,7 @@ def engine_options(mission: Mission, layout: Layout, weights: Path | None,
                    progress=None) -> EngineOptions:
     mlp = None
     if mission.strategy is Strategy.ANN:
-        from fleet.ann import load_scorer
+        from fleet.dispatching.scorer import load_scorer
 
         mlp = load_scorer(layout, weights)
     return EngineOptions(mlp=mlp, progress=progress)
@@ -244,7 +244,7 @@ def command_line() -> str:
 
 def _report(path: Path) -> Report:
     """The analysis of the run's recording: its numbers and verdicts."""
-    from fleet.analysis import analyze
+    from fleet.analysis.analyze import analyze
 
     report = analyze(read_recording(path))
     write_summary(path.parent, report)  # what `fleet runs` lists

@@ -24,8 +24,7 @@ from typing import Any
 from mcap.reader import make_reader
 
 from fleet.errors import UserError
-from fleet.protocol import MissionDone
-from fleet.recording import (
+from fleet.recording.mcapfile import (
     MCAP_MAGIC,
     RUN_FILE,
     RecordingError,
@@ -33,7 +32,8 @@ from fleet.recording import (
     read_description,
     segment_paths,
 )
-from fleet.rundir import MARKER, RUNS, marker_of, run_id_of
+from fleet.recording.rundir import MARKER, RUNS, marker_of, run_id_of
+from fleet.wire.protocol import MissionDone
 
 SUMMARY = "summary.json"
 VERDICTS = ("safety", "work", "messages")
@@ -84,7 +84,7 @@ class RunEntry:
 
 
 def summary_of(report, run_id: str | None, segments: dict[str, int]) -> dict[str, Any]:
-    """What `fleet runs` keeps of a judged run (a fleet.analysis.Report)."""
+    """What `fleet runs` keeps of a judged run (a fleet.analysis.analyze.Report)."""
     verdicts = {"safety": report.safe, "work": report.work_done,
                 "messages": report.messages_lost == 0}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,

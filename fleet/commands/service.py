@@ -1,5 +1,5 @@
 """`fleet service NAME`: what each container of the compose deployment runs. The settings
-come from FLEET_* environment variables (fleet/deploy.py, docs/deployment.md); `--health` is
+come from FLEET_* environment variables (fleet/runtime/deploy.py, docs/deployment.md); `--health` is
 the container's health check."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import socket
 import sys
 from pathlib import Path
 
-from fleet.deploy import (
+from fleet.runtime.deploy import (
     ACL_FILE,
     MAX_VEHICLES,
     ROUTER_PORT,
@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "from FLEET_* environment variables",
                        description="What each container of the compose deployment runs: "
                        "the service's process, set up from FLEET_* environment variables "
-                       "(fleet/deploy.py, docs/deployment.md); --health is the container's "
+                       "(fleet/runtime/deploy.py, docs/deployment.md); --health is the container's "
                        "health check.")
     p.add_argument("name", choices=SERVICES, help="the service")
     p.add_argument("--health", action="store_true",
@@ -52,8 +52,8 @@ def run_service(args: argparse.Namespace) -> int:
     if args.name == "router" and config.secure:  # the run's rules; the logins are secrets
         import json
 
-        from fleet.access import router_acl
-        from fleet.bus import Keys
+        from fleet.runtime.access import router_acl
+        from fleet.runtime.bus import Keys
 
         Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
         Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
@@ -71,8 +71,8 @@ def healthy(name: str, config) -> bool:
                 return True
         except OSError:
             return False
-    from fleet.access import read_dictionary, vehicle_user
-    from fleet.bus import BusConfig, Keys, open_session, wait_alive
+    from fleet.runtime.access import read_dictionary, vehicle_user
+    from fleet.runtime.bus import BusConfig, Keys, open_session, wait_alive
 
     keys = Keys(config.run)
     user, password = "", ""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fleet.cli_types import integer, layout_arg, positive_int, writable_file
-from fleet.layout import load_layout
-from fleet.progress import ProgressBar
+from fleet.commands.progress import ProgressBar
+from fleet.runtime.argtypes import integer, layout_arg, positive_int, writable_file
+from fleet.world.layout import load_layout
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fleet.training import train
+    from fleet.mission.training import train
 
     layout = load_layout(args.layout)
     out = args.out or Path(f"{layout.name}.weights.json")

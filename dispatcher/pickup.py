@@ -1,0 +1,46 @@
+"""A restarted dispatcher picks the mission up (docs/faults.md): the stacks done are the goods
+the reservation service holds, each forklift says what it has committed, and the clock goes
+on from the last tick they heard. Asking each agent is also a barrier: an agent answers in
+turn, so a task the dead dispatcher had sent is committed (or failed) before it answers, and
+the table read afterwards holds everything."""
+
+from __future__ import annotations
+
+import math
+
+from dispatcher.liveness import ParticipantLost
+from dispatcher.remote import RemoteExecutor
+from fleet.mission.freeze import Held, Recovered, recovered_state
+from fleet.mission.seam import GOODS
+from fleet.params import DispatchParams
+from fleet.planning.trajectory import Pose, Trajectory
+from fleet.wire.convert import step_from_wire
+from fleet.wire.protocol import ProtocolError
+from fleet.world.layout import Layout
+
+
+def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
+            params: DispatchParams) -> tuple[Recovered, int, float]:
+    """The mission as the store and the forklifts hold it, and the last tick they heard: its
+    number and (real time) its wall anchor."""
+    statuses = [executor.status(v) for v in vehicles]
+    held = []
+    for s in statuses:
+        if s.down:
+            raise ParticipantLost(f"forklift {s.vehicle} was down when the dispatcher died; "
+                                  f"where it stopped is not known to a new dispatcher (not "
+                                  f"supported yet)")
+        try:
+            steps = tuple(step_from_wire(st, f"vehicle.status.steps[{i}]")
+                          for i, st in enumerate(s.steps))
+            pose = Pose.parse(s.pose)
+            leg = Trajectory(s.vehicle, Pose.parse(s.start), steps[-1].end, steps[0].t0,
+                             steps, (), 0) if steps else None
+        except (ValueError, ProtocolError) as exc:
+            raise ParticipantLost(f"forklift {s.vehicle}'s status is malformed: {exc}") from None
+        held.append(Held(s.vehicle, pose, leg, s.loaded, s.kind, s.down))
+    goods = {r.cell: r.t0 for r in executor.store.reservations(GOODS) if r.t1 == math.inf}
+    stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
+    last = max(statuses, key=lambda s: s.tick)
+    return recovered_state(stacks, goods, held, last.t, params.t_claim, params.t_unload), \
+        last.tick, last.wall

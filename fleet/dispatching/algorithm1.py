@@ -1,0 +1,226 @@
+"""Dispatcher core of seed 000 (Section 3, Algorithm 1): pure functions over a fleet view.
+
+Which vehicle plans next (`rank`, SelectInitialState / SelectAlteredState / SelectBackupState),
+where it goes (the scores of Equations 3, 4 and 9 from the time-expanded preliminary A*), and
+how decision failures are counted. The engine (in-process or distributed) owns the state and
+calls `Dispatcher.decide` whenever a vehicle must be given its next subtask.
+
+Reading of the seed where it is ambiguous (docs/dispatching.md says more):
+- I_d is printed as (t_find - t_i) [+ C5 for s1, s2]; with C2 > 0 that would make the greedy
+  strategy (argmax I_d) pick the farthest cluster. We use I_d = -(t_find - t_i) [+ C5 for the
+  far clusters], so that less travel time scores higher, as the text intends.
+- S_r must be positive to accept a return (Algorithm 1, line 24); with I_r = -(t_find - t_i) it
+  never is, so S_r = C3 + I_r when the preliminary search succeeds and 0 otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+
+from fleet.dispatching.prelim import cover_time, preliminary_astar
+from fleet.mission.spec import Strategy
+from fleet.params import DispatchParams
+from fleet.planning.geometry import Cell
+from fleet.planning.gridmap import GridMap
+from fleet.planning.reservations import ReservationView
+from fleet.planning.trajectory import Pose
+
+
+class TaskKind(Enum):
+    DELIVER = "deliver"  # to a shelf cluster (put goods in fill, take goods in empty)
+    RETURN = "return"  # to a picking station
+
+
+@dataclass(frozen=True)
+class VehicleView:
+    vehicle: int
+    pose: Pose
+    t_free: float  # end of its last trajectory plus handling time
+    next_task: TaskKind
+    linked_cluster: str | None  # cluster of its current or last subtask (MLP input, Eq. 7)
+    linked_kind: TaskKind | None
+
+
+@dataclass(frozen=True)
+class Target:
+    """A candidate goal: a cluster's next stack, or a station."""
+
+    name: str  # cluster or station name
+    goals: tuple[Pose, ...]  # poses with the forks at the stack / station
+    stack_cell: Cell | None = None
+    stack_index: int | None = None
+    remaining: int = 0  # G_d: stacks of the cluster still to do
+    far: bool = False  # s1/s2-like clusters far from the stations (C5, C7)
+
+
+@dataclass(frozen=True)
+class Score:
+    target: Target
+    found: bool
+    t_find: float
+    cover: float
+    I: float  # noqa: E741 - the seed's name
+    J0: float
+    S0: float
+    J_hat: float
+    value: float  # what the strategy maximises
+
+
+@dataclass(frozen=True)
+class Decision:
+    vehicle: int
+    t_i: float
+    kind: TaskKind
+    target: Target
+    scores: tuple[Score, ...]
+    postponed: bool
+
+
+@dataclass
+class DispatchOutcome:
+    decision: Decision | None
+    failures: int  # times n_current or t_i changed without a decision (the seed's count)
+    postponements: dict[int, float] = field(default_factory=dict)  # vehicle -> new t_free
+
+
+def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = ()) -> list[int]:
+    """Vehicles by the end of their last trajectory; vehicles whose last decision failed to be
+    planned go last, in the order they failed."""
+    order = [v.vehicle for v in sorted(vehicles, key=lambda v: (v.t_free, v.vehicle))]
+    late = [v for v in failed if v in order]
+    return [v for v in order if v not in late] + late
+
+
+MlpFn = Callable[[list[float]], list[float]]
+
+
+@dataclass
+class Dispatcher:
+    """Scores targets and runs Algorithm 1 for one decision at a time."""
+
+    grid_for: Callable[[], GridMap]
+    store: ReservationView
+    strategy: Strategy
+    params: DispatchParams = field(default_factory=DispatchParams)
+    cluster_names: tuple[str, ...] = ()
+    mlp: MlpFn | None = None
+    entrance_cells: Callable[[Target], tuple[Cell, ...]] = lambda t: ()
+
+    def mlp_inputs(self, vehicles: Sequence[VehicleView],
+                   remaining: dict[str, int]) -> list[float]:
+        """Equation (7): u_d = G_d if a delivery is linked to cluster d, -G_d for a return or
+        both, 0 if none."""
+        linked: dict[str, set[TaskKind]] = {}
+        for v in vehicles:
+            if v.linked_cluster is not None and v.linked_kind is not None:
+                linked.setdefault(v.linked_cluster, set()).add(v.linked_kind)
+        u = []
+        for name in self.cluster_names:
+            kinds = linked.get(name, set())
+            g = remaining.get(name, 0)
+            u.append(0.0 if not kinds else float(g) if kinds == {TaskKind.DELIVER} else -float(g))
+        return u
+
+    def score_clusters(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
+                       u: list[float]) -> list[Score]:
+        """Equations (3) and (9) for every cluster with work left."""
+        p = self.params
+        grid = self.grid_for()
+        j_hat = self.mlp(u) if (self.mlp is not None and self.strategy is Strategy.ANN) else None
+        scores = []
+        for target in targets:
+            cells = [g.cell for g in target.goals]
+            pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
+                                    cells, p.iter_pre)
+            if pre.found:
+                cover = cover_time(self.store, vehicle.vehicle,
+                                   self.entrance_cells(target) or cells, pre.t_find,
+                                   p.dt_entry)
+                travel = pre.t_find - t_i
+                i_d = -travel + (p.C5 if target.far else 0.0)
+                j0 = -cover + p.C2 * i_d + p.C3
+            else:
+                cover, i_d, j0 = 0.0, -float(p.iter_pre), p.C4
+            s0 = p.C1 * target.remaining + j0
+            jh = 0.0
+            if j_hat is not None:
+                jh = j_hat[self.cluster_names.index(target.name)]
+            value = {
+                Strategy.GREEDY: i_d,
+                Strategy.TRAFFIC: j0,
+                Strategy.BALANCE: float(target.remaining),
+                Strategy.COMPREHENSIVE: s0,
+                Strategy.ANN: (p.C1 * target.remaining + p.C9 * j0 + p.C10 * jh)
+                if j_hat is not None else s0,
+            }[self.strategy]
+            scores.append(Score(target, pre.found, pre.t_find, cover, i_d, j0, s0, jh, value))
+        return scores
+
+    def score_stations(self, vehicle: VehicleView, t_i: float,
+                       targets: Sequence[Target]) -> list[Score]:
+        """Equation (4), shifted by C3 so that a found station scores above zero."""
+        p = self.params
+        grid = self.grid_for()
+        scores = []
+        for target in targets:
+            cells = [g.cell for g in target.goals]
+            pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
+                                    cells, p.iter_pre)
+            i_r = -(pre.t_find - t_i) if pre.found else 0.0
+            s_r = p.C3 + i_r if pre.found else 0.0
+            scores.append(Score(target, pre.found, pre.t_find, 0.0, i_r, s_r, s_r, 0.0, s_r))
+        return scores
+
+    def accepted(self, scores: Sequence[Score], kind: TaskKind) -> Score | None:
+        """The best target, if the decision is solid: a found preliminary trajectory and, for
+        the scored strategies, a positive score (Algorithm 1, lines 16 and 24)."""
+        found = [s for s in scores if s.found]
+        if not found:
+            return None
+        best = max(found, key=lambda s: s.value)  # first of equals: targets are ordered
+        if kind is TaskKind.RETURN or self.strategy in (Strategy.COMPREHENSIVE, Strategy.ANN):
+            return best if best.S0 > 0 else None
+        return best
+
+    def decide(self, vehicles: Sequence[VehicleView], failed: Sequence[int],
+               targets_for: Callable[[VehicleView], list[Target]],
+               remaining: dict[str, int]) -> DispatchOutcome:
+        """Algorithm 1: select the vehicle and its goal, re-selecting on failure.
+
+        `failed` lists the vehicles whose decided trajectory could not be planned since the
+        last success (the engine's `fail` flag, kept across calls so that two failing vehicles
+        cannot starve the others). When every vehicle has failed, the backup state postpones
+        the one that has waited longest by dt_i and tries it again at the later instant."""
+        by_id = {v.vehicle: v for v in vehicles}
+        order = rank(vehicles, failed)
+        selected: set[int] = set(failed)
+        failures = 0
+        postponements: dict[int, float] = {}
+        u = self.mlp_inputs(vehicles, remaining)
+        for _ in range(self.params.iter_dispatch):
+            postponed = False
+            fresh = [v for v in order if v not in selected]
+            if fresh:
+                current = fresh[0]  # SelectInitialState, then SelectAlteredState
+            else:
+                current = min(order, key=lambda v: (postponements.get(v, by_id[v].t_free), v))
+                postponed = True  # SelectBackupState: postpone by dt_i
+                base = postponements.get(current, by_id[current].t_free)
+                postponements[current] = base + self.params.dt_postpone
+            selected.add(current)
+            view = by_id[current]
+            t_i = postponements.get(current, view.t_free)
+            targets = targets_for(view)
+            if view.next_task is TaskKind.DELIVER:
+                scores = self.score_clusters(view, t_i, targets, u)
+            else:
+                scores = self.score_stations(view, t_i, targets)
+            best = self.accepted(scores, view.next_task)
+            if best is not None:
+                return DispatchOutcome(Decision(current, t_i, view.next_task, best.target,
+                                                tuple(scores), postponed), failures,
+                                       postponements)
+            failures += 1
+        return DispatchOutcome(None, failures, postponements)

@@ -1,0 +1,1 @@
+"""The run of one mission, the same in one process or many: what the mission is, the engine's decision loop, the seam to the executors and pacers, faults and the freeze cascade, the mission record."""

@@ -1,0 +1,164 @@
+"""Where a forklift is at a sim time, from the trajectories it committed (pure; no I/O).
+
+A forklift stands at rest at its pose until its next trajectory starts, then follows the
+trajectory maneuver by maneuver, and stands at the goal after it ends. Within a maneuver the
+progress is linear in time; the cells a maneuver sweeps are reserved for its whole window, so
+any progress profile stays inside the reservation.
+
+States are published at the instants k * period of one grid shared by every forklift (0.5 s
+of sim time in fast mode, 0.1 s of wall time in real time), so a verifier can compare the
+forklifts' poses at the very same instants. In fast mode a tick at t publishes the instants
+before t only: a subtask decided at t may still start at t.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from fleet.planning.maneuvers import Manner, world_pose
+from fleet.planning.trajectory import Pose, Step, Trajectory
+from fleet.wire.protocol import VehicleState
+from fleet.world.layout import Layout
+
+FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
+REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (10 Hz)
+
+
+def state_period(mode: str, speed: float) -> float:
+    """Sim seconds between two states: the fast grid, or 10 Hz of wall time but never coarser
+    than the fast grid, so the recording's safety check sees as much at any speed."""
+    if mode != "realtime":
+        return FAST_STATE_PERIOD_S
+    return min(speed * REALTIME_STATE_PERIOD_S, FAST_STATE_PERIOD_S)
+
+
+@dataclass
+class Leg:
+    trajectory: Trajectory
+    loaded: bool
+    # A forklift that went down stands still over [pause_from, pause_to) part-way through
+    # its maneuver, then completes it: the leg runs that much later.
+    pause_from: float = math.inf
+    pause_to: float = math.inf
+
+    @property
+    def t_end(self) -> float:
+        if self.pause_from >= self.trajectory.t_end:
+            return self.trajectory.t_end
+        return self.trajectory.t_end + (self.pause_to - self.pause_from)
+
+    def local(self, t: float) -> float:
+        """The trajectory's own time at t (time stands still while paused)."""
+        if t < self.pause_from:
+            return t
+        return self.pause_from if t < self.pause_to else t - (self.pause_to - self.pause_from)
+
+
+class Drive:
+    def __init__(self, vehicle: int, pose: Pose, layout: Layout) -> None:
+        self.vehicle = vehicle
+        self.layout = layout
+        self.rest_pose = pose  # where the forklift stands when no leg covers t
+        self.legs: list[Leg] = []
+        self.loaded = False
+        self.next_k = 0  # grid index of the next state to publish
+
+    @property
+    def pose(self) -> Pose:
+        """Where the forklift will stand once every committed leg is driven."""
+        return self.legs[-1].trajectory.goal if self.legs else self.rest_pose
+
+    def add(self, trajectory: Trajectory, loaded: bool) -> None:
+        self.legs.append(Leg(trajectory, loaded))
+
+    def cut(self, t: float) -> None:
+        """Drive nothing committed after the maneuver in progress at t (legs not started by
+        t go; the one in progress ends with that maneuver)."""
+        kept = []
+        for leg in self.legs:
+            if leg.trajectory.t_start >= t:
+                continue
+            steps = tuple(s for s in leg.trajectory.steps if s.t0 < leg.local(t))
+            if steps and len(steps) < len(leg.trajectory.steps):
+                traj = leg.trajectory
+                leg = Leg(Trajectory(traj.vehicle, traj.start, steps[-1].end, traj.t_start,
+                                     steps, (), traj.expansions), leg.loaded,
+                          leg.pause_from, leg.pause_to)
+            kept.append(leg)
+        self.legs = kept
+
+    def stop(self, t: float) -> None:
+        """Stand still from t where the forklift is (it is down), until `resume`."""
+        self.cut(t)
+        if self.legs and self.legs[-1].t_end > t:
+            self.legs[-1].pause_from, self.legs[-1].pause_to = t, math.inf
+
+    def resume(self, t: float) -> None:
+        """Move again from t: the maneuver stopped part-way is completed first."""
+        for leg in self.legs:
+            if leg.pause_to == math.inf and leg.pause_from <= t:
+                leg.pause_to = t
+
+    def restart(self, rest: Pose, loaded: bool, step: Step | None, t_stop: float,
+                t_resume: float) -> None:
+        """Become what the dispatcher says (a restarted agent knows nothing of itself): at
+        rest at `rest`, or stopped part-way through `step` since t_stop, moving from
+        t_resume. States before t_resume are not published again."""
+        self.legs = []
+        self.rest_pose, self.loaded = rest, loaded
+        if step is not None:
+            self.rest_pose = step.start
+            traj = Trajectory(self.vehicle, step.start, step.end, step.t0, (step,), (), 0)
+            self.legs = [Leg(traj, loaded, t_stop, t_resume)]
+
+    def skip_to(self, t: float, period: float) -> None:
+        """Publish no state for instants before t (the forklift was down: nothing was said)."""
+        self.next_k = max(self.next_k, math.ceil(t / period - 1e-9))
+
+    def forget_before(self, t: float) -> None:
+        """Drop legs that ended before t (their goal becomes the rest pose, their load what it
+        carries); the last leg stays."""
+        while len(self.legs) > 1 and self.legs[0].t_end < t:
+            leg = self.legs.pop(0)
+            self.rest_pose, self.loaded = leg.trajectory.goal, leg.loaded
+
+    def state_at(self, t: float) -> VehicleState:
+        pose, loaded = self.rest_pose, self.loaded
+        for leg in self.legs:
+            traj = leg.trajectory
+            if t < traj.t_start:
+                break
+            loaded = leg.loaded
+            if t >= leg.t_end:
+                pose = traj.goal
+                continue
+            tau = leg.local(t)
+            for step in traj.steps:
+                if step.t0 <= tau < step.t1:
+                    s = (tau - step.t0) / (step.t1 - step.t0)
+                    speed = int(max(step.v0, step.v1)) if step.manner is not Manner.STOP else 0
+                    return self._state(step.start, step.manner, s, speed, loaded,
+                                       step.manner.label)
+        return self._state(pose, Manner.STOP, 0.0, 0, loaded, "")
+
+    def due(self, until: float, period: float, before: bool = False) -> list[float]:
+        """The grid instants k * period up to `until` (with `before`, only those before it)
+        not published yet, from t = 0 on; marks them published."""
+        if not (math.isfinite(until) and math.isfinite(period) and period > 0):
+            raise ValueError(f"no grid instants up to {until} every {period} s")
+        last = math.floor(until / period)
+        while (last + 1) * period <= until:  # floor of a rounded quotient can fall one short
+            last += 1
+        while last >= 0 and (last * period > until or (before and last * period == until)):
+            last -= 1
+        out = [k * period for k in range(self.next_k, last + 1)]
+        self.next_k = max(self.next_k, last + 1)
+        return out
+
+    def _state(self, start: Pose, manner: Manner, s: float, speed: int, loaded: bool,
+               label: str) -> VehicleState:
+        x, y, theta = world_pose(start.cell, start.heading, manner, s, self.layout.cell_size)
+        ox, oy = self.layout.origin
+        return VehicleState(self.vehicle, str(start), speed, label, loaded, x + ox, y + oy,
+                            theta)

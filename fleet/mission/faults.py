@@ -1,0 +1,258 @@
+"""Fault scenarios as data (docs/faults.md): a TOML file listing faults at simulation times.
+
+A scenario is pure data: loading checks every field and names the fault and the field that is
+wrong. What each kind does to a run lives elsewhere (the injector in `fleet run` applies the
+process faults, the dispatcher detects and recovers, fleet/mission/freeze.py decides who stops).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from enum import StrEnum
+from importlib import resources
+from pathlib import Path
+
+from fleet.errors import UserError
+from fleet.planning.geometry import Cell
+from fleet.world.layout import Layout, parse_cells
+
+
+class ScenarioError(UserError):
+    """A scenario file that cannot be used; the message names the fault and the field."""
+
+
+class FaultKind(StrEnum):
+    KILL_VEHICLE = "kill_vehicle"
+    STALL_VEHICLE = "stall_vehicle"
+    CUT_LINK = "cut_link"
+    SLOW_PLANNER = "slow_planner"
+    KILL_SERVICE = "kill_service"
+    CLOSE_ZONE = "close_zone"
+    VEHICLE_BREAKDOWN = "vehicle_breakdown"
+
+
+SERVICES = ("reservation", "dispatcher", "recorder")
+
+
+@dataclass(frozen=True)
+class KindSpec:
+    summary: str
+    required: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+
+
+KINDS: dict[FaultKind, KindSpec] = {
+    FaultKind.KILL_VEHICLE: KindSpec(
+        "SIGKILL the forklift's agent process; with `duration`, start a new one that many "
+        "sim seconds later", ("vehicle",), ("duration",)),
+    FaultKind.STALL_VEHICLE: KindSpec(
+        "SIGSTOP the agent process for `duration` sim seconds, then SIGCONT",
+        ("vehicle", "duration")),
+    FaultKind.CUT_LINK: KindSpec(
+        "the agent loses its zenoh link silently for `duration` sim seconds; its process "
+        "keeps running", ("vehicle", "duration")),
+    FaultKind.SLOW_PLANNER: KindSpec(
+        "the agent's planning takes `factor` times longer for `duration` sim seconds",
+        ("vehicle", "duration", "factor")),
+    FaultKind.KILL_SERVICE: KindSpec(
+        "SIGKILL the reservation service, the dispatcher or the recorder and start "
+        "a new one `downtime` wall seconds later (default 1)", ("service",), ("downtime",)),
+    FaultKind.CLOSE_ZONE: KindSpec(
+        "cells unusable (a spill) for `duration` sim seconds: `cells` as in layouts, e.g. "
+        "\"10,4..12,5\"", ("cells", "duration")),
+    FaultKind.VEHICLE_BREAKDOWN: KindSpec(
+        "the forklift stops (its process alive) and reports it; repaired after `duration` "
+        "sim seconds if given", ("vehicle",), ("duration",)),
+}
+VEHICLE_KINDS = {k for k, spec in KINDS.items() if "vehicle" in spec.required}
+DEFAULT_DOWNTIME_S = 1.0
+
+
+@dataclass(frozen=True)
+class Fault:
+    kind: FaultKind
+    at: float  # sim seconds
+    vehicle: int | None = None
+    duration: float | None = None  # sim seconds the fault lasts (None: for good)
+    factor: float = 1.0
+    service: str | None = None
+    downtime: float = DEFAULT_DOWNTIME_S  # wall seconds a killed service stays down
+    cells: tuple[Cell, ...] = ()
+
+    @property
+    def until(self) -> float:
+        """When the fault ends (infinity: it does not)."""
+        return math.inf if self.duration is None else self.at + self.duration
+
+    def describe(self) -> str:
+        who = f"forklift {self.vehicle}" if self.vehicle is not None else \
+            self.service or f"{len(self.cells)} cells"
+        span = f" for {self.duration:g} s" if self.duration is not None else ""
+        return f"{self.kind.value} of {who} at {self.at:g} s{span}"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    faults: tuple[Fault, ...]
+
+    def instants(self) -> list[float]:
+        """Every sim time at which a fault starts or ends: the fast clock stops there."""
+        times = {f.at for f in self.faults} | {f.until for f in self.faults}
+        return sorted(t for t in times if math.isfinite(t))
+
+    def vehicle_faults(self) -> list[Fault]:
+        return [f for f in self.faults if f.kind in VEHICLE_KINDS]
+
+
+def builtin_scenarios() -> list[str]:
+    files = resources.files("fleet.mission.scenarios")
+    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A shipped scenario by name (`kill_vehicle`, `mixed`, ...) or a TOML file by path."""
+    text = str(name_or_path)
+    if text in builtin_scenarios():
+        source = resources.files("fleet.mission.scenarios").joinpath(f"{text}.toml").read_text()
+        return parse_scenario(source, f"scenario {text}")
+    path = Path(text)
+    if not path.is_file():
+        raise ScenarioError(f"scenario {text!r} is neither a shipped scenario "
+                            f"({', '.join(builtin_scenarios())}) nor a file")
+    return parse_scenario(path.read_text(), text)
+
+
+def parse_scenario(source: str, where: str) -> Scenario:
+    try:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{where}: not valid TOML: {exc}") from None
+    unknown = sorted(set(data) - {"name", "description", "fault"})
+    if unknown:
+        raise ScenarioError(f"{where}: unknown key {unknown[0]!r} (expected name, "
+                            f"description and [[fault]] tables)")
+    name = _text(data.get("name", Path(where).stem), f"{where}: name")
+    description = _text(data.get("description", ""), f"{where}: description")
+    raw = data.get("fault", [])
+    if not isinstance(raw, list) or not all(isinstance(f, dict) for f in raw):
+        raise ScenarioError(f"{where}: faults must be [[fault]] tables")
+    faults = tuple(_fault(f, f"{where}: fault {i + 1}") for i, f in enumerate(raw))
+    _check_overlaps(faults, where)
+    return Scenario(name, description, faults)
+
+
+def _fault(data: dict, where: str) -> Fault:
+    kind_text = data.get("kind")
+    try:
+        kind = FaultKind(kind_text)
+    except ValueError:
+        raise ScenarioError(f"{where}: kind {kind_text!r} is not one of "
+                            f"{', '.join(k.value for k in FaultKind)}") from None
+    spec = KINDS[kind]
+    where = f"{where} ({kind.value})"
+    allowed = {"kind", "at", *spec.required, *spec.optional}
+    unknown = sorted(set(data) - allowed)
+    if unknown:
+        raise ScenarioError(f"{where}: unknown field {unknown[0]!r} (it takes "
+                            f"{', '.join(sorted(allowed - {'kind'}))})")
+    missing = [k for k in ("at", *spec.required) if k not in data]
+    if missing:
+        raise ScenarioError(f"{where}: missing field {missing[0]!r}")
+    fields: dict = {"kind": kind, "at": _seconds(data["at"], f"{where}: at", zero=True)}
+    if "vehicle" in data:
+        vehicle = data["vehicle"]
+        if not isinstance(vehicle, int) or isinstance(vehicle, bool) or vehicle < 1:
+            raise ScenarioError(f"{where}: vehicle must be a forklift number (1, 2, ...), "
+                                f"not {vehicle!r}")
+        fields["vehicle"] = vehicle
+    if "duration" in data:
+        fields["duration"] = _seconds(data["duration"], f"{where}: duration")
+    if "downtime" in data:
+        fields["downtime"] = _seconds(data["downtime"], f"{where}: downtime", zero=True)
+    if "factor" in data:
+        factor = _number(data["factor"], f"{where}: factor")
+        if not 1.0 <= factor <= 1000.0:
+            raise ScenarioError(f"{where}: factor must be between 1 and 1000, not {factor}")
+        fields["factor"] = factor
+    if "service" in data:
+        if data["service"] not in SERVICES:
+            raise ScenarioError(f"{where}: service {data['service']!r} is not one of "
+                                f"{', '.join(SERVICES)}")
+        fields["service"] = data["service"]
+    if "cells" in data:
+        fields["cells"] = _cells(data["cells"], f"{where}: cells")
+    return Fault(**fields)
+
+
+def _text(value: object, where: str) -> str:
+    if not isinstance(value, str):
+        raise ScenarioError(f"{where} must be a string, not {value!r}")
+    return value
+
+
+def _number(value: object, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or \
+            not math.isfinite(value):
+        raise ScenarioError(f"{where} must be a finite number, not {value!r}")
+    return float(value)
+
+
+def _seconds(value: object, where: str, zero: bool = False) -> float:
+    seconds = _number(value, where)
+    if seconds < 0 or (seconds == 0 and not zero) or seconds > 1e6:
+        raise ScenarioError(f"{where} must be {'at least 0' if zero else 'positive'} and at "
+                            f"most 1e6 seconds, not {value!r}")
+    return seconds
+
+
+def _cells(value: object, where: str) -> tuple[Cell, ...]:
+    items = [value] if isinstance(value, str) else value
+    if not isinstance(items, list) or not items or \
+            not all(isinstance(v, str) for v in items):
+        raise ScenarioError(f"{where} must be a cell \"c,r\", a range \"c0,r0..c1,r1\" or a "
+                            f"list of them, not {value!r}")
+    cells: list[Cell] = []
+    for text in items:
+        try:
+            cells += parse_cells(text, where)
+        except UserError as exc:
+            raise ScenarioError(str(exc)) from None
+    if len(cells) > 10_000:
+        raise ScenarioError(f"{where}: {len(cells)} cells is more than a zone can be")
+    return tuple(dict.fromkeys(cells))
+
+
+def _check_overlaps(faults: tuple[Fault, ...], where: str) -> None:
+    """One fault at a time per forklift, and per service: a second one on top of the first
+    would have no clear meaning (kill a stalled process?)."""
+    seen: dict[object, tuple[int, Fault]] = {}
+    order = sorted(enumerate(faults), key=lambda p: p[1].at)
+    for i, fault in order:
+        who = fault.vehicle if fault.kind in VEHICLE_KINDS else fault.service
+        if who is None:
+            continue
+        if who in seen:
+            j, before = seen[who]
+            end = before.at + before.downtime if before.kind is FaultKind.KILL_SERVICE \
+                else before.until
+            if fault.at <= end:
+                raise ScenarioError(f"{where}: fault {i + 1} ({fault.describe()}) starts "
+                                    f"before fault {j + 1} ({before.describe()}) is over")
+        seen[who] = (i, fault)
+
+
+def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:
+    """Refuse faults that name a forklift the run does not have or cells off the map."""
+    for i, fault in enumerate(scenario.faults):
+        where = f"scenario {scenario.name}: fault {i + 1} ({fault.describe()})"
+        if fault.vehicle is not None and fault.vehicle > vehicles:
+            raise ScenarioError(f"{where}: the run has forklifts 1 to {vehicles}")
+        off = [c for c in fault.cells if not (0 <= c[0] < layout.cols and
+                                              0 <= c[1] < layout.rows)]
+        if off:
+            raise ScenarioError(f"{where}: cell {off[0]} is off the {layout.cols}x"
+                                f"{layout.rows} map")

@@ -1,0 +1,195 @@
+"""The seam between the dispatching loop and the forklifts (DESIGN.md section 7, the one
+store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
+`Pacer` holds the loop to a clock.
+
+In one process, `LocalExecutor` plans with the improved hybrid A* against a
+`ReservationTable` it owns and `NoPacer` lets the loop run flat out. The distributed runtime
+implements the same two interfaces over zenoh (`dispatcher.remote`): a task goes to the
+forklift's agent process, which plans against its mirror of the reservation service and
+commits there; the pacer publishes the clock. Everything the engine decides is therefore the
+same code in both, which is what makes a fast-mode run of processes equal, bit for bit, the
+in-process run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from fleet.dispatching.algorithm1 import TaskKind
+from fleet.errors import UserError
+from fleet.mission.freeze import Disruption, Freeze
+from fleet.planning.geometry import Cell
+from fleet.planning.maneuvers import body_cells_at_rest
+from fleet.planning.planner import PlannerCache
+from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.wire.protocol import Change
+
+
+class VehicleLost(UserError):
+    """A forklift went away in the middle of a request (its agent's liveliness is gone)."""
+
+    def __init__(self, vehicle: int, message: str) -> None:
+        super().__init__(message)
+        self.vehicle = vehicle
+
+
+@dataclass(frozen=True)
+class Task:
+    """One subtask for one forklift: drive from `start` at rest at `t_i` to any of `goals`,
+    on the static map of the warehouse with the stacks in `filled` occupied."""
+
+    vehicle: int
+    kind: TaskKind
+    start: Pose
+    t_i: float
+    goals: tuple[Pose, ...]
+    filled: frozenset[Cell]
+    loaded: bool  # carrying goods on this trip
+
+
+class Executor(Protocol):
+    @property
+    def store(self) -> ReservationTable:
+        """The reservation table as the dispatcher sees it (current after every call below)."""
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        """The vehicle stands at its start pose, reserved to infinity."""
+
+    def execute(self, task: Task) -> Trajectory | PlanFailure:
+        """Plan the task and commit its trajectory (releasing the vehicle's parking from t_i);
+        a failure commits nothing."""
+
+    def reserve_goods(self, intervals: Sequence[Interval]) -> None:
+        """Reserve stack cells for the goods on them (owner GOODS); refused silently where a
+        vehicle holds the cell, exactly as the table refuses a conflicting commit."""
+
+    def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+               zone_until: float, moving: list[int], standing: list[int]) -> None:
+        """Make the table say what the freezes say: each frozen forklift holds its cells from
+        t to infinity and nothing else after t, the goods of cancelled deliveries go, the zone
+        is held by ZONE until `zone_until`; the `moving` forklifts are told to stop after
+        their maneuver in progress, the `standing` ones (broken down) to stand where they
+        are at t."""
+
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+        """A forklift that was down moves again from t, completing its interrupted maneuver."""
+
+
+class Pacer(Protocol):
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        """Called before each dispatching decision with the earliest instant the next decision
+        can be for and each active vehicle's free time; returns the free times to decide with
+        (a real-time clock moves those that already passed to a reachable instant)."""
+
+    def finish(self, t_end: float) -> None:
+        """The mission is over at sim time t_end."""
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        """Hold the clock at each fault instant up to t_next and say what happened to the
+        schedule there (forklifts down or back, zones closed; [] if nothing did). `down` are
+        the forklifts the engine holds as down: nobody waits for them."""
+
+    def instant(self, t: float) -> float:
+        """The first sim instant, not before t, at which a change decided now can still take
+        effect (a freeze every forklift must hear of before it)."""
+
+
+GOODS = 0  # owner id of stacks with goods on them, in the reservation table
+ZONE = -1  # owner id of closed zones
+
+
+class LocalExecutor:
+    """Plans in this process against a table this process owns."""
+
+    def __init__(self, planners: PlannerCache) -> None:
+        self.planners = planners
+        self.table = ReservationTable()
+        self.changes: list[Change] = []  # what a reservation service would have published
+
+    def _log(self, vehicle: int, intervals: Sequence[Interval],
+             release_from: float | None, cells: Sequence[Cell] | None = None) -> None:
+        op = "commit" if intervals else "release"
+        self.changes.append(Change(self.table.revision, op, vehicle,
+                                   [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals],
+                                   release_from,
+                                   release_cells=None if cells is None else list(cells)))
+
+    @property
+    def store(self) -> ReservationTable:
+        return self.table
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        cells = body_cells_at_rest(pose.cell, pose.heading)
+        conflict = self.table.park(vehicle, cells, 0.0)
+        if conflict is not None:
+            raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
+                             f"{conflict.other}")
+        self._log(vehicle, [Interval(c, 0.0, math.inf) for c in cells], None)
+
+    def execute(self, task: Task) -> Trajectory | PlanFailure:
+        result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
+                                                     task.goals, self.table)
+        if isinstance(result, Trajectory):
+            conflict = self.table.commit(task.vehicle, result.intervals,
+                                         release_from=result.t_start)
+            if conflict is not None:  # the planner checked against this very table
+                raise AssertionError(f"planned trajectory conflicts: {conflict}")
+            self._log(task.vehicle, result.intervals, result.t_start)
+        return result
+
+    def reserve_goods(self, intervals: Sequence[Interval]) -> None:
+        if self.table.commit(GOODS, intervals) is None:
+            self._log(GOODS, intervals, None)
+
+    def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+               zone_until: float, moving: list[int], standing: list[int]) -> None:
+        for change in freeze_changes(t, freezes, goods, zone, zone_until):
+            owner, intervals, release_from, cells = change
+            if intervals:
+                conflict = self.table.commit(owner, intervals)
+                if conflict is not None:  # the cascade left nothing in the way
+                    raise AssertionError(f"freeze at t={t} conflicts: {conflict}")
+            else:
+                self.table.release(owner, release_from, cells)
+            self._log(owner, intervals, release_from, cells)
+
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+        pass  # the table already holds the forklift's cells to infinity
+
+
+FreezeChange = tuple[int, list[Interval], float | None, list[Cell] | None]
+
+
+def freeze_changes(t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
+                   zone_until: float) -> list[FreezeChange]:
+    """The table changes of a freeze, in an order each is valid in: first every release
+    (the frozen forklifts' plans after t, the cancelled goods), then the frozen cells to
+    infinity, then the zone. (owner, intervals to add, release from, only these cells)."""
+    out: list[FreezeChange] = [(f.vehicle, [], t, None) for f in freezes]
+    if goods:
+        out.append((GOODS, [], t, sorted(goods)))
+    out += [(f.vehicle, [Interval(c, t, math.inf) for c in sorted(f.cells)], None, None)
+            for f in freezes]
+    if zone:
+        out.append((ZONE, [Interval(c, t, zone_until) for c in sorted(zone)], None, None))
+    return out
+
+
+class NoPacer:
+    """The in-process reference: no clock to wait for."""
+
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        return t_free
+
+    def finish(self, t_end: float) -> None:
+        pass
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        return []
+
+    def instant(self, t: float) -> float:
+        return t

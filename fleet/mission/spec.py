@@ -1,0 +1,33 @@
+"""Missions as data: what the fleet must do, on which layout, with which strategy and seed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+from fleet.planning.trajectory import Pose
+
+
+class MissionKind(Enum):
+    FILL = "fill"  # goods picked at stations, delivered to stacks in fill order
+    EMPTY = "empty"  # goods fetched from stacks in reverse fill order, dropped at stations
+
+
+class Strategy(Enum):
+    """The five dispatching strategies of seed 000, Section 6.2."""
+
+    GREEDY = "greedy"  # argmax I_d
+    TRAFFIC = "traffic"  # traffic-jam removal: argmax J_d,0
+    BALANCE = "balance"  # argmax G_d
+    COMPREHENSIVE = "comprehensive"  # argmax S_d,0
+    ANN = "ann"  # argmax S_d (Equation 9): comprehensive corrected by the MLP
+
+
+@dataclass(frozen=True)
+class Mission:
+    layout: str = "paper"
+    kind: MissionKind = MissionKind.FILL
+    strategy: Strategy = Strategy.ANN
+    vehicles: int | None = None  # None: as many as the layout has start poses
+    seed: int = 0
+    starts: tuple[Pose, ...] = field(default=())  # empty: the layout's start poses

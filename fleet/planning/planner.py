@@ -1,0 +1,403 @@
+"""Improved hybrid A* of seed 000 (Algorithm 2, Sections 4.1 to 4.4).
+
+Nodes are (cell, heading, t_zero); each keeps the FixMovingTime end instants per speed level.
+Children come from the eleven manners; Algorithm 3 decides their fate against the static map
+and the reservations of the other vehicles: gamma = 1 (the end pose collides) closes the child
+node, gamma = 2 (only the sweep between the poses collides) skips it. Collisions are checked
+over the whole window the maneuver may occupy, from the earliest instant it may start to the
+instant it ends at v_zero, so any speed profile later chosen along the path stays inside what
+was checked. Waiting is the stop manner. A goal is reached only where the vehicle can then park
+to infinity.
+
+The search is deterministic: ties in f break on insertion order.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+from functools import cache
+from typing import NamedTuple
+
+import numpy as np
+
+from fleet.params import ManeuverTimes, SearchParams, VehicleDims
+from fleet.planning.geometry import Cell
+from fleet.planning.gridmap import GridMap
+from fleet.planning.maneuvers import Kind, Manner, Move, move_table
+from fleet.planning.reservations import ReservationView
+from fleet.planning.trajectory import (
+    FailureReason,
+    PlanFailure,
+    Pose,
+    Step,
+    Trajectory,
+    merge_intervals,
+)
+from fleet.planning.velocity import INF, EndTimes, VelocityPlanner, fix_ending_levels, start_times
+
+Key = tuple[int, int, int, float]
+
+
+class _Edge(NamedTuple):
+    manner: Manner
+    kind: Kind
+    direction: int
+    x: int
+    y: int
+    heading: int
+    end_cells: tuple[Cell, ...]
+    body_cells: tuple[Cell, ...]  # start and intermediate cells
+
+
+@cache
+def _candidate_edges(moves: tuple[Move, ...], x: int, y: int) -> tuple[_Edge, ...]:
+    """Every move from (x, y) with absolute cells, whatever the map: planners for different
+    fill states share these and only filter them by their own static map."""
+    return tuple(_Edge(move.manner, move.manner.kind, move.manner.direction,
+                       x + move.end_delta[0], y + move.end_delta[1], move.end_heading,
+                       tuple((x + a, y + b) for a, b in sorted(move.end_cells)),
+                       tuple((x + a, y + b) for a, b in sorted(move.start_cells
+                                                               | move.middle_cells)))
+                 for move in moves)
+
+
+@dataclass
+class _Node:
+    key: Key
+    parent: _Node | None
+    manner: Manner | None
+    times: EndTimes
+    last_dir: int  # direction of the last moving maneuver (0: none yet)
+    turns: int
+    lanes: int
+    inversions: int
+    g: float
+    f: float
+
+
+def heuristic(cell: Cell, heading: int, goal: Pose) -> float:
+    """Equation (13): Manhattan distance in cells plus heading difference in quarter turns."""
+    dh = abs(heading - goal.heading) % 4
+    return abs(goal.cell[0] - cell[0]) + abs(goal.cell[1] - cell[1]) + min(dh, 4 - dh)
+
+
+class HybridAStar:
+    """One planner per map (and body); `plan` answers one query."""
+
+    def __init__(self, grid: GridMap, dims: VehicleDims = VehicleDims(),
+                 times: ManeuverTimes = ManeuverTimes(),
+                 params: SearchParams = SearchParams()) -> None:
+        self.grid = grid
+        self.params = params
+        self.velocity = VelocityPlanner(times)
+        self.move_of = move_table(dims, grid.cell_size)
+        self.moves = [tuple(self.move_of[m, h] for m in Manner) for h in range(4)]
+        self._static: dict[tuple[int, Manner], list[list[int]]] | None = None
+        self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
+        self._component: dict[tuple[Cell, int], int] | None = None
+        self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
+        for (kind, _, _), dt in self.velocity.links.items():
+            self._shortest[kind] = min(dt, self._shortest.get(kind, INF))
+
+    def component(self, pose: Pose) -> int | None:
+        """Connected component of the pose in the static pose graph (moves are reversible,
+        so reachability is symmetric); None for a pose on a blocked cell."""
+        if self._component is None:
+            self._component = self._components()
+        return self._component.get((pose.cell, pose.heading))
+
+    def _components(self) -> dict[tuple[Cell, int], int]:
+        """Label every free pose with its connected component: union-find over the static
+        moves, vectorised (hook roots, then jump pointers until every edge agrees)."""
+        g = self.grid
+        if self._static is None:
+            self._static = self._static_table()
+
+        def node(x, y, h):
+            return (x * g.rows + y) * 4 + h
+
+        src, dst = [], []
+        for (heading, manner), gamma in self._static.items():
+            if manner is Manner.STOP:
+                continue
+            # a move's gamma ignores its start cells: require the start pose free as well
+            usable = (np.asarray(gamma) == 0) & (np.asarray(self._static[heading, Manner.STOP])
+                                                  == 0)
+            xs, ys = np.nonzero(usable)
+            move = self.move_of[manner, heading]
+            src.append(node(xs, ys, heading))
+            dst.append(node(xs + move.end_delta[0], ys + move.end_delta[1], move.end_heading))
+        u, v = np.concatenate(src), np.concatenate(dst)
+        parent = np.arange(g.cols * g.rows * 4)
+        while True:
+            ru, rv = parent[u], parent[v]
+            if np.array_equal(ru, rv):
+                break
+            np.minimum.at(parent, np.maximum(ru, rv), np.minimum(ru, rv))
+            while not np.array_equal(jumped := parent[parent], parent):
+                parent = jumped
+        labels = parent.tolist()
+        return {((x, y), h): labels[node(x, y, h)]
+                for h in range(4) for (x, y) in np.argwhere(
+                    np.asarray(self._static[h, Manner.STOP]) == 0).tolist()}
+
+    def static_gamma(self, cell: Cell, move: Move) -> int:
+        """Algorithm 3, lines 4-7 and 15-18: 1 if the end pose hits the static map, 2 if only
+        the sweep does, else 0."""
+        x, y = cell
+        if 0 <= x < self.grid.cols and 0 <= y < self.grid.rows:
+            if self._static is None:
+                self._static = self._static_table()
+            return self._static[move.heading, move.manner][x][y]
+        if not self.grid.all_free((x + a, y + b) for a, b in move.end_cells):
+            return 1
+        return 2 if not self.grid.all_free((x + a, y + b) for a, b in move.middle_cells) else 0
+
+    def _static_table(self) -> dict[tuple[int, Manner], list[list[int]]]:
+        """static_gamma for every cell of the map at once, per (heading, manner): a cell is
+        free where the map is, so "all cells of a move free" is an AND of shifted copies of
+        the free mask. Building a planner for a new fill state is then a few milliseconds,
+        which the dispatcher and every agent do often."""
+        g = self.grid
+        pad = 1 + max(max(abs(a), abs(b)) for move in self.move_of.values()
+                      for a, b in move.swept)
+        free = np.zeros((g.cols + 2 * pad, g.rows + 2 * pad), dtype=bool)
+        free[pad:pad + g.cols, pad:pad + g.rows] = True
+        for x, y in g.blocked:
+            if 0 <= x < g.cols and 0 <= y < g.rows:
+                free[pad + x, pad + y] = False
+
+        def all_free(offsets: frozenset[Cell]) -> np.ndarray:
+            ok = np.ones((g.cols, g.rows), dtype=bool)
+            for a, b in offsets:
+                ok &= free[pad + a:pad + a + g.cols, pad + b:pad + b + g.rows]
+            return ok
+
+        table = {}
+        for (manner, heading), move in self.move_of.items():
+            gamma = np.where(all_free(move.end_cells), 0, 1)
+            gamma[(gamma == 0) & ~all_free(move.middle_cells)] = 2
+            table[heading, manner] = gamma.tolist()
+        return table
+
+    def edges(self, x: int, y: int, heading: int) -> list[_Edge]:
+        """The statically valid moves from a pose, with absolute cells (cached per map)."""
+        found = self._edges.get((x, y, heading))
+        if found is None:
+            found = [edge for move, edge in zip(self.moves[heading],
+                                                _candidate_edges(self.moves[heading], x, y),
+                                                strict=True)
+                     if not self.static_gamma((x, y), move)]  # static collisions always fail
+            self._edges[x, y, heading] = found
+        return found
+
+    def plan(self, vehicle: int, start: Pose, t_start: float, goals: list[Pose] | tuple[Pose, ...],
+             store: ReservationView) -> Trajectory | PlanFailure:
+        """Plan from `start` at rest at `t_start` to any of `goals` (arriving at rest)."""
+        table = self.moves
+        start_cells = [(start.cell[0] + a, start.cell[1] + b)
+                       for a, b in table[start.heading][0].start_cells]
+        if not self.grid.all_free(start_cells):
+            return PlanFailure(FailureReason.START_BLOCKED,
+                               f"start pose {start} lies on a blocked cell", 0)
+        t_probe = math.nextafter(t_start, INF)
+        for c in start_cells:
+            other = store.conflict(vehicle, c, t_start, t_probe)
+            if other is not None:
+                return PlanFailure(FailureReason.START_BLOCKED,
+                                   f"start cell {c} is held by vehicle {other} at t={t_start}", 0)
+
+        goals = list(dict.fromkeys(goals))
+        reachable_goals = [g for g in goals if self._goal_can_park(vehicle, g, store)]
+        if not reachable_goals:
+            return PlanFailure(FailureReason.GOAL_BLOCKED,
+                               "every goal pose is static-blocked or parked on by another "
+                               "vehicle: " + ", ".join(str(g) for g in goals), 0)
+        here = self.component(start)
+        reachable_goals = [g for g in reachable_goals if self.component(g) == here]
+        if not reachable_goals:
+            return PlanFailure(FailureReason.NO_PATH,
+                               f"no goal pose can be reached from {start} on the static map", 0)
+        goal_set = {(g.cell, g.heading) for g in reachable_goals}
+
+        def h(cell: Cell, heading: int) -> float:
+            return min(heuristic(cell, heading, g) for g in reachable_goals)
+
+        root = _Node((start.cell[0], start.cell[1], start.heading, t_start), None, None,
+                     start_times(t_start), 0, 0, 0, 0, 0.0, 0.0)
+        if (start.cell, start.heading) in goal_set:
+            return self._build(vehicle, start, root, 0)
+        root.f = self.params.C11 * h(start.cell, start.heading)
+
+        C11, p = self.params.C11, self.params
+        open_heap: list[tuple[float, int, _Node]] = [(root.f, 0, root)]
+        best_f: dict[Key, float] = {root.key: root.f}
+        closed: set[Key] = set()
+        counter = 1
+        expansions = 0
+        h_cache: dict[tuple[int, int, int], float] = {}
+        conflict = store.conflict
+        child_times = self.velocity.child_times
+        while open_heap:
+            f, _, node = heapq.heappop(open_heap)
+            if node.key in closed or best_f.get(node.key) != f:
+                continue  # stale heap entry
+            closed.add(node.key)
+            expansions += 1
+            if expansions == p.deadline_check_at and not self._deadline_reachable(
+                    vehicle, start, t_start, goal_set, store):
+                return PlanFailure(FailureReason.NO_PATH,
+                                   "vehicles parked for good cut every way to the goal "
+                                   f"(checked after {expansions} expansions)", expansions)
+            if expansions > p.iter_search:
+                return PlanFailure(FailureReason.ITERATION_CAP,
+                                   f"no path within iter_search={p.iter_search} expansions",
+                                   expansions - 1)
+            x, y, heading, _ = node.key
+            parent_at = node.times.at
+            for edge in self.edges(x, y, heading):
+                manner = edge.manner
+                d = edge.direction
+                reverses = d != 0 and node.last_dir != 0 and d != node.last_dir
+                times = child_times(node.times, edge.kind, manner is Manner.STOP or reverses)
+                tz = times.at[0]
+                ex, ey, eh = edge.x, edge.y, edge.heading
+                key = (ex, ey, eh, tz)
+                if key in closed:
+                    continue
+                t_from = min(parent_at[v] for v in times.start_level if v is not None)
+                t_to = max(t for t in times.at if t < INF)
+                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.end_cells):
+                    closed.add(key)  # gamma = 1
+                    continue
+                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.body_cells):
+                    continue  # gamma = 2
+                at_goal = ((ex, ey), eh) in goal_set
+                if at_goal and any(conflict(vehicle, c, tz, INF) is not None
+                                   for c in edge.end_cells):
+                    closed.add(key)  # cannot park here at this time
+                    continue
+                turns = node.turns + (edge.kind is Kind.TURN)
+                lanes = node.lanes + (edge.kind is Kind.LANE)
+                inversions = node.inversions + reverses
+                g = (tz - t_start + p.p_turn * turns + p.p_lane * lanes
+                     + p.p_inv * inversions)
+                hc = h_cache.get((ex, ey, eh))
+                if hc is None:
+                    hc = h_cache[ex, ey, eh] = h((ex, ey), eh)
+                fc = g + C11 * hc
+                previous = best_f.get(key)
+                if previous is not None and previous <= fc:
+                    continue
+                child = _Node(key, node, manner, times, d or node.last_dir, turns, lanes,
+                              inversions, g, fc)
+                if at_goal:
+                    return self._build(vehicle, start, child, expansions)
+                best_f[key] = fc
+                heapq.heappush(open_heap, (fc, counter, child))
+                counter += 1
+        return PlanFailure(FailureReason.NO_PATH,
+                           f"open list exhausted after {expansions} expansions", expansions)
+
+    def _deadline_reachable(self, vehicle: int, start: Pose, t_start: float,
+                            goal_set: set[tuple[Cell, int]], store: ReservationView) -> bool:
+        """A relaxation that can only say too much: earliest arrivals over the static pose
+        graph with every maneuver at its shortest duration, where a cell may be used only if
+        the maneuver ends before another vehicle parks on it for good. Other reservations are
+        ignored (waiting can outlast them). False proves that no trajectory exists, since a real
+        one departs no earlier and moves no faster."""
+        shortest = self._shortest
+        deadline: dict[Cell, float] = {}
+
+        def usable_until(cell: Cell) -> float:
+            t = deadline.get(cell)
+            if t is None:
+                t = deadline[cell] = store.parked_from(vehicle, cell)
+            return t
+
+        best = {(start.cell[0], start.cell[1], start.heading): t_start}
+        heap = [(t_start, start.cell[0], start.cell[1], start.heading)]
+        while heap:
+            t, x, y, heading = heapq.heappop(heap)
+            if best[x, y, heading] < t:
+                continue
+            if ((x, y), heading) in goal_set:
+                return True
+            for edge in self.edges(x, y, heading):
+                if edge.kind is Kind.STOP:
+                    continue
+                t_end = t + shortest[edge.kind]
+                if any(usable_until(c) < t_end for c in edge.end_cells + edge.body_cells):
+                    continue
+                key = (edge.x, edge.y, edge.heading)
+                if t_end < best.get(key, INF):
+                    best[key] = t_end
+                    heapq.heappush(heap, (t_end, *key))
+        return False
+
+    def _goal_can_park(self, vehicle: int, goal: Pose, store: ReservationView) -> bool:
+        cells = [(goal.cell[0] + a, goal.cell[1] + b)
+                 for a, b in self.moves[goal.heading][0].start_cells]
+        if not self.grid.all_free(cells):
+            return False
+        # Someone parked there for good can never be waited out.
+        return all(store.conflict(vehicle, c, 1e300, INF) is None for c in cells)
+
+    @staticmethod
+    def _collides(vehicle: int, x: int, y: int, offsets: frozenset[Cell], t0: float, t1: float,
+                  store: ReservationView) -> bool:
+        return any(store.conflict(vehicle, (x + a, y + b), t0, t1) is not None
+                   for a, b in offsets)
+
+    def _build(self, vehicle: int, start: Pose, goal_node: _Node,
+               expansions: int) -> Trajectory:
+        chain = []
+        node: _Node | None = goal_node
+        while node is not None and node.parent is not None:
+            chain.append(node)
+            node = node.parent
+        chain.reverse()
+        levels = fix_ending_levels([n.times for n in chain])
+        steps = []
+        for node, level in zip(chain, levels, strict=True):
+            parent = node.parent
+            assert parent is not None and node.manner is not None
+            v0 = node.times.start_level[level]
+            assert v0 is not None
+            move = self.move_of[node.manner, parent.key[2]]
+            px, py = parent.key[0], parent.key[1]
+            cells = frozenset((px + a, py + b) for a, b in move.swept)
+            steps.append(Step(node.manner, Pose((px, py), parent.key[2]),
+                              Pose((node.key[0], node.key[1]), node.key[2]),
+                              parent.times.at[v0], node.times.at[level], v0, level, cells))
+        goal = Pose((goal_node.key[0], goal_node.key[1]), goal_node.key[2])
+        t_end = steps[-1].t1 if steps else goal_node.key[3]
+        goal_cells = [(goal.cell[0] + a, goal.cell[1] + b)
+                      for a, b in self.moves[goal.heading][0].start_cells]
+        pieces = [(c, s.t0, s.t1) for s in steps for c in s.cells]
+        pieces += [(c, t_end, INF) for c in goal_cells]
+        return Trajectory(vehicle, start, goal, steps[0].t0 if steps else t_end, tuple(steps),
+                          merge_intervals(pieces), expansions)
+
+
+class PlannerCache:
+    """One planner per fill state of a layout (its static map), the most recent few kept: a
+    mission asks for the current state and the next few candidates, and building a planner
+    (map + reachability) costs far more than a search."""
+
+    def __init__(self, grid_for, dims: VehicleDims, size: int = 16) -> None:
+        self.grid_for = grid_for  # filled cells -> GridMap
+        self.dims = dims
+        self.size = size
+        self._planners: dict[frozenset[Cell], HybridAStar] = {}  # least recently used first
+
+    def get(self, filled: frozenset[Cell]) -> HybridAStar:
+        planner = self._planners.pop(filled, None)
+        if planner is None:
+            planner = HybridAStar(self.grid_for(filled), self.dims)
+            if len(self._planners) >= self.size:
+                del self._planners[next(iter(self._planners))]
+        self._planners[filled] = planner
+        return planner

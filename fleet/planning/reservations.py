@@ -1,0 +1,239 @@
+"""Space-time reservation table: per grid cell, sorted non-overlapping [t0, t1) intervals, each
+owned by one vehicle.
+
+This is the data structure the reservation service holds; planners talk to it through the
+`ReservationView` protocol, so an in-process table and a remote store are interchangeable.
+Intervals of one vehicle that touch or overlap in a cell are merged, so a cell's intervals never
+overlap at all; intervals of different vehicles may touch (one leaves at t, the other enters at
+t) but never overlap. Every change bumps the revision and is kept as a `Change`, from which a
+mirror can follow the table (`diff`, `apply`).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from fleet.planning.geometry import Cell
+
+INF = math.inf
+
+
+@dataclass(frozen=True, order=True)
+class Interval:
+    """One cell reserved over [t0, t1); t1 may be infinity (parked)."""
+
+    cell: Cell
+    t0: float
+    t1: float
+
+    def __post_init__(self) -> None:
+        if not (self.t0 < self.t1) or math.isnan(self.t0) or math.isnan(self.t1):
+            raise ValueError(f"interval on cell {self.cell} must have t0 < t1, got "
+                             f"[{self.t0}, {self.t1})")
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """An interval that cannot be reserved because another vehicle holds the cell."""
+
+    cell: Cell
+    t0: float
+    t1: float
+    other: int
+
+
+@dataclass(frozen=True)
+class Reservation:
+    vehicle: int
+    cell: Cell
+    t0: float
+    t1: float
+
+
+@dataclass(frozen=True)
+class Change:
+    """One accepted change: a commit (release from `release_from`, then add `intervals`) or a
+    release (no intervals)."""
+
+    revision: int
+    vehicle: int
+    release_from: float | None
+    intervals: tuple[Interval, ...] = ()
+    release_cells: frozenset[Cell] | None = None  # release only these cells (None: all)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    revision: int
+    reservations: tuple[Reservation, ...]
+
+
+class ReservationView(Protocol):
+    """What a planner needs from a store."""
+
+    def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None: ...
+
+    def parked_from(self, vehicle: int, cell: Cell) -> float:
+        """When another vehicle takes `cell` for good (infinity if none does)."""
+        ...
+
+
+@dataclass
+class _CellLine:
+    starts: list[float] = field(default_factory=list)
+    ends: list[float] = field(default_factory=list)
+    owners: list[int] = field(default_factory=list)
+
+
+class ReservationTable:
+    """The table itself. Not thread-safe; the service serialises access."""
+
+    def __init__(self) -> None:
+        self._cells: dict[Cell, _CellLine] = {}
+        self._cells_of: dict[int, set[Cell]] = {}
+        self.revision = 0
+        self.changes: list[Change] = []
+
+    # -- queries -------------------------------------------------------------------------------
+    def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None:
+        """The other vehicle holding `cell` somewhere in [t0, t1), or None."""
+        line = self._cells.get(cell)
+        if line is None:
+            return None
+        i = bisect.bisect_left(line.starts, t1) - 1
+        while i >= 0 and line.ends[i] > t0:
+            if line.owners[i] != vehicle:
+                return line.owners[i]
+            i -= 1
+        return None
+
+    def parked_from(self, vehicle: int, cell: Cell) -> float:
+        """When another vehicle takes `cell` for good (infinity if none does). Intervals do not
+        overlap, so only a cell's last interval can run to infinity."""
+        line = self._cells.get(cell)
+        if line is None or line.ends[-1] != INF or line.owners[-1] == vehicle:
+            return INF
+        return line.starts[-1]
+
+    def first_conflict(self, vehicle: int, intervals: Iterable[Interval]) -> Conflict | None:
+        for iv in intervals:
+            other = self.conflict(vehicle, iv.cell, iv.t0, iv.t1)
+            if other is not None:
+                return Conflict(iv.cell, iv.t0, iv.t1, other)
+        return None
+
+    def reservations(self, vehicle: int | None = None) -> list[Reservation]:
+        """All reservations (of one vehicle, or of all), sorted by cell then time."""
+        out = []
+        cells = self._cells_of.get(vehicle, set()) if vehicle is not None else self._cells
+        for cell in sorted(cells):
+            line = self._cells[cell]
+            for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
+                if vehicle is None or owner == vehicle:
+                    out.append(Reservation(owner, cell, t0, t1))
+        return out
+
+    def vehicles(self) -> list[int]:
+        return sorted(v for v, cells in self._cells_of.items() if cells)
+
+    # -- changes -------------------------------------------------------------------------------
+    def commit(self, vehicle: int, intervals: Iterable[Interval],
+               release_from: float | None = None) -> Conflict | None:
+        """All or nothing: if no interval conflicts with another vehicle, release this
+        vehicle's reservations from `release_from` on (when given) and add the intervals.
+        Returns the first conflict (and changes nothing) otherwise."""
+        intervals = tuple(intervals)
+        conflict = self.first_conflict(vehicle, intervals)
+        if conflict is not None:
+            return conflict
+        self._apply(Change(self.revision + 1, vehicle, release_from, intervals))
+        return None
+
+    def release(self, vehicle: int, from_t: float = -INF,
+                cells: Iterable[Cell] | None = None) -> None:
+        """Drop what the vehicle holds from `from_t` on (intervals straddling it are cut), on
+        `cells` only when given."""
+        self._apply(Change(self.revision + 1, vehicle, from_t, (),
+                           None if cells is None else frozenset(cells)))
+
+    def park(self, vehicle: int, cells: Iterable[Cell], t0: float) -> Conflict | None:
+        """Reserve cells from t0 to infinity."""
+        return self.commit(vehicle, [Interval(c, t0, INF) for c in cells])
+
+    def apply(self, change: Change) -> None:
+        """Replay a change made elsewhere (a mirror following the authoritative table)."""
+        if change.revision != self.revision + 1:
+            raise ValueError(f"change revision {change.revision} does not follow table "
+                             f"revision {self.revision}")
+        self._apply(change)
+
+    def _apply(self, change: Change) -> None:
+        if change.release_from is not None:
+            self._release(change.vehicle, change.release_from, change.release_cells)
+        for iv in change.intervals:
+            self._insert(change.vehicle, iv)
+        self.revision = change.revision
+        self.changes.append(change)
+
+    def _release(self, vehicle: int, from_t: float, only: frozenset[Cell] | None) -> None:
+        for cell in list(self._cells_of.get(vehicle, ())):
+            if only is not None and cell not in only:
+                continue
+            line = self._cells[cell]
+            keep = [(s, e, o) for s, e, o in zip(line.starts, line.ends, line.owners, strict=True)
+                    if o != vehicle or s < from_t]
+            keep = [(s, min(e, from_t) if o == vehicle else e, o) for s, e, o in keep]
+            self._set_line(cell, keep)
+            if not any(o == vehicle for _, _, o in keep):
+                self._cells_of[vehicle].discard(cell)
+
+    def _insert(self, vehicle: int, iv: Interval) -> None:
+        line = self._cells.get(iv.cell)
+        entries = list(zip(line.starts, line.ends, line.owners, strict=True)) if line else []
+        t0, t1 = iv.t0, iv.t1
+        kept = []
+        for s, e, o in entries:
+            if o == vehicle and s <= t1 and e >= t0:  # touching or overlapping: merge
+                t0, t1 = min(t0, s), max(t1, e)
+            else:
+                kept.append((s, e, o))
+        kept.append((t0, t1, vehicle))
+        kept.sort()
+        self._set_line(iv.cell, kept)
+        self._cells_of.setdefault(vehicle, set()).add(iv.cell)
+
+    def _set_line(self, cell: Cell, entries: list[tuple[float, float, int]]) -> None:
+        if not entries:
+            self._cells.pop(cell, None)
+            return
+        self._cells[cell] = _CellLine([s for s, _, _ in entries], [e for _, e, _ in entries],
+                                      [o for _, _, o in entries])
+
+    # -- wire forms ----------------------------------------------------------------------------
+    def snapshot(self) -> Snapshot:
+        return Snapshot(self.revision, tuple(self.reservations()))
+
+    @classmethod
+    def from_snapshot(cls, snap: Snapshot) -> ReservationTable:
+        table = cls()
+        table.load(snap)
+        return table
+
+    def load(self, snap: Snapshot) -> None:
+        """Become the table of the snapshot (in place, so holders of this object see it)."""
+        self._cells, self._cells_of, self.changes = {}, {}, []
+        by_vehicle: dict[int, list[Interval]] = {}
+        for r in snap.reservations:
+            by_vehicle.setdefault(r.vehicle, []).append(Interval(r.cell, r.t0, r.t1))
+        for vehicle, intervals in sorted(by_vehicle.items()):
+            for iv in intervals:
+                self._insert(vehicle, iv)
+        self.revision = snap.revision
+
+    def diff(self, since: int) -> list[Change]:
+        """Changes after revision `since` (all of them kept in memory)."""
+        return [c for c in self.changes if c.revision > since]

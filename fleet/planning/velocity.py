@@ -1,0 +1,98 @@
+"""Velocity planner of seed 000 (Section 4.2, Tables 1 and 2, Figure 11).
+
+A maneuver starts and ends at one of three speed levels. The duration of a maneuver depends on
+its kind and on its start and end levels (Table 1); v_high exists only when going straight and
+zero <-> high within one straight move is illegal, which leaves the 16 legal links of Figure 11.
+
+FixMovingTime (Table 2) keeps, for every search node, the earliest instant at which the maneuver
+can end at each level. `child_times` computes it as a minimum over the legal links; this equals
+Table 2 row by row (tests check it) and also remembers which start level achieved each end
+level, so a found trajectory can be timed exactly by walking back from v_zero at the goal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+from fleet.params import ManeuverTimes
+from fleet.planning.maneuvers import Kind
+
+INF = math.inf
+
+
+class Speed(IntEnum):
+    ZERO = 0
+    MID = 1
+    HIGH = 2
+
+
+def link_durations(times: ManeuverTimes) -> dict[tuple[Kind, Speed, Speed], float]:
+    """The 16 legal (kind, start level, end level) links and their durations (Table 1)."""
+    z, m, h = Speed.ZERO, Speed.MID, Speed.HIGH
+    s, t, lane = Kind.STRAIGHT, Kind.TURN, Kind.LANE
+    return {
+        (s, z, z): times.T1, (s, z, m): times.T2, (s, m, z): times.T2, (s, m, m): times.T3,
+        (s, m, h): times.T4, (s, h, m): times.T4, (s, h, h): times.T5,
+        (t, z, z): times.T6, (t, z, m): times.T7, (t, m, z): times.T7, (t, m, m): times.T8,
+        (lane, z, z): times.T9, (lane, z, m): times.T10, (lane, m, z): times.T10,
+        (lane, m, m): times.T11,
+        (Kind.STOP, z, z): times.T12,
+    }
+
+
+@dataclass(frozen=True)
+class EndTimes:
+    """Earliest end instant per end level (INF: level not reachable), and the start level
+    that achieves it (None for unreachable or the trajectory start)."""
+
+    at: tuple[float, float, float]
+    start_level: tuple[Speed | None, Speed | None, Speed | None]
+
+    @property
+    def t_zero(self) -> float:
+        return self.at[Speed.ZERO]
+
+
+def start_times(t_i: float) -> EndTimes:
+    """The trajectory starts at rest at t_i."""
+    return EndTimes((t_i, INF, INF), (None, None, None))
+
+
+class VelocityPlanner:
+    """FixMovingTime over the 16 legal links."""
+
+    def __init__(self, times: ManeuverTimes = ManeuverTimes()) -> None:
+        self.links = link_durations(times)
+        self._by_kind: dict[Kind, list[tuple[Speed, Speed, float]]] = {}
+        for (kind, v0, v1), dt in self.links.items():
+            self._by_kind.setdefault(kind, []).append((v0, v1, dt))
+
+    def child_times(self, parent: EndTimes, kind: Kind, from_rest: bool) -> EndTimes:
+        """End times of a maneuver of this kind after a parent that ends as `parent` says.
+        from_rest (the stopping flag mu = 1): the maneuver must start at v_zero, as after a
+        stop or when the direction of travel reverses."""
+        best = [INF, INF, INF]
+        via: list[Speed | None] = [None, None, None]
+        for v0, v1, dt in self._by_kind[kind]:
+            if from_rest and v0 is not Speed.ZERO:
+                continue
+            t = parent.at[v0] + dt
+            if t < best[v1]:
+                best[v1] = t
+                via[v1] = v0
+        return EndTimes((best[0], best[1], best[2]), (via[0], via[1], via[2]))
+
+
+def fix_ending_levels(chain: list[EndTimes]) -> list[Speed]:
+    """Pick each maneuver's end level along a found path: the last ends at v_zero, and each
+    earlier one ends at the level its successor started from."""
+    levels: list[Speed] = []
+    level: Speed | None = Speed.ZERO
+    for times in reversed(chain):
+        assert level is not None
+        levels.append(level)
+        level = times.start_level[level]
+    levels.reverse()
+    return levels

@@ -1,0 +1,141 @@
+"""The in-process reference run written as a recording: the same keys, schemas, senders and
+sequence numbers a run of processes puts on the wire, so analysis and plots have one input.
+
+The engine's dispatch events are recorded as they happened; the reservation changes are the
+ones its table applied; the forklifts' states are driven from the committed trajectories on
+the fast-mode grid, exactly as each agent would publish them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleet.dispatching.algorithm1 import TaskKind
+from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
+from fleet.mission.engine import Engine, EngineOptions, MissionRecord
+from fleet.mission.faults import Scenario
+from fleet.mission.freeze import ScheduledPacer
+from fleet.mission.record import digest_of, record_to_dict
+from fleet.mission.spec import Mission, MissionKind
+from fleet.recording.mcapfile import RecordingWriter, mission_info
+from fleet.runtime.bus import Keys
+from fleet.wire.protocol import Change, Message, MissionDone, MissionInfo, Progress, encode
+from fleet.world.layout import Layout
+from reservation.store import change_time
+
+
+@dataclass(frozen=True)
+class Outgoing:
+    key: str
+    message: Message
+    sender: str
+    sim_time: float
+
+
+def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
+                   drive_log: dict[int, list[tuple]] | None = None) -> list[Outgoing]:
+    """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick,
+    driven as its agent was told to (`Engine.drive_log`; without one, every subtask of the
+    record); a forklift that is down says nothing until it moves again."""
+    until = max(record.end_time, record.all_parked_time)
+    fill = record.mission.kind is MissionKind.FILL
+    out = []
+    for vehicle, start in zip(record.vehicles, record.starts, strict=True):
+        drive = Drive(vehicle, start, layout)
+        silent: list[tuple[float, float]] = []
+        ops = drive_log[vehicle] if drive_log is not None else [
+            ("add", s.trajectory, (s.kind is TaskKind.DELIVER) == fill)
+            for s in record.subtasks if s.vehicle == vehicle]
+        for op, *args in ops:
+            if op == "add":
+                drive.add(*args)
+            elif op == "cut":
+                drive.cut(args[0])
+            elif op == "stop":
+                drive.stop(args[0])
+                silent.append((args[0], math.inf))
+            elif op == "resume":
+                drive.resume(args[0])
+                silent[-1] = (silent[-1][0], args[0])
+        out += [Outgoing(keys.vehicle_state(vehicle), drive.state_at(t), f"vehicle-{vehicle}",
+                         t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
+                if not any(t0 <= t < t1 for t0, t1 in silent)]
+    return out
+
+
+def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
+                     events: list[tuple[Message, float]], changes: list[Change],
+                     done: MissionDone, drive_log: dict[int, list[tuple]],
+                     keys: Keys | None = None) -> list[Outgoing]:
+    """Everything a run of processes would have published, in sim-time order."""
+    keys = keys or Keys()
+    key_of = {"dispatch.subtask": keys.dispatch_subtask, "dispatch.stack": keys.dispatch_stack,
+              "dispatch.failure": keys.dispatch_failure,
+              "dispatch.progress": keys.dispatch_progress, "dispatch.halt": keys.dispatch_halt,
+              "dispatch.resume": keys.dispatch_resume, "dispatch.reopen": keys.dispatch_reopen,
+              "dispatch.zone": keys.dispatch_zone}
+    stream = [Outgoing(keys.dispatch_mission, info, "dispatcher", 0.0)]
+    stream += [Outgoing(keys.reservation_change, c, "reservation", change_time(c))
+               for c in changes]
+    stream += [Outgoing(key_of[m.TYPE], m, "dispatcher", t) for m, t in events]
+    stream += vehicle_states(record, layout, keys, drive_log)
+    stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
+    stream.append(Outgoing(keys.dispatch_done, done, "dispatcher", record.end_time))
+    return stream
+
+
+def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
+                 command: str = "", scenario: Scenario | None = None
+                 ) -> tuple[MissionDone, list[Outgoing]]:
+    """Run the mission in this process (with the scenario's faults at their instants): its
+    result, and everything a run of processes would have published (options.progress still
+    hears the progress)."""
+    events: list[tuple[Message, float]] = []
+    told = options.progress
+
+    def progress(done: int, total: int, t: float, failures: int) -> None:
+        events.append((Progress(done, total, t, failures), t))
+        if told is not None:
+            told(done, total, t, failures)
+
+    options.progress = progress
+    options.events = lambda message, t: events.append((message, t))
+    t0 = time.perf_counter()
+    pacer = ScheduledPacer(scenario) if scenario is not None else None
+    engine = Engine(mission, options, layout, pacer=pacer)
+    record = engine.run()
+    as_dict = record_to_dict(record)
+    done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
+                       wall_s=time.perf_counter() - t0)
+    info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)
+    return done, inprocess_stream(info, record, layout, events, engine.executor.changes, done,
+                                  engine.drive_log)
+
+
+def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:
+    """Write a stream as a recording, with its Foxglove view channels. Log times are the
+    run's start (now) plus sim time, as the view channels have them. Written in a run
+    directory, it carries that run's id, as a recorder's segment does (RecordingWriter)."""
+    from fleet.views.scene import SceneViews
+
+    writer = RecordingWriter(path)
+    seq: dict[tuple[str, str], int] = defaultdict(int)
+    now = time.time_ns()
+    info = next(o.message for o in stream if isinstance(o.message, MissionInfo))
+    writer.describe(info)
+    views = SceneViews(layout, now, kind=info.kind, vehicles=info.vehicles)
+    for topic, message, log_ns in views.start():
+        writer.write_view(topic, message, log_ns)
+    try:
+        for o in stream:
+            seq[o.key, o.sender] += 1
+            payload = encode(o.message, o.sender, seq[o.key, o.sender], o.sim_time)
+            writer.write(o.key, payload, views.log_ns(o.sim_time), o.sim_time)
+            for topic, message, log_ns in views.on_message(o.key, o.message, o.sim_time):
+                writer.write_view(topic, message, log_ns)
+    finally:
+        writer.close()

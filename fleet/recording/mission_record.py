@@ -1,0 +1,278 @@
+"""The mission record (the dict of fleet.mission.record) rebuilt from a recording's dispatch
+events, so plots and summaries read recordings, including those of runs that never ended.
+
+A run recorded in segments has windows in which no recorder ran (docs/recording.md). What a
+dispatcher announced then is in its final record (dispatch/done: every subtask, failure and
+stack of that dispatcher), so it is taken from there. A dispatcher that died and was replaced
+(docs/faults.md) left no record: what it announced while no recorder ran is known nowhere,
+and the rebuilt record's `incomplete` says so (an empty list: the figures are whole).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import Any
+
+from fleet.mission.record import subtask_dict
+from fleet.recording.mcapfile import Recorded, Recording, RecordingError
+from fleet.wire.protocol import (
+    DecisionFailure,
+    Halt,
+    MissionDone,
+    MissionInfo,
+    Progress,
+    ProtocolError,
+    Resume,
+    StackDone,
+    StackReopened,
+    SubtaskEvent,
+    ZoneClosed,
+    build_message,
+)
+
+# A stream whose numbers fall this far below the highest seen is a restarted sender whose
+# first messages were not recorded (a stream shared by threads may swap a few neighbours).
+RESTART_DROP = 16
+# What each dispatcher publishes, each key numbered from 1 by each dispatcher that runs.
+EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, Halt, Resume,
+          StackReopened, ZoneClosed)
+# Those the numbers are made of: the first three are in the final record too; a halt's stand
+# time and a stack reopened are in the recording only.
+IN_RECORD = (SubtaskEvent, DecisionFailure, StackDone)
+RECORDING_ONLY = (Halt, Resume, StackReopened)
+NOUNS = {SubtaskEvent: "subtask", DecisionFailure: "announced decision failure",
+         StackDone: "stack done", Halt: "halt", Resume: "resume",
+         StackReopened: "stack reopened"}
+
+
+@dataclass(frozen=True)
+class Restart:
+    """A new dispatcher took over (docs/faults.md): the first message of it recorded, and
+    the last of the dispatchers' messages recorded before (receive times, Unix ns)."""
+
+    at_ns: int
+    last_before_ns: int
+    unrecorded: bool  # no recorder ran for a while between: the old one's last words unknown
+
+
+@dataclass(frozen=True)
+class Final:
+    """The last dispatcher's record (its result, dispatch/done), checked: all it announced."""
+
+    record: dict
+    since_ns: int  # where that dispatcher's messages begin (receive time)
+    subtasks: list[dict]  # as the recording's are read (subtask_dict)
+    failures: list[dict]
+    stacks: list[list]  # [cluster, index, t]
+
+
+def record_of(recording: Recording) -> dict[str, Any]:
+    info = recording.info
+    if info is None:
+        raise RecordingError(f"{recording.path}: no mission message (dispatch/mission) was "
+                             f"recorded, so the run is unknown")
+    restarts = dispatcher_restarts(recording)
+    final = final_record(recording, restarts)
+    incomplete = unknown(recording, restarts, final is not None)
+    heard = recording.of(SubtaskEvent)
+    subtasks = [subtask_dict(m) for _, m in heard]
+    stacks = [[m.cluster, m.index, m.t] for _, m in recording.of(StackDone)]
+    failures = [_failure(m) for _, m in recording.of(DecisionFailure)]
+    if final is not None:
+        # Those of the dispatchers before it as recorded, then all it announced.
+        own = {_frozen(s) for s in final.subtasks}
+        if any(r.log_ns >= final.since_ns and _frozen(s) not in own
+               for (r, _), s in zip(heard, subtasks, strict=True)):
+            incomplete.append("the dispatcher's record lacks subtasks it announced")
+        subtasks = [s for s in subtasks if _frozen(s) not in own] + final.subtasks
+        own = {_frozen(f) for f in final.failures}
+        failures = [f for f in failures if _frozen(f) not in own] + final.failures
+        seen = {(c, i) for c, i, _ in stacks}
+        stacks += [s for s in final.stacks if (s[0], s[1]) not in seen]
+    busy: dict[str, float] = {str(v): 0.0 for v in range(1, info.vehicles + 1)}
+    wait = dict(busy)
+    for s in subtasks:
+        for label, _, _, t0, t1, *_ in s["steps"]:
+            (wait if label == "stop" else busy)[str(s["vehicle"])] += t1 - t0
+    account = _dispatcher_account(final.record) if final is not None else None
+    if account:  # the dispatcher's own, which also counts postponements as waiting
+        busy, wait, _ = account
+    return {
+        "mission": {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
+                    "vehicles": info.vehicles, "seed": info.seed},
+        "starts": list(info.starts),
+        "end_time_s": max((t for _, _, t in stacks), default=0.0),
+        "all_parked_s": max((s["t_end"] for s in subtasks), default=0.0),
+        "decision_failures": decision_failures(
+            recording, restarts, account[2] if account else None, failures),
+        "wait_s": wait,
+        "busy_s": busy,
+        "stacks_done": stacks,
+        "failures": failures,
+        "subtasks": subtasks,
+        "incomplete": incomplete,
+    }
+
+
+def dispatcher_restarts(recording: Recording) -> list[Restart]:
+    """Where a new dispatcher's messages begin. Every dispatcher numbers each key from 1, and
+    its count of decision failures starts at 0: a key whose numbers start again, fall far
+    below the highest, repeat, or whose count falls, shows a restart between two of its
+    messages. A key quiet through a restart, or whose first new numbers went unrecorded, is
+    told by the others: a restart is placed at the first message any key shows it at."""
+    found: list[tuple[int, int]] = []  # (the key's last message before, the first after)
+    last: dict[str, Recorded] = {}
+    numbers: dict[str, set[int]] = defaultdict(set)
+    failures: dict[str, int] = {}
+    for r, m in _events(recording):
+        key, seq = r.key, r.envelope.seq
+        before = last.get(key)
+        fewer = isinstance(m, Progress) and m.failures < failures.get(key, 0)
+        if before is not None and (seq == 1 or seq in numbers[key] or fewer
+                                   or seq + RESTART_DROP < max(numbers[key])):
+            found.append((before.log_ns, r.log_ns))
+            numbers[key] = set()
+        last[key] = r
+        numbers[key].add(seq)
+        if isinstance(m, Progress):
+            failures[key] = m.failures
+    starts: list[int] = []
+    for before, at in sorted(found, key=lambda pair: pair[1]):
+        if not starts or before >= starts[-1]:  # else the same restart, seen on another key
+            starts.append(at)
+    times = sorted(r.log_ns for r, _ in _events(recording))
+    out = []
+    for at in starts:
+        index = bisect.bisect_left(times, at)
+        previous = times[index - 1] if index else at
+        out.append(Restart(at, previous, any(previous <= g.start_ns and g.end_ns <= at
+                                             for g in recording.gaps)))
+    return out
+
+
+def unknown(recording: Recording, restarts: list[Restart], final: bool) -> list[str]:
+    """What the figures miss: numbers missing from a dispatcher's keys (announced while no
+    recorder ran, or lost), unless its final record has them, and the last words of one that
+    died while no recorder ran. `final`: the last dispatcher's record is in the recording."""
+    lives = len(restarts) + 1
+    numbers: dict[tuple[int, type, str], set[int]] = defaultdict(set)
+    starts = [x.at_ns for x in restarts]
+    for r, m in _events(recording):
+        numbers[bisect.bisect_right(starts, r.log_ns), type(m), r.key].add(r.envelope.seq)
+    missing: dict[tuple[int, type], int] = defaultdict(int)
+    for (life, cls, _), seen in numbers.items():
+        missing[life, cls] += max(seen) - len(seen)
+    out = []
+    for life in range(lives):
+        kept = RECORDING_ONLY if final and life == lives - 1 else IN_RECORD + RECORDING_ONLY
+        whose = f" (dispatcher {life + 1} of {lives})" if lives > 1 else ""
+        out += [f"{_counted(missing[life, cls], NOUNS[cls])} not recorded{whose}"
+                for cls in kept if missing[life, cls]]
+        if life < lives - 1 and restarts[life].unrecorded:
+            out.append(f"dispatcher {life + 1} of {lives} died while no recorder ran")
+    return out
+
+
+def _counted(n: int, noun: str) -> str:
+    """"1 stack done", "2 stacks done": the noun's first word in the plural."""
+    first, *rest = noun.split(" ")
+    return " ".join([str(n), first if n == 1 else first + "s", *rest])
+
+
+def decision_failures(recording: Recording, restarts: list[Restart], final: int | None,
+                      failures: list[dict]) -> int:
+    """The dispatcher's count of decision failures (docs/metrics.md). Failures inside a
+    decision are counted, not announced one by one: each progress report has the count so
+    far, the dispatcher's result (`final`) the last one. A restarted dispatcher counts from 0
+    again: the counts of each are added (at least the plans that failed, of `failures`)."""
+    starts = [x.at_ns for x in restarts]
+    counts = [0] * (len(starts) + 1)
+    for r, m in recording.of(Progress):
+        life = bisect.bisect_right(starts, r.log_ns)
+        counts[life] = max(counts[life], m.failures)
+    if final is not None:
+        counts[-1] = max(counts[-1], final)
+    return max(sum(counts), sum(f["stage"] == "plan" for f in failures))
+
+
+def _events(recording: Recording) -> list[tuple[Recorded, Any]]:
+    """The dispatchers' numbered events, in the order they were received."""
+    return [(r, r.envelope.message) for r in recording.messages
+            if r.genuine and r.envelope.seq > 0 and isinstance(r.envelope.message, EVENTS)]
+
+
+def final_record(recording: Recording, restarts: list[Restart]) -> Final | None:
+    """The last dispatcher's record, if its result is in the recording and the record has
+    the shape record_io gives it (else None: the recording alone says what happened)."""
+    done = [(r, m) for r, m in recording.of(MissionDone)
+            if m.ok and isinstance(m.record, dict) and m.record]
+    since = restarts[-1].at_ns if restarts else 0
+    if not done or done[-1][0].log_ns < since:
+        return None
+    record = done[-1][1].record
+    try:
+        subtasks = [subtask_dict(build_message(SubtaskEvent, _as_sent(entry)))
+                    for entry in _entries(record, "subtasks")]
+        failures = [_failure(build_message(DecisionFailure, entry))
+                    for entry in _entries(record, "failures")]
+    except ProtocolError:
+        return None
+    return Final(record, since, subtasks, failures, _record_stacks(record))
+
+
+def _entries(record: dict, name: str) -> list[dict]:
+    entries = record.get(name)
+    if not (isinstance(entries, list) and all(isinstance(e, dict) for e in entries)):
+        raise ProtocolError(f"dispatch.done.record.{name}: must be a list of maps")
+    return entries
+
+
+def _as_sent(subtask: dict) -> dict:
+    """A record's subtask as its message carried it (an infinite end is "inf" in records)."""
+    intervals = subtask.get("intervals")
+    if not isinstance(intervals, list):
+        return subtask
+    return dict(subtask, intervals=[
+        [*iv[:3], math.inf] if isinstance(iv, list) and len(iv) == 4 and iv[3] == "inf"
+        else iv for iv in intervals])
+
+
+def _failure(m: DecisionFailure) -> dict:
+    return {"t": m.t, "vehicle": m.vehicle, "stage": m.stage, "reason": m.reason}
+
+
+def _record_stacks(record: dict) -> list[list]:
+    entries = record.get("stacks_done")
+    return [[e[0], e[1], float(e[2])] for e in entries if isinstance(e, list) and len(e) == 3
+            and isinstance(e[0], str) and isinstance(e[1], int) and not isinstance(e[1], bool)
+            and isinstance(e[2], int | float) and not isinstance(e[2], bool)
+            and math.isfinite(e[2])] if isinstance(entries, list) else []
+
+
+def _frozen(value: Any) -> Any:
+    """A hashable copy of JSON-like data, to compare subtasks and failures by content."""
+    if isinstance(value, dict):
+        return tuple(sorted((k, _frozen(v)) for k, v in value.items()))
+    if isinstance(value, list | tuple):
+        return tuple(_frozen(v) for v in value)
+    return value
+
+
+def _dispatcher_account(record: dict) -> tuple[dict, dict, int] | None:
+    """Busy and waiting seconds per forklift and the decision failures from the dispatcher's
+    final record, or None if they are not there in the expected shape (a damaged file)."""
+    busy, wait, failures = (record.get(k) for k in ("busy_s", "wait_s", "decision_failures"))
+
+    def seconds(value: Any) -> bool:
+        return isinstance(value, dict) and all(
+            isinstance(k, str) and k.isdigit() and isinstance(v, int | float)
+            and not isinstance(v, bool)
+            for k, v in value.items())
+
+    if seconds(busy) and seconds(wait) and isinstance(failures, int) \
+            and not isinstance(failures, bool):
+        return busy, wait, failures
+    return None

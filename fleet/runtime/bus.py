@@ -1,0 +1,441 @@
+"""Zenoh plumbing shared by every process: the key space (docs/protocol.md), session
+configuration, and a request helper. Processes are clients of one router (`fleet run` starts
+it; in compose it is the `router` service); tests may connect peers directly."""
+
+from __future__ import annotations
+
+import argparse
+import faulthandler
+import itertools
+import json
+import logging
+import os
+import re
+import signal
+import socket
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from fleet.errors import UserError
+from fleet.runtime.access import configure_client, configure_router
+from fleet.runtime.argtypes import endpoint, positive_float
+from fleet.wire.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+# Congestion control for streams that must not lose a message (table changes, the clock, the
+# mission result): the publisher waits rather than drop. Their receivers only enqueue, so
+# they drain. State streams keep zenoh's default (drop), so a stalled reader stalls no one.
+RELIABLE = zenoh.CongestionControl.BLOCK
+CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
+log = logging.getLogger("fleet.runtime.bus")
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Every key expression of one run, under fleet/<run>/."""
+
+    run: str = "default"
+
+    @property
+    def root(self) -> str:
+        return f"fleet/{self.run}"
+
+    @property
+    def everything(self) -> str:
+        return f"{self.root}/**"
+
+    @property
+    def reservation_requests(self) -> str:
+        """Where the reservation service answers: every principal's request key."""
+        return f"{self.root}/reservation/request/*"
+
+    def reservation_request(self, sender: str) -> str:
+        """Where `sender` sends its requests: the key names who asks, so access control
+        can let a forklift ask only under its own name (docs/protocol.md)."""
+        return f"{self.root}/reservation/request/{sender}"
+
+    @property
+    def reservation_change(self) -> str:
+        return f"{self.root}/reservation/change"
+
+    @property
+    def reservation_alive(self) -> str:
+        return f"{self.root}/reservation/alive"
+
+    def vehicle_state(self, vehicle: int) -> str:
+        return f"{self.root}/vehicle/{vehicle}/state"
+
+    def vehicle_alive(self, vehicle: int | str) -> str:
+        return f"{self.root}/vehicle/{vehicle}/alive"
+
+    def vehicle_task(self, vehicle: int) -> str:
+        return f"{self.root}/vehicle/{vehicle}/task"
+
+    @property
+    def clock(self) -> str:
+        return f"{self.root}/clock"
+
+    def clock_ack(self, vehicle: int | str) -> str:
+        return f"{self.root}/clock/ack/{vehicle}"
+
+    @property
+    def dispatch_progress(self) -> str:
+        return f"{self.root}/dispatch/progress"
+
+    @property
+    def dispatch_done(self) -> str:
+        return f"{self.root}/dispatch/done"
+
+    @property
+    def dispatcher_alive(self) -> str:
+        return f"{self.root}/dispatch/alive"
+
+    @property
+    def dispatch_claim(self) -> str:
+        return f"{self.root}/dispatch/claim"
+
+    @property
+    def dispatch_mission(self) -> str:
+        return f"{self.root}/dispatch/mission"
+
+    @property
+    def dispatch_subtask(self) -> str:
+        return f"{self.root}/dispatch/subtask"
+
+    @property
+    def dispatch_stack(self) -> str:
+        return f"{self.root}/dispatch/stack"
+
+    @property
+    def dispatch_failure(self) -> str:
+        return f"{self.root}/dispatch/failure"
+
+    @property
+    def dispatch_halt(self) -> str:
+        return f"{self.root}/dispatch/halt"
+
+    @property
+    def dispatch_resume(self) -> str:
+        return f"{self.root}/dispatch/resume"
+
+    @property
+    def dispatch_reopen(self) -> str:
+        return f"{self.root}/dispatch/reopen"
+
+    @property
+    def dispatch_zone(self) -> str:
+        return f"{self.root}/dispatch/zone"
+
+    def vehicle_fault(self, vehicle: int | str) -> str:
+        return f"{self.root}/vehicle/{vehicle}/fault"
+
+    def vehicle_inject(self, vehicle: int) -> str:
+        """Where the fault injector reaches an agent (breakdown, slow planner)."""
+        return f"{self.root}/vehicle/{vehicle}/inject"
+
+    @property
+    def recorder_alive(self) -> str:
+        return f"{self.root}/recorder/alive"
+
+    @property
+    def recorder_status(self) -> str:
+        return f"{self.root}/recorder/status"
+
+    @staticmethod
+    def vehicle_of(key: str) -> int | None:
+        """The vehicle id in a .../vehicle/<id>/... or .../ack/<id> key, if any."""
+        parts = str(key).split("/")
+        for i, part in enumerate(parts[:-1]):
+            if part in ("vehicle", "ack") and parts[i + 1].isdigit():
+                return int(parts[i + 1])
+        return None
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    mode: str = "client"  # "client", "peer" or "router"
+    connect: tuple[str, ...] = (DEFAULT_ROUTER,)
+    listen: tuple[str, ...] = ()
+    lease_ms: int = 1000  # a lost peer is noticed after this (measured: docs/reliability.md)
+    connect_timeout_ms: int = -1  # -1: wait for the router however long it takes to start
+    user: str = ""  # log in to the router as this principal (fleet/runtime/access.py)
+    password: str = ""
+    acl: dict | None = None  # a router: enforce this access control ...
+    users_file: str = ""  # ... and authenticate sessions against this dictionary
+
+    def zenoh_config(self) -> zenoh.Config:
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps(self.mode))
+        config.insert_json5("scouting/multicast/enabled", "false")  # loopback and named hosts
+        config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        config.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
+        config.insert_json5("transport/link/tx/lease", str(self.lease_ms))
+        if self.user:
+            configure_client(config, self.user, self.password)
+        if self.acl is not None:
+            configure_router(config, self.acl, self.users_file)
+        return config
+
+
+class BusError(UserError, zenoh.ZError):
+    """A session that could not be opened: no router at the endpoints, a busy listen port, a
+    refused login. The message names the endpoint; still a zenoh.ZError to whoever catches
+    those."""
+
+
+SLOW_CONNECT_S = 1.0  # a connect that takes longer says what it waits for
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """A zenoh error's text without the Rust source locations it carries."""
+    text = re.sub(r" at /\S+?\.rs:\d+\.?", "", str(exc))
+    return " ".join(text.split())
+
+
+def open_session(config: BusConfig, say: Callable[[str], None] | None = None) -> zenoh.Session:
+    """A zenoh session. A client waits for its router up to `connect_timeout_ms`, says
+    through `say` (default: the log) what it is waiting for once that takes a while, and
+    fails with a BusError naming the endpoints."""
+    endpoints = ", ".join(config.connect) or "no endpoint"
+    waiting = f"waiting for a zenoh router at {endpoints}" + (
+        f" (up to {config.connect_timeout_ms / 1000:g} s)" if config.connect_timeout_ms >= 0
+        else "")
+    note = threading.Timer(SLOW_CONNECT_S, say or log.warning, (waiting,))
+    note.daemon = True
+    if config.mode != "router" and config.connect:
+        note.start()
+    try:
+        return zenoh.open(config.zenoh_config())
+    except zenoh.ZError as exc:
+        raise BusError(_open_failure(config, zenoh_message(exc))) from None
+    finally:
+        note.cancel()
+
+
+def _open_failure(config: BusConfig, text: str) -> str:
+    if "Unable to connect" in text or "Timeout" in text:
+        waited = f"{config.connect_timeout_ms / 1000:g} s"
+        if config.user:
+            return (f"no zenoh router at {', '.join(config.connect)} let {config.user} in "
+                    f"within {waited} (none is there, or it refused the login)")
+        return f"no zenoh router answers at {', '.join(config.connect)} (waited {waited})"
+    if "Address already in use" in text:
+        where = re.search(r"bound to (\S+?):? ", text)
+        return (f"cannot listen on {where[1] if where else ', '.join(config.listen)}: the "
+                f"address is in use (another process listens there)")
+    return f"zenoh: {text}"
+
+
+class Stream:
+    """A publisher with its own sequence numbers (1, 2, ...), so whoever records the key can
+    count the messages it missed."""
+
+    def __init__(self, session: zenoh.Session, key: str, sender: str,
+                 reliable: bool = False) -> None:
+        options = {"congestion_control": RELIABLE} if reliable else {}
+        self.publisher = session.declare_publisher(key, **options)
+        self.sender = sender
+        self.seq = itertools.count(1)  # next() is atomic: threads may share a stream
+
+    def put(self, message: Message, sim_time: float) -> None:
+        self.publisher.put(encode(message, self.sender, next(self.seq), sim_time))
+
+    def undeclare(self) -> None:
+        self.publisher.undeclare()
+
+
+class RequestFailed(RuntimeError):
+    """No valid answer came back (nobody answered in time, or the answer was malformed)."""
+
+
+class Requester:
+    """Sends requests with a per-sender sequence number and decodes the single reply.
+
+    A request nobody answers (no queryable reachable: the server is starting, restarting, or
+    its router has not yet propagated it), or whose reply does not come within `timeout_s`,
+    is sent again with backoff for up to `retry_s`; every request we send is idempotent
+    (commits carry request ids, tasks task ids)."""
+
+    def __init__(self, session: zenoh.Session, sender: str, timeout_s: float = 5.0,
+                 retry_s: float = 15.0) -> None:
+        self.session = session
+        self.sender = sender
+        self.timeout_s = timeout_s
+        self.retry_s = retry_s
+        self.seq = 0  # of messages sent
+        self.ids = 0  # of request ids handed out
+        # Ids must not repeat across a restart of the sender: the store answers a known id
+        # with its old reply (idempotent retries), and an agent a known task id likewise.
+        self.incarnation = f"{time.time_ns():x}"
+
+    def next_id(self) -> str:
+        self.ids += 1
+        return f"{self.sender}:{self.incarnation}:{self.ids}"
+
+    def request(self, key: str, message: Message, sim_time: float = 0.0) -> Envelope:
+        self.seq += 1
+        payload = encode(message, self.sender, self.seq, sim_time)
+        give_up = time.monotonic() + self.retry_s
+        backoff = 0.1
+        while True:
+            start = time.monotonic()
+            for reply in self.session.get(key, payload=payload, timeout=self.timeout_s):
+                if reply.ok is None:
+                    error = reply.err.payload.to_bytes().decode(errors="replace")
+                    if error == "Timeout":  # zenoh's own: the server did not answer in time
+                        break
+                    raise RequestFailed(f"{key}: error reply: {error}")
+                try:
+                    return decode(reply.ok.payload.to_bytes())
+                except ProtocolError as exc:
+                    raise RequestFailed(f"{key}: malformed reply: {exc}") from None
+            timed_out = time.monotonic() - start >= self.timeout_s
+            if time.monotonic() + backoff > give_up:
+                raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s" if timed_out
+                                    else f"{key}: nobody answered (no process serves this key)")
+            time.sleep(backoff)  # backoff before asking again, not synchronisation
+            backoff = min(2 * backoff, 2.0)
+
+
+def received(sample: zenoh.Sample, expected: type[Message] | tuple[type[Message], ...],
+             log: logging.Logger) -> Message | None:
+    """The message in a sample if it is valid and of an expected type; otherwise None, with
+    the reason logged (a malformed message never takes a process down)."""
+    try:
+        message = decode(sample.payload.to_bytes()).message
+    except ProtocolError as exc:
+        log.warning("rejected a message on %s: %s", sample.key_expr, exc)
+        return None
+    if not isinstance(message, expected):
+        log.warning("rejected a message on %s: a %s does not belong here", sample.key_expr,
+                    message.TYPE)
+        return None
+    return message
+
+
+def follow_recorded(session: zenoh.Session, keys: Keys, recorded: threading.Event,
+                    log: logging.Logger):
+    """Set `recorded` once the recorder says the mission's result is in its file; returns
+    the subscriber (undeclare it when done)."""
+    def on_status(sample: zenoh.Sample) -> None:
+        status = received(sample, RecorderStatus, log)
+        if status is not None and status.done_seen:
+            recorded.set()
+
+    return session.declare_subscriber(keys.recorder_status, on_status)
+
+
+def free_port() -> int:
+    """A loopback TCP port nobody listens on right now (for tests and benchmarks)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_alive(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Block until a liveliness token matching `key` exists (True) or the timeout passes."""
+    seen = threading.Event()
+    subscriber = session.liveliness().declare_subscriber(
+        key, lambda sample: seen.set() if sample.kind == zenoh.SampleKind.PUT else None,
+        history=True)
+    try:
+        return seen.wait(timeout)
+    finally:
+        subscriber.undeclare()
+
+
+def wait_gone(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Block until no liveliness token matches `key` (True) or the timeout passes. Asks the
+    network each time (a subscriber's history and a query can cross a token's deletion)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        replies = session.liveliness().get(key, timeout=1.0)
+        if not any(reply.ok is not None for reply in replies):
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)  # paces the poll
+
+
+def add_bus_arguments(p: argparse.ArgumentParser,
+                      connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """The flags every process shares: which run, and how to reach the others."""
+    p.add_argument("--run", default="default",
+                   help="run name: the run's keys live under fleet/RUN/ (default default)")
+    p.add_argument("--mode", choices=["client", "peer"], default="client",
+                   help="zenoh mode (default client of a router)")
+    p.add_argument("--connect", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help=f"zenoh endpoint to connect to, e.g. "
+                   f"tcp/HOST:PORT (default {DEFAULT_ROUTER}; repeatable)")
+    p.add_argument("--listen", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help="zenoh endpoint to listen on (default none; "
+                   "repeatable)")
+    p.add_argument("--connect-timeout", type=positive_float, default=connect_timeout_s,
+                   metavar="SECONDS", help=f"give up when no router answers at --connect "
+                   f"within this many seconds (default {connect_timeout_s:g})")
+    add_login_arguments(p)
+
+
+def add_login_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--user", default="", help="log in to a router that runs access control "
+                   "as this principal (fleet run --secure makes one per process; default: "
+                   "no login)")
+    p.add_argument("--password-file", type=Path, metavar="FILE",
+                   help="the password of --user, in a file (never on the command line; "
+                   "default none)")
+
+
+def login_of(args: argparse.Namespace) -> tuple[str, str]:
+    """The (user, password) the flags name; a user without its password is refused."""
+    if not args.user:
+        return "", ""
+    if args.password_file is None:
+        raise UserError(f"--user {args.user} needs --password-file")
+    try:
+        return args.user, args.password_file.read_text().strip()
+    except OSError as exc:
+        raise UserError(f"--password-file {args.password_file}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UserError(f"--password-file {args.password_file}: not UTF-8 text") from None
+
+
+def bus_config(args: argparse.Namespace) -> BusConfig:
+    connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
+    user, password = login_of(args)
+    timeout_ms = int(args.connect_timeout * 1000)
+    return BusConfig(args.mode, connect, tuple(args.listen), connect_timeout_ms=timeout_ms,
+                     user=user, password=password)
+
+
+def setup_logging() -> None:
+    """Processes log to stderr with a wall-clock timestamp (fleet run keeps one file each);
+    SIGUSR1 writes every thread's stack there (what a stuck process is doing)."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
+
+
+PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children
+
+
+def stop_on_signals(stop: Callable[[], None]) -> None:
+    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
+    of `fleet run` also stops when that parent is gone (killed outright, it could not stop
+    its children), so no orphan keeps running."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop())
+    parent = os.environ.get(PARENT_ENV)
+    if parent and parent.isdigit():
+        def watch() -> None:
+            while os.getppid() == int(parent):
+                time.sleep(1.0)  # polling the parent: there is no event to wait on
+            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
+
+        threading.Thread(target=watch, daemon=True, name="parent-watch").start()

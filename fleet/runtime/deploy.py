@@ -1,0 +1,161 @@
+"""The compose deployment's configuration (docs/deployment.md): every setting comes from a
+FLEET_* environment variable, with its default here and nowhere else, and `service_args`
+turns it into the command line of each service's process. Pure: the environment is passed
+in, nothing is read or started here."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import PurePosixPath
+
+from fleet.errors import UserError
+from fleet.mission.spec import MissionKind, Strategy
+from fleet.runtime.access import (
+    DISPATCHER,
+    OPERATOR,
+    RECORDER,
+    RESERVATION,
+    Credentials,
+    dictionary_text,
+)
+
+SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
+SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
+ROUTER_PORT = 7447
+FOXGLOVE_PORT = 8765
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    run: str = "default"  # keys live under fleet/RUN/
+    layout: str = "paper"
+    mission: str = "fill"
+    strategy: str = "ann"
+    vehicles: str = "auto"  # "auto": as many as claim an id (docker compose --scale vehicle=N)
+    seed: int = 0
+    clock: str = "fast"
+    speed: float = 10.0  # sim seconds per wall second, real-time clock
+    gather_s: float = 5.0  # "auto" fleets: start once no forklift has claimed for this long
+    router: str = "router"  # the router's host name (its compose service)
+    secure: bool = False  # access control; the logins come from compose secrets
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/{self.router}:{ROUTER_PORT}"
+
+
+ENV = {f.name: "FLEET_" + f.name.upper() for f in dataclasses.fields(DeployConfig)}
+ENV["gather_s"] = "FLEET_GATHER_S"
+
+SECRETS = PurePosixPath("/run/secrets")  # where compose mounts the secrets
+ACL_FILE = "/tmp/fleet/acl.json"  # the router writes the run's access control here
+MAX_VEHICLES = 16  # logins are made for this many forklifts
+JOURNAL = "/data/journal/reservation-{host}.journal"  # a recreated container starts afresh
+RECORDINGS = "/data/recordings"
+RESTART_MARKER = "/tmp/fleet/dispatcher.started"  # survives a restart, not a re-creation
+VEHICLE_ID_FILE = "/tmp/fleet/vehicle.id"  # what the vehicle's health check looks for
+
+
+def config_from_env(env: Mapping[str, str]) -> DeployConfig:
+    """The configuration the environment gives; an unset or empty variable keeps its
+    default, a bad value is an error naming the variable."""
+    values: dict[str, object] = {}
+    for f in dataclasses.fields(DeployConfig):
+        text = env.get(ENV[f.name], "").strip()
+        if not text:
+            continue
+        values[f.name] = _parse(f.name, text, f.default)
+    config = DeployConfig(**values)
+    _check(config)
+    return config
+
+
+def _parse(name: str, text: str, default: object) -> object:
+    var = ENV[name]
+    if isinstance(default, bool):
+        if text.lower() not in ("0", "1", "true", "false", "yes", "no"):
+            raise UserError(f"{var}={text!r}: give 1 or 0")
+        return text.lower() in ("1", "true", "yes")
+    if isinstance(default, int):
+        try:
+            return int(text)
+        except ValueError:
+            raise UserError(f"{var}={text!r}: not an integer") from None
+    if isinstance(default, float):
+        try:
+            value = float(text)
+        except ValueError:
+            raise UserError(f"{var}={text!r}: not a number") from None
+        if not (math.isfinite(value) and value > 0):
+            raise UserError(f"{var}={text!r}: must be a positive number")
+        return value
+    return text
+
+
+def _check(config: DeployConfig) -> None:
+    choices = {"mission": [k.value for k in MissionKind],
+               "strategy": [s.value for s in Strategy], "clock": ["fast", "realtime"]}
+    for name, allowed in choices.items():
+        if getattr(config, name) not in allowed:
+            raise UserError(f"{ENV[name]}={getattr(config, name)!r}: one of "
+                            f"{', '.join(allowed)}")
+    if config.vehicles != "auto" and not (config.vehicles.isdigit() and
+                                          int(config.vehicles) >= 1):
+        raise UserError(f"FLEET_VEHICLES={config.vehicles!r}: 'auto' or a fleet size")
+
+
+def service_args(service: str, config: DeployConfig) -> list[str]:
+    """The `fleet` command line of one service's process."""
+    if service not in SERVICES:
+        raise UserError(f"unknown service {service!r}: one of {', '.join(SERVICES)}")
+    if service == "router":
+        args = ["router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--exit-when-idle", "5"]
+        if config.secure:
+            args += ["--acl", ACL_FILE, "--users", str(SECRETS / "fleet_users")]
+        return args
+    common = ["--run", config.run, "--connect", config.endpoint]
+    if service == "reservation":
+        return ["reservation", *common, *login(config, "reservation"), "--journal", JOURNAL,
+                "--exit-when-done"]
+    if service == "recorder":
+        return ["recorder", *common, *login(config, "recorder"), "--out-dir", RECORDINGS,
+                "--exit-when-done", "--foxglove", str(FOXGLOVE_PORT), "--foxglove-host",
+                "0.0.0.0"]
+    if service == "vehicle":
+        logins = ["--logins", str(SECRETS / "fleet_vehicle_logins")] if config.secure else []
+        return ["agent", *common, *logins, "--id", "auto", "--layout",
+                config.layout, "--id-file", VEHICLE_ID_FILE, "--exit-when-done"]
+    fleet = [] if config.vehicles == "auto" else ["--vehicles", config.vehicles]
+    return ["dispatcher", *common, *login(config, "dispatcher"), "--layout", config.layout,
+            "--mission", config.mission, "--strategy", config.strategy, *fleet,
+            "--seed", str(config.seed), "--clock", config.clock, "--speed", repr(config.speed),
+            "--claims", "--gather", repr(config.gather_s), "--restart-marker", RESTART_MARKER,
+            "--recorded", "--exit-when-done",
+            "--command", f"docker compose (FLEET_LAYOUT={config.layout} "
+            f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})"]
+
+
+def password_file(principal: str) -> PurePosixPath:
+    return SECRETS / f"fleet_{principal}_password"
+
+
+def login(config: DeployConfig, principal: str) -> list[str]:
+    if not config.secure:
+        return []
+    return ["--user", principal, "--password-file", str(password_file(principal))]
+
+
+def secret_files(credentials: Credentials) -> dict[str, str]:
+    """What `fleet compose secrets` writes, file name -> text: the router's dictionary, a
+    password per service (and the operator's, for tools on the host), and the forklifts'
+    logins, which every forklift container gets (it learns its id only by claiming one)."""
+    files = {"users": dictionary_text(credentials.logins.values()),
+             "vehicle_logins": dictionary_text(
+                 login for name, login in credentials.logins.items()
+                 if name.startswith("vehicle-"))}
+    for principal in SERVICES_WITH_LOGINS:
+        files[f"{principal}_password"] = credentials[principal].password + "\n"
+    return files

@@ -1,0 +1,328 @@
+"""One mission as processes on this machine (what `fleet run` does): a zenoh router on a
+loopback port, the recorder, the reservation service, one agent per forklift and the
+dispatcher, all clients of the router. This process follows the dispatcher's progress and
+result, and stops every child when the mission ends, on Ctrl-C, or as soon as any child dies."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+from fleet.mission.faults import FaultKind, Scenario
+from fleet.mission.spec import Mission
+from fleet.recording.mcapfile import next_segment
+from fleet.recording.rundir import fresh
+from fleet.runtime.access import (
+    DISPATCHER,
+    OPERATOR,
+    RECORDER,
+    RESERVATION,
+    generate_credentials,
+    router_acl,
+    vehicle_user,
+    write_dictionary,
+    write_private,
+)
+from fleet.runtime.bus import (
+    SLOW_CONNECT_S,
+    BusConfig,
+    BusError,
+    Keys,
+    follow_recorded,
+    free_port,
+    open_session,
+)
+from fleet.runtime.injector import Applied, Injector
+from fleet.runtime.launcher import Child, Launcher
+from fleet.runtime.linkproxy import LinkProxy
+from fleet.wire.protocol import MissionDone, Progress, ProtocolError, decode
+
+ROUTER_TIMEOUT_MS = 30_000
+ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
+RECORDED_TIMEOUT_S = 10.0
+log = logging.getLogger("fleet.run")
+
+
+@dataclass
+class RunSpec:
+    mission: Mission
+    vehicles: int
+    run_dir: Path  # the recording, logs/ and the reservation journal: a new directory, or
+    # one claimed for this run a moment ago (fleet.recording.rundir.claim); anything else is refused
+    clock: str = "fast"
+    speed: float = 1.0
+    weights: Path | None = None
+    port: int | None = None  # router port on 127.0.0.1 (default: a free one)
+    run: str = "default"
+    extra: dict[str, list[str]] = field(default_factory=dict)  # more flags per process kind
+    command: str = ""  # the user's command line, for the recording
+    foxglove: int | None = None  # serve the live Foxglove view on this port
+    record: bool = True  # start the recorder (benchmarks measure the run without it)
+    faults: Scenario | None = None  # applied by an injector in this process
+    faults_source: str = ""  # the scenario's name or file, for the dispatcher
+    secure: bool = False  # access control and a login per process (fleet/runtime/access.py)
+
+    @property
+    def recording(self) -> Path:
+        return self.run_dir / "run.mcap"
+
+
+@dataclass
+class RunOutcome:
+    done: MissionDone | None
+    error: str
+    endpoint: str
+    log_dir: Path
+    injected: list[Applied] = field(default_factory=list)  # the faults' actions, when
+
+
+class RunFailed(RuntimeError):
+    pass
+
+
+def dispatcher_args(spec: RunSpec) -> list[str]:
+    m = spec.mission
+    args = ["--layout", m.layout, "--mission", m.kind.value, "--strategy", m.strategy.value,
+            "--vehicles", str(spec.vehicles), "--seed", str(m.seed), "--clock", spec.clock,
+            "--speed", repr(spec.speed)]
+    if spec.command:
+        args += ["--command", spec.command]
+    if spec.weights is not None:
+        args += ["--weights", str(spec.weights)]
+    if spec.faults is not None:
+        args += ["--faults", spec.faults_source]
+    if spec.record:
+        args.append("--recorded")
+    return args
+
+
+class Secrets:
+    """A secure run's logins (fleet/runtime/access.py), kept in the run directory readable by its
+    owner only: the router's dictionary and access control, one password file each."""
+
+    def __init__(self, folder: Path, run: str, root: str, vehicles: int) -> None:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        self.folder = folder
+        credentials = generate_credentials(run, vehicles)
+        self.logins = credentials.logins
+        self.users = write_dictionary(credentials, folder / "users.txt")
+        self.acl = folder / "acl.json"
+        self.acl.write_text(json.dumps(router_acl(root, vehicles), indent=1))
+        for name, login in self.logins.items():
+            write_private(folder / f"{name}.password", login.password)
+
+    def args(self, principal: str) -> list[str]:
+        return ["--user", principal, "--password-file", str(self.folder / f"{principal}.password")]
+
+    def router_args(self) -> list[str]:
+        return ["--acl", str(self.acl), "--users", str(self.users)]
+
+
+def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None = None,
+                  on_ready: Callable[[zenoh.Session, Keys, Launcher], None] | None = None
+                  ) -> RunOutcome:
+    """Run the mission; `on_ready` is called with this process's session, the keys and the
+    launcher once every child has been started (tests use it to watch or disturb the run)."""
+    endpoint = f"tcp/127.0.0.1:{spec.port or free_port()}"
+    keys = Keys(spec.run)
+    fresh(spec.run_dir)  # a run directory of its own: no table, recording or log of another
+    log_dir = spec.run_dir / "logs"
+    journal = spec.run_dir / "reservation.journal"
+    # Everything this process waits for comes through one queue: the dispatcher's messages,
+    # a started child's liveliness, and each child's exit the moment it happens.
+    inbox: queue.Queue[tuple[str, object]] = queue.Queue()
+    launcher = Launcher(log_dir, on_exit=lambda child: inbox.put(("exit", child)))
+    session = None
+    injector = None
+    port = int(endpoint.rsplit(":", 1)[1])
+    # A forklift whose link a fault cuts reaches the router through its own forwarder.
+    proxies = {f.vehicle: LinkProxy("127.0.0.1", port) for f in
+               (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
+    common = ["--run", spec.run, "--connect", endpoint]
+    live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
+    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles) \
+        if spec.secure else None
+
+    def login(principal: str) -> list[str]:
+        return secrets.args(principal) if secrets else []
+
+    def args_of(kind: str, again: bool = False) -> list[str]:
+        """How to start each kind of process (`again`: after a fault killed it)."""
+        if kind == "recorder":
+            out = next_segment(spec.run_dir)  # run.mcap, then run-2.mcap after a restart
+            return ["recorder", *common, *login(RECORDER), "--out", str(out), *live,
+                    *spec.extra.get("recorder", [])]
+        if kind == "reservation":
+            return ["reservation", *common, *login(RESERVATION), "--journal", str(journal),
+                    *spec.extra.get("reservation", [])]
+        if kind.startswith("agent-"):
+            v = int(kind.split("-")[1])
+            connect = ["--connect", f"tcp/127.0.0.1:{proxies[v].port}"] if v in proxies \
+                else ["--connect", endpoint]
+            return ["agent", "--run", spec.run, *connect, *login(vehicle_user(v)), "--id",
+                    str(v), "--layout", spec.mission.layout, *spec.extra.get("agent", [])]
+        if kind == "dispatcher":  # a restart picks the mission up where it was
+            return ["dispatcher", *common, *login(DISPATCHER), *dispatcher_args(spec),
+                    *(["--recover"] if again else []), *spec.extra.get("dispatcher", [])]
+        raise RunFailed(f"cannot restart a {kind} process")
+
+    try:
+        router = launcher.start("router", ["router", "--listen", endpoint,
+                                           *(secrets.router_args() if secrets else [])])
+        for proxy in proxies.values():
+            proxy.start()
+        operator = secrets.logins[OPERATOR] if secrets else None
+        session = _open_when_up(BusConfig("client", (endpoint,),
+                                          user=operator.user if operator else "",
+                                          password=operator.password if operator else ""),
+                                router)
+        subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
+                       for key in (keys.dispatch_progress, keys.dispatch_done)]
+        recorded = threading.Event()  # the recorder holds the mission's result
+        clock_started = threading.Event()  # every forklift was up: the mission runs
+        subscribers.append(session.declare_subscriber(keys.clock,
+                                                      lambda _: clock_started.set()))
+        if spec.record:
+            subscribers.append(follow_recorded(session, keys, recorded, log))
+            recorder = launcher.start("recorder", args_of("recorder"))
+            _wait_started(session, keys.recorder_alive, inbox, recorder)
+        launcher.start("reservation", args_of("reservation"))
+        for v in range(1, spec.vehicles + 1):
+            launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
+        if spec.faults is not None:
+            injector = Injector(spec.faults, session, keys, launcher,
+                                lambda kind: args_of(kind, again=True), proxies)
+        launcher.start("dispatcher", args_of("dispatcher"))
+        if on_ready is not None:
+            on_ready(session, keys, launcher)
+        done = _follow(inbox, on_progress, clock_started)
+        if spec.record and not recorded.wait(RECORDED_TIMEOUT_S):
+            log.warning("the recorder had not recorded the mission's result within %g s",
+                        RECORDED_TIMEOUT_S)
+        for subscriber in subscribers:
+            subscriber.undeclare()
+        return RunOutcome(done, "" if done.ok else done.error, endpoint, log_dir,
+                          injector.applied if injector else [])
+    except RunFailed as exc:
+        return RunOutcome(None, str(exc), endpoint, log_dir)
+    finally:
+        if injector is not None:
+            injector.close()
+        if session is not None:
+            session.close()  # before the router is told to stop: it waits for its clients
+        launcher.stop_all()
+        for proxy in proxies.values():
+            proxy.close()
+
+
+def _follow(inbox: queue.Queue, on_progress: Callable[[Progress], None] | None,
+            clock_started: threading.Event) -> MissionDone:
+    while True:
+        kind, item = inbox.get()  # a message, or a child's exit, as it happens
+        if kind == "exit":
+            # A fault's kill is the injector's, a forklift's death once the mission runs the
+            # dispatcher's to recover from (docs/faults.md); any other death ends the run (a
+            # forklift that never came up would keep the dispatcher waiting for it).
+            if item.killed or (item.name.startswith("agent-") and clock_started.is_set()):
+                continue
+            done = _last_word(inbox)
+            if done is not None:
+                return done  # the dispatcher's account of it, when it has one
+            raise RunFailed(Launcher.death(item, "before the mission ended"))
+        message = _from_dispatcher(item) if kind == "sample" else None
+        if isinstance(message, MissionDone):
+            return message
+        if isinstance(message, Progress) and on_progress is not None:
+            on_progress(message)
+
+
+def _open_when_up(config: BusConfig, router: Child) -> zenoh.Session:
+    """This process's session, once the router takes connections; at once a RunFailed that
+    says why when the router exits first (a busy port, a bad access control file). Zenoh's
+    open cannot be interrupted, so it is tried in short attempts with the router's exit
+    looked at between them."""
+    attempt = dataclasses.replace(config, connect_timeout_ms=ROUTER_ATTEMPT_MS)
+    start = time.monotonic()
+    said = False
+    while True:
+        try:  # each attempt quiet: its own note would give its 0.5 s as the whole wait
+            return open_session(attempt, say=lambda _: None)
+        except BusError as exc:
+            if router.proc.poll() is not None:
+                raise RunFailed(Launcher.death(router, "before the run started")) from None
+            waited = time.monotonic() - start
+            if waited > ROUTER_TIMEOUT_MS / 1000:
+                raise RunFailed(f"the router took no connection within "
+                                f"{ROUTER_TIMEOUT_MS / 1000:g} s: {exc}") from None
+            if not said and waited >= SLOW_CONNECT_S:
+                log.warning("waiting for the router at %s to take connections (up to %g s)",
+                            ", ".join(config.connect), ROUTER_TIMEOUT_MS / 1000)
+                said = True
+
+
+def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child) -> None:
+    """Wait for a child's liveliness token; fail at once, saying why, if a child exits first
+    (nothing else comes through the inbox before the dispatcher starts)."""
+    alive = session.liveliness().declare_subscriber(
+        token, lambda sample: inbox.put(("alive", sample))
+        if sample.kind == zenoh.SampleKind.PUT else None, history=True)
+    try:
+        deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                kind, item = inbox.get(timeout=left)
+            except queue.Empty:
+                break
+            if kind == "alive":
+                return
+            if kind == "exit" and not item.killed:
+                raise RunFailed(Launcher.death(item, f"before {child.name} was up"
+                                               if item is not child else "as it started"))
+        raise RunFailed(f"{child.name} was not up within {ROUTER_TIMEOUT_MS / 1000:g} s "
+                        f"(no {token} token); its log: {child.log}")
+    finally:
+        alive.undeclare()
+
+
+def _last_word(inbox: queue.Queue, within_s: float = 3.0) -> MissionDone | None:
+    """The dispatcher's result if it arrives soon (it notices a dead forklift by liveliness
+    and says which one and when)."""
+    deadline = time.monotonic() + within_s
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            kind, item = inbox.get(timeout=left)
+        except queue.Empty:
+            return None
+        message = _from_dispatcher(item) if kind == "sample" else None
+        if isinstance(message, MissionDone):
+            return message
+    return None
+
+
+def _from_dispatcher(sample: zenoh.Sample) -> MissionDone | Progress | None:
+    """The dispatcher's progress or result, believed only on its own key from its own name
+    (anyone on the network could put a forged result)."""
+    try:
+        envelope = decode(sample.payload.to_bytes())
+    except ProtocolError as exc:
+        log.warning("rejected a message on %s: %s", sample.key_expr, exc)
+        return None
+    message, key, sender = envelope.message, str(sample.key_expr), envelope.sender
+    if not isinstance(message, MissionDone | Progress):
+        log.warning("rejected a %s on %s: it does not belong there", message.TYPE, key)
+        return None
+    wanted = "dispatch/done" if isinstance(message, MissionDone) else "dispatch/progress"
+    if sender != "dispatcher" or not key.endswith(wanted):
+        log.warning("ignored a %s on %s from %r: only the dispatcher's on %s counts",
+                    message.TYPE, key, sender, wanted)
+        return None
+    return message

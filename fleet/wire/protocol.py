@@ -1,0 +1,577 @@
+"""Every message on the wire, in one place: dataclasses encoded with msgpack (docs/protocol.md).
+
+Each message travels in an envelope carrying the schema version, its type, the sender, the
+sender's sequence number and the simulation time. `decode` validates everything it returns:
+a malformed, truncated, unknown-type or wrong-version payload raises ProtocolError naming
+what was wrong, so a process can log it and carry on.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import types
+import typing
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Annotated, Any, ClassVar
+
+import msgpack
+
+from fleet.planning.maneuvers import Manner
+from fleet.planning.trajectory import Pose
+
+SCHEMA_VERSION = 1
+MAX_PAYLOAD = 16 * 1024 * 1024  # no legitimate message comes near this
+
+
+class ProtocolError(ValueError):
+    """A payload that is not a valid message; the message says why."""
+
+
+def _maneuver_label(text: str) -> None:
+    Manner.from_label(text)
+
+
+def _maneuver_or_rest(text: str) -> None:
+    if text:
+        Manner.from_label(text)
+
+
+# Strings with a syntax of their own: `decode` checks them too (the validator raises
+# ValueError), so a reader never meets a pose or maneuver it cannot interpret.
+PoseText = Annotated[str, Pose.parse]  # "col,row,H"
+ManeuverLabel = Annotated[str, _maneuver_label]
+ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
+
+# (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
+WireInterval = tuple[int, int, float, float]
+
+
+@dataclass(frozen=True)
+class Message:
+    TYPE: ClassVar[str] = ""
+
+
+@dataclass(frozen=True)
+class VehicleState(Message):
+    TYPE: ClassVar[str] = "vehicle.state"
+    vehicle: int
+    pose: PoseText
+    speed: int  # 0 v_zero, 1 v_mid, 2 v_high
+    maneuver: ManeuverOrRest  # label of the maneuver being driven
+    loaded: bool
+    x: float = 0.0  # world position of the rear axle point (metres) and heading (radians)
+    y: float = 0.0
+    theta: float = 0.0
+
+
+@dataclass(frozen=True)
+class CommitRequest(Message):
+    TYPE: ClassVar[str] = "reservation.commit"
+    request_id: str
+    vehicle: int
+    intervals: list[WireInterval]
+    release_from: float | None = None  # release the vehicle's reservations from here first
+    # The table revision the dispatcher's task was issued at: refused if the dispatcher has
+    # halted the vehicle since (a forklift cut off mid-task must not undo its freeze).
+    based_on: int | None = None
+    # Real time: the Unix time after which it is refused (the plan's start would be past,
+    # and releasing from there would rewrite what was already driven).
+    deadline: float | None = None
+
+
+@dataclass(frozen=True)
+class ReleaseRequest(Message):
+    TYPE: ClassVar[str] = "reservation.release"
+    request_id: str
+    vehicle: int
+    from_t: float
+    cells: list[tuple[int, int]] = field(default_factory=list)  # only these (empty: all)
+
+
+@dataclass(frozen=True)
+class Reply(Message):
+    """The reservation service's answer to a commit or release."""
+
+    TYPE: ClassVar[str] = "reservation.reply"
+    request_id: str
+    ok: bool
+    revision: int
+    conflict_vehicle: int | None = None
+    conflict_cell: list[int] = field(default_factory=list)
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class SnapshotRequest(Message):
+    TYPE: ClassVar[str] = "reservation.snapshot_request"
+    since_revision: int = -1  # -1: the whole table; otherwise the changes after it
+
+
+@dataclass(frozen=True)
+class Change(Message):
+    """One accepted change of the table, published and journaled."""
+
+    TYPE: ClassVar[str] = "reservation.change"
+    revision: int
+    op: str  # "commit" or "release"
+    vehicle: int
+    intervals: list[WireInterval] = field(default_factory=list)
+    release_from: float | None = None
+    request_id: str = ""
+    release_cells: list[tuple[int, int]] | None = None  # release only these (None: all)
+
+
+@dataclass(frozen=True)
+class Snapshot(Message):
+    TYPE: ClassVar[str] = "reservation.snapshot"
+    revision: int
+    reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
+    changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
+    diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
+
+
+# (manner label, start pose, end pose, t0, t1, v0, v1, swept cells): one maneuver.
+WireStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int,
+                 list[tuple[int, int]]]
+
+
+@dataclass(frozen=True)
+class TaskRequest(Message):
+    """The dispatcher asks a forklift's agent to plan and commit one subtask."""
+
+    TYPE: ClassVar[str] = "dispatch.task"
+    task_id: str
+    vehicle: int
+    kind: str  # "deliver" or "return"
+    start: str  # pose "col,row,H" where the dispatcher believes the forklift stands
+    t_i: float
+    goals: list[str]
+    filled: list[tuple[int, int]]  # stacks holding goods: the static map to plan on
+    loaded: bool
+    revision: int  # plan on a table at least this recent
+
+
+@dataclass(frozen=True)
+class TaskResult(Message):
+    """The agent's answer: the committed trajectory, or why there is none."""
+
+    TYPE: ClassVar[str] = "dispatch.task_result"
+    task_id: str
+    vehicle: int
+    ok: bool
+    revision: int  # the table revision that holds the committed trajectory
+    start: str = ""
+    goal: str = ""
+    t_start: float = 0.0
+    steps: list[WireStep] = field(default_factory=list)
+    intervals: list[WireInterval] = field(default_factory=list)
+    expansions: int = 0
+    failure: str = ""  # a FailureReason value when not ok
+    detail: str = ""
+    rejections: list[str] = field(default_factory=list)  # commits the store refused first
+
+
+@dataclass(frozen=True)
+class ClockTick(Message):
+    """The one source of "now". Fast mode: the clock stands at t until every agent acks this
+    tick. Real time: sim time = t + speed * (wall clock - wall)."""
+
+    TYPE: ClassVar[str] = "clock.tick"
+    tick: int
+    mode: str  # "fast" or "realtime"
+    t: float
+    speed: float = 1.0
+    wall: float = 0.0  # Unix time at which sim time was t (real time only)
+    down: list[int] = field(default_factory=list)  # forklifts the dispatcher holds as down
+
+
+@dataclass(frozen=True)
+class ClockAck(Message):
+    TYPE: ClassVar[str] = "clock.ack"
+    tick: int
+    vehicle: int
+
+
+@dataclass(frozen=True)
+class Progress(Message):
+    """After each committed subtask: stacks done of total, the decision failures so far and
+    `t`, the sim time the mission has reached (the clock's instant of the decision)."""
+
+    TYPE: ClassVar[str] = "dispatch.progress"
+    done: int
+    total: int
+    t: float
+    failures: int
+
+
+@dataclass(frozen=True)
+class MissionDone(Message):
+    """The dispatcher's last word: the mission record (record_io.record_to_dict) or an error."""
+
+    TYPE: ClassVar[str] = "dispatch.done"
+    ok: bool
+    error: str = ""
+    record: dict = field(default_factory=dict)
+    digest: str = ""
+    wall_s: float = 0.0
+    rejections: list[str] = field(default_factory=list)  # commits refused before a replan
+    detections: list[dict] = field(default_factory=list)  # faults seen (dispatcher/clock.py)
+
+
+# (manner label, start pose, end pose, t0, t1, v0, v1): one maneuver of a recorded subtask.
+RecordStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int]
+
+
+@dataclass(frozen=True)
+class MissionInfo(Message):
+    """What the run is: published by the dispatcher when the mission starts (and answered to
+    late joiners), so a recorder needs no flags to describe the run it records."""
+
+    TYPE: ClassVar[str] = "dispatch.mission"
+    layout: str  # the layout's name
+    layout_toml: str  # the layout itself, so a recording stands on its own
+    kind: str  # "fill" or "empty"
+    strategy: str
+    vehicles: int
+    seed: int
+    clock: str  # "fast", "realtime" or "inprocess"
+    speed: float
+    starts: list[str]  # start pose of forklift 1..N
+    command: str = ""
+    versions: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SubtaskEvent(Message):
+    """A subtask the dispatcher decided and a forklift committed (its whole trajectory)."""
+
+    TYPE: ClassVar[str] = "dispatch.subtask"
+    vehicle: int
+    kind: str  # "deliver" or "return"
+    target: str  # cluster or station
+    stack: int | None  # stack index in the cluster, for deliveries
+    t_i: float
+    t_end: float
+    t_done: float  # after claiming / unloading
+    postponed: bool
+    steps: list[RecordStep]
+    intervals: list[WireInterval]
+
+
+@dataclass(frozen=True)
+class StackDone(Message):
+    """A stack filled (or emptied): the goods are on it (or gone) from t."""
+
+    TYPE: ClassVar[str] = "dispatch.stack"
+    cluster: str
+    index: int
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class DecisionFailure(Message):
+    TYPE: ClassVar[str] = "dispatch.failure"
+    t: float
+    vehicle: int | None  # None: no solid decision at all
+    stage: str  # "dispatch" or "plan"
+    reason: str
+
+
+@dataclass(frozen=True)
+class HaltRequest(Message):
+    """The dispatcher freezes a forklift at t (docs/faults.md): it completes the maneuver in
+    progress and drives nothing it committed after it; with `stand` (it broke down), it
+    stands where it is at t instead, until resumed."""
+
+    TYPE: ClassVar[str] = "dispatch.halt_request"
+    request_id: str
+    vehicle: int
+    t: float
+    stand: bool = False
+
+
+@dataclass(frozen=True)
+class ResumeRequest(Message):
+    """A forklift that was down moves again from t_resume: it stood since t_stop part-way
+    through `step` (or at rest at `pose`, without one), and completes that maneuver first."""
+
+    TYPE: ClassVar[str] = "dispatch.resume_request"
+    request_id: str
+    vehicle: int
+    t_stop: float
+    t_resume: float
+    pose: PoseText  # where it stands once the maneuver is over
+    loaded: bool
+    step: WireStep | None = None
+
+
+@dataclass(frozen=True)
+class StatusRequest(Message):
+    """A restarted dispatcher asks a forklift what it holds. The agent answers once the work
+    it had in hand is done (its requests are served in order), so nothing is in flight."""
+
+    TYPE: ClassVar[str] = "dispatch.status_request"
+    request_id: str
+    vehicle: int
+
+
+@dataclass(frozen=True)
+class VehicleStatus(Message):
+    """What a forklift holds: its last committed leg (`steps`, from `start`; none: at rest
+    at `pose`), what that leg was for, whether it is down, and the last tick it heard."""
+
+    TYPE: ClassVar[str] = "vehicle.status"
+    vehicle: int
+    pose: PoseText  # where it stands once everything committed is driven
+    loaded: bool  # on its last leg (or at rest)
+    kind: str  # "deliver", "return" or "" (no leg yet)
+    start: str = ""
+    steps: list[WireStep] = field(default_factory=list)
+    down: bool = False
+    tick: int = 0
+    t: float = 0.0
+    wall: float = 0.0  # real time: the last tick's wall anchor (Unix time at sim time t)
+
+
+@dataclass(frozen=True)
+class Halt(Message):
+    """A forklift frozen at t: it holds `cells` from t to infinity. A moving one completes
+    its maneuver and stands at `pose` from t_stand; one that is down stands at (x, y, theta)
+    (world, as in VehicleState) until it resumes."""
+
+    TYPE: ClassVar[str] = "dispatch.halt"
+    vehicle: int
+    t: float
+    cause: str
+    moving: bool
+    pose: PoseText
+    t_stand: float
+    cells: list[tuple[int, int]]
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True)
+class Resume(Message):
+    """A forklift that was down moves again from t (it stands at its pose from t_stand)."""
+
+    TYPE: ClassVar[str] = "dispatch.resume"
+    vehicle: int
+    t: float
+    t_stand: float
+
+
+@dataclass(frozen=True)
+class StackReopened(Message):
+    """A delivery cut short: the stack is not done after all and goes back to the queue."""
+
+    TYPE: ClassVar[str] = "dispatch.reopen"
+    cluster: str
+    index: int
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class ZoneClosed(Message):
+    """Cells unusable over [t0, t1) (a spill), held by owner ZONE."""
+
+    TYPE: ClassVar[str] = "dispatch.zone"
+    cells: list[tuple[int, int]]
+    t0: float
+    t1: float
+
+
+@dataclass(frozen=True)
+class VehicleFault(Message):
+    """A forklift reports a fault of its own ("broken") and its end ("repaired")."""
+
+    TYPE: ClassVar[str] = "vehicle.fault"
+    vehicle: int
+    t: float
+    state: str
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class InjectFault(Message):
+    """The fault injector to an agent: "breakdown", "repair", or "slow_planner" (planning
+    takes `factor` times longer; 1 restores it)."""
+
+    TYPE: ClassVar[str] = "inject.fault"
+    request_id: str
+    vehicle: int
+    kind: str
+    factor: float = 1.0
+
+
+@dataclass(frozen=True)
+class VehicleClaim(Message):
+    """An agent started without an id (`fleet agent --id auto`, one replica of a compose
+    service) asks the dispatcher for one. The same name gets the same forklift back."""
+
+    TYPE: ClassVar[str] = "dispatch.claim"
+    request_id: str
+    name: str  # the claimant's host name, which a restarted container keeps
+
+
+@dataclass(frozen=True)
+class ClaimReply(Message):
+    TYPE: ClassVar[str] = "dispatch.claim_reply"
+    request_id: str
+    ok: bool
+    vehicle: int = 0
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class RecorderStatus(Message):
+    """The recorder's answer on fleet/<run>/recorder/status: how much it holds."""
+
+    TYPE: ClassVar[str] = "recorder.status"
+    path: str
+    messages: int
+    done_seen: bool  # the dispatcher's mission result is in the file
+
+
+@dataclass(frozen=True)
+class Envelope:
+    message: Message
+    sender: str
+    seq: int
+    sim_time: float
+
+
+TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
+                              SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
+                              ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
+                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
+                              HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
+                              ZoneClosed, VehicleFault, InjectFault, StatusRequest,
+                              VehicleStatus, VehicleClaim, ClaimReply)
+}
+
+
+def body_of(message: Message) -> dict:
+    return {f.name: getattr(message, f.name) for f in fields(message)}
+
+
+def encode(message: Message, sender: str, seq: int, sim_time: float) -> bytes:
+    body = body_of(message)
+    return msgpack.packb({"v": SCHEMA_VERSION, "type": message.TYPE, "sender": sender,
+                          "seq": seq, "t": sim_time, "body": body}, use_bin_type=True)
+
+
+def decode(payload: bytes) -> Envelope:
+    if not isinstance(payload, bytes | bytearray | memoryview):
+        raise ProtocolError(f"payload must be bytes, not {type(payload).__name__}")
+    if len(payload) > MAX_PAYLOAD:
+        raise ProtocolError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+    try:
+        raw = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=True,
+                              use_list=True)
+    except Exception as exc:  # msgpack raises several unrelated types for bad input
+        raise ProtocolError(f"not msgpack: {type(exc).__name__}: {exc}") from None
+    if not isinstance(raw, dict):
+        raise ProtocolError(f"envelope must be a map, not {type(raw).__name__}")
+    version = raw.get("v")
+    if version != SCHEMA_VERSION:
+        raise ProtocolError(f"schema version {version!r} is not {SCHEMA_VERSION}")
+    kind = raw.get("type")
+    cls = TYPES.get(kind) if isinstance(kind, str) else None
+    if cls is None:
+        raise ProtocolError(f"unknown message type {kind!r}")
+    sender = _check(raw.get("sender"), str, "sender")
+    seq = _check(raw.get("seq"), int, "seq")
+    sim_time = _check(raw.get("t"), float, "t")
+    body = raw.get("body")
+    if not isinstance(body, dict):
+        raise ProtocolError(f"{kind}: body must be a map")
+    return Envelope(build_message(cls, body), sender, seq, sim_time)
+
+
+def build_message(cls: type[Message], body: dict) -> Message:
+    """A message of type `cls` from its body map, validated (ProtocolError otherwise)."""
+    hints = _hints(cls)
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(body) - known, key=str)
+    if unknown:
+        raise ProtocolError(f"{cls.TYPE}: unknown field {unknown[0]!r}")
+    values = {}
+    for f in fields(cls):
+        if f.name not in body:
+            if f.default is MISSING and f.default_factory is MISSING:
+                raise ProtocolError(f"{cls.TYPE}: missing field {f.name!r}")
+            continue
+        values[f.name] = _check(body[f.name], hints[f.name], f"{cls.TYPE}.{f.name}")
+    return cls(**values)
+
+
+@functools.cache
+def _hints(cls: type[Message]) -> dict[str, Any]:
+    return typing.get_type_hints(cls, include_extras=True)
+
+
+def _check(value: Any, hint: Any, where: str) -> Any:
+    """`value` converted to the type `hint` describes, or ProtocolError."""
+    origin = typing.get_origin(hint)
+    if origin is Annotated:
+        base, *validators = typing.get_args(hint)
+        value = _check(value, base, where)
+        for validate in validators:
+            try:
+                validate(value)
+            except ValueError as exc:
+                raise ProtocolError(f"{where}: {exc}") from None
+        return value
+    if origin in (types.UnionType, typing.Union):
+        errors = []
+        for option in typing.get_args(hint):
+            if option is type(None):
+                if value is None:
+                    return None
+                continue
+            try:
+                return _check(value, option, where)
+            except ProtocolError as exc:
+                errors.append(str(exc))
+        raise ProtocolError(errors[0] if errors else f"{where}: must be null")
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ProtocolError(f"{where}: must be true or false, not {value!r}")
+        return value
+    if hint is int:
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ProtocolError(f"{where}: must be an integer, not {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ProtocolError(f"{where}: must be a number, not {value!r}")
+        value = float(value)
+        if math.isnan(value):
+            raise ProtocolError(f"{where}: must not be NaN")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ProtocolError(f"{where}: must be a string, not {value!r}")
+        return value
+    if hint is dict:
+        if not isinstance(value, dict):
+            raise ProtocolError(f"{where}: must be a map")
+        return value
+    if origin is list:
+        if not isinstance(value, list | tuple):
+            raise ProtocolError(f"{where}: must be a list")
+        (item,) = typing.get_args(hint)
+        return [_check(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+    if origin is tuple:
+        items = typing.get_args(hint)
+        if not isinstance(value, list | tuple) or len(value) != len(items):
+            raise ProtocolError(f"{where}: must be a list of {len(items)} items")
+        return tuple(_check(v, h, f"{where}[{i}]") for i, (v, h) in
+                     enumerate(zip(value, items, strict=True)))
+    raise ProtocolError(f"{where}: unsupported type {hint!r}")  # pragma: no cover
