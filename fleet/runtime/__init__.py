@@ -1,1 +1,3 @@
-"""The zenoh runtime, local launcher and deployment: the bus, access control, the router, child processes, `fleet run`'s processes, compose settings, and fault tooling (zenoh lives here and in the process packages, nowhere else in the core)."""
+"""The zenoh runtime, local launcher and deployment: the bus, access control, the router, child
+processes, `fleet run`'s processes, compose settings, and fault tooling (zenoh lives here and in
+the process packages, nowhere else in the core)."""

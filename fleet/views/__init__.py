@@ -1,1 +1,2 @@
-"""Pictures of a run: the matplotlib drawings and plots, and the Foxglove scene (matplotlib and foxglove live here and nowhere else in the core)."""
+"""Pictures of a run: the matplotlib drawings and plots, and the Foxglove scene (matplotlib and
+foxglove live here and nowhere else in the core)."""

@@ -1,1 +1,2 @@
-"""What travels between processes: the message catalogue (docs/protocol.md) and the conversions between core objects and messages."""
+"""What travels between processes: the message catalogue (docs/protocol.md) and the conversions
+between core objects and messages."""
