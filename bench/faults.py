@@ -19,8 +19,9 @@ from pathlib import Path
 
 from dispatcher.clock import DETECT_TIMEOUT_S
 from fleet.analysis.analyze import analyze
+from fleet.dispatching.decision import Strategy
 from fleet.mission.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.mcapfile import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume

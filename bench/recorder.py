@@ -248,7 +248,8 @@ def wall_cost(layout: str = "paper", repeats: int = 3, vehicles: int = 4,
     """Fast-mode ANN fills as processes with the recorder and without, alternated (the
     order flips every repeat, so a drift in the machine's speed hits both alike), with
     `vehicles` forklifts or as many as the layout has start poses."""
-    from fleet.mission.spec import Mission, MissionKind, Strategy
+    from fleet.dispatching.decision import Strategy
+    from fleet.mission.spec import Mission, MissionKind
     from fleet.runtime.local_run import RunSpec, run_processes
     from fleet.world.layout import load_layout
 

@@ -10,9 +10,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from fleet.dispatching.decision import Strategy
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, lower_bound, run_mission
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.world.layout import load_layout
 
 ORDER = (Strategy.ANN, Strategy.COMPREHENSIVE, Strategy.GREEDY, Strategy.TRAFFIC,

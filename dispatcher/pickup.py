@@ -10,7 +10,7 @@ import math
 
 from dispatcher.liveness import ParticipantLost
 from dispatcher.remote import RemoteExecutor
-from fleet.mission.freeze import Held, Recovered, recovered_state
+from fleet.mission.pickup import HeldLeg, Recovered, recovered_state
 from fleet.mission.seam import GOODS
 from fleet.params import DispatchParams
 from fleet.planning.trajectory import Pose, Trajectory
@@ -38,7 +38,7 @@ def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
                              steps, (), 0) if steps else None
         except (ValueError, ProtocolError) as exc:
             raise ParticipantLost(f"forklift {s.vehicle}'s status is malformed: {exc}") from None
-        held.append(Held(s.vehicle, pose, leg, s.loaded, s.kind, s.down))
+        held.append(HeldLeg(s.vehicle, pose, leg, s.loaded, s.kind, s.down))
     goods = {r.cell: r.t0 for r in executor.store.reservations(GOODS) if r.t1 == math.inf}
     stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
     last = max(statuses, key=lambda s: s.tick)

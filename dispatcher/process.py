@@ -235,8 +235,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         def progress(done: int, total: int, t: float, failures: int) -> None:
             publish(Progress(done, total, t, failures), t)
 
-        options.progress = progress
-        options.events = publish
+        options = dataclasses.replace(options, progress=progress, events=publish)
         record = Engine(mission, options, layout, executor, clock, recovered).run()
         changes.undeclare()
         as_dict = record_to_dict(record)

@@ -19,8 +19,9 @@ from hypothesis import strategies as st
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.commands.run import engine_options
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
 from fleet.runtime.bus import Keys

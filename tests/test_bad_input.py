@@ -23,8 +23,9 @@ from zenoh_helpers import client
 
 from fleet.cli import EX_SOFTWARE, build_parser, main, subcommands
 from fleet.commands.helptext import STRATEGIES, HelpFormatter, shows_default
+from fleet.dispatching.decision import Strategy
 from fleet.errors import describe
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.runtime.argtypes import endpoint, finite_float, port, positive_float, sim_seconds
 from fleet.runtime.bus import free_port
 from fleet.runtime.local_run import ROUTER_TIMEOUT_MS, RunSpec, run_processes

@@ -15,10 +15,11 @@ from dispatcher.claims import Roster
 from fleet.analysis.analyze import analyze
 from fleet.cli import build_parser
 from fleet.commands.run import engine_options
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.mcapfile import read_recording
 from fleet.runtime.access import generate_credentials, read_dictionary
 from fleet.runtime.bus import BusConfig, Keys, free_port, open_session, wait_alive

@@ -1,11 +1,13 @@
 """Dispatcher core: rank, Algorithm 1's altered and backup states with constructed blockages,
 and what each strategy maximises."""
 
-from fleet.dispatching.algorithm1 import Dispatcher, Target, TaskKind, VehicleView, rank
-from fleet.mission.spec import Strategy
+from fleet.dispatching.algorithm1 import Algorithm1, mlp_inputs, rank
+from fleet.dispatching.decision import Strategy, Target, TaskKind, VehicleView
+from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
+from fleet.world.layout import load_layout
 
 # A 12 x 5 floor split by a wall at column 6 except for a one-cell gap at row 2.
 WALL = frozenset((6, r) for r in range(5) if r != 2)
@@ -17,7 +19,7 @@ def view(vehicle, cell, t_free=0.0, task=TaskKind.DELIVER):
 
 
 def dispatcher(store, strategy=Strategy.COMPREHENSIVE, names=("east",)):
-    return Dispatcher(grid_for=lambda: GRID, store=store, strategy=strategy,
+    return Algorithm1(grid_for=lambda: GRID, store=store, strategy=strategy,
                       cluster_names=names)
 
 
@@ -85,8 +87,16 @@ def test_strategies_maximise_their_own_term():
 
 
 def test_mlp_inputs_follow_equation_7():
-    d = dispatcher(ReservationTable(), names=("a", "b", "c"))
     views = [VehicleView(1, Pose((0, 0), 0), 0, TaskKind.RETURN, "a", TaskKind.DELIVER),
              VehicleView(2, Pose((0, 1), 0), 0, TaskKind.DELIVER, "b", TaskKind.RETURN),
              VehicleView(3, Pose((0, 2), 0), 0, TaskKind.DELIVER, None, None)]
-    assert d.mlp_inputs(views, {"a": 4, "b": 7, "c": 9}) == [4.0, -7.0, 0.0]
+    assert mlp_inputs(("a", "b", "c"), views, {"a": 4, "b": 7, "c": 9}) == [4.0, -7.0, 0.0]
+
+
+def test_every_strategy_names_seed_000s_algorithm_1_with_itself():
+    layout = load_layout("small")
+    for strategy in Strategy:
+        policy = dispatch_policy(PolicySetup(strategy, layout, ReservationTable(),
+                                             lambda: GRID))
+        assert isinstance(policy, Algorithm1)
+        assert (policy.strategy, policy.cluster_names) == (strategy, ("a", "b"))

@@ -5,10 +5,11 @@ from pathlib import Path
 
 import pytest
 
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, lower_bound, run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.world.layout import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -87,7 +88,7 @@ def test_a_fleet_stuck_on_one_station_tries_the_others():
     and keeps choosing it). After `unstick_after` failures in a row each forklift skips the
     stations it failed to reach since the last success, and every one gets home."""
     from fleet.mission.engine import MissionStuck
-    from fleet.mission.freeze import Recovered
+    from fleet.mission.pickup import Recovered
     from fleet.planning.trajectory import Pose
 
     layout = load_layout("paper")

@@ -24,10 +24,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fleet.commands.run import engine_options
+from fleet.dispatching.decision import Strategy
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.seam import Task
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.maneuvers import Manner
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable

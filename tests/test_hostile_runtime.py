@@ -23,9 +23,10 @@ import zenoh
 
 from fleet.analysis.analyze import analyze
 from fleet.commands.run import engine_options
+from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.mcapfile import KEY_TYPES, expected_sender, message_type, read_recording
 from fleet.runtime.bus import Keys
 from fleet.runtime.launcher import Launcher

@@ -6,10 +6,11 @@ import json
 import pytest
 import torch
 
+from fleet.dispatching.decision import Strategy
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError, lm_fit, make_net
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, run_mission
-from fleet.mission.spec import Mission, Strategy
+from fleet.mission.spec import Mission
 from fleet.mission.training import train
 from fleet.world.layout import load_layout
 

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from fleet.dispatching.decision import Strategy
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, lower_bound, run_mission
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.world.layout import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))

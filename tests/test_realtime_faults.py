@@ -11,8 +11,9 @@ from mission_check import journal_overlaps
 
 from bench.faults import timings
 from fleet.analysis.analyze import SILENT, analyze
+from fleet.dispatching.decision import Strategy
 from fleet.mission.faults import load_scenario
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.mcapfile import read_recording
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume, VehicleState, ZoneClosed

@@ -9,11 +9,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fleet.analysis.safety import double_bookings, replay
+from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import Fault, FaultKind, Scenario
 from fleet.mission.freeze import Motion, ScheduledPacer, cascade, freeze_of
 from fleet.mission.seam import GOODS, ZONE, freeze_changes
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.maneuvers import Manner
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import Pose, Step, Trajectory

@@ -23,8 +23,9 @@ from fleet.cli import main
 from fleet.commands.compose import place_copy
 from fleet.commands.run import engine_options
 from fleet.commands.runs import SUMMARY, write_summary
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.mcapfile import (
     RUN_FILE,

@@ -22,9 +22,10 @@ from websockets.sync.client import connect
 
 from fleet.analysis.analyze import analyze
 from fleet.commands.run import engine_options
-from fleet.mission.engine import run_mission
+from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import Engine, run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import vehicle_states
 from fleet.recording.mcapfile import read_recording
 from fleet.runtime.bus import (
@@ -58,7 +59,8 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_fast_mode_processes_equal_the_inprocess_reference(strategy, kind, tmp_path):
     mission = Mission("paper", MissionKind(kind), Strategy(strategy))
     layout = load_layout("paper")
-    reference = run_mission(mission, engine_options(mission, layout, None), layout)
+    engine = Engine(mission, engine_options(mission, layout, None), layout)
+    reference = engine.run()
     check_paper_mission(reference)  # the reference itself is sound (test_paper_missions.py)
     outcome = run_processes(RunSpec(mission, 4, tmp_path))
     assert outcome.error == ""
@@ -79,7 +81,7 @@ def test_fast_mode_processes_equal_the_inprocess_reference(strategy, kind, tmp_p
     # Every forklift's recorded states are the ones the reference drives, instant by instant.
     recorded = sorted((r.key, r.envelope.sim_time, m) for r, m in recording.of(VehicleState))
     driven = sorted((o.key, o.sim_time, o.message)
-                    for o in vehicle_states(reference, layout, Keys()))
+                    for o in vehicle_states(reference, layout, Keys(), engine.drive_log))
     assert recorded == driven
 
 

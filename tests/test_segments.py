@@ -22,7 +22,8 @@ import zenoh
 from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.commands.run import engine_options
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.dispatching.decision import Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run
 from fleet.recording.mcapfile import (
     NS,

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from fleet.dispatching.algorithm1 import TaskKind
+from fleet.dispatching.decision import TaskKind
 from fleet.mission.seam import Task
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable

@@ -16,11 +16,12 @@ from typing import TYPE_CHECKING, Any
 from fleet.commands.helptext import strategies_epilog
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.engine import EngineOptions
 from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mcapfile import read_recording
 from fleet.recording.rundir import choose

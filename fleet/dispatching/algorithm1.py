@@ -1,9 +1,10 @@
-"""Dispatcher core of seed 000 (Section 3, Algorithm 1): pure functions over a fleet view.
+"""Seed 000's dispatch policy (Section 3, Algorithm 1): pure functions over a fleet view.
 
 Which vehicle plans next (`rank`, SelectInitialState / SelectAlteredState / SelectBackupState),
 where it goes (the scores of Equations 3, 4 and 9 from the time-expanded preliminary A*), and
 how decision failures are counted. The engine (in-process or distributed) owns the state and
-calls `Dispatcher.decide` whenever a vehicle must be given its next subtask.
+calls `Algorithm1.decide` (the DispatchPolicy interface, fleet/dispatching/policy.py) whenever
+a vehicle must be given its next subtask.
 
 Reading of the seed where it is ambiguous (docs/dispatching.md says more):
 - I_d is printed as (t_find - t_i) [+ C5 for s1, s2]; with C2 > 0 that would make the greedy
@@ -17,42 +18,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 
+from fleet.dispatching.decision import (
+    Decision,
+    DispatchOutcome,
+    Strategy,
+    Target,
+    TaskKind,
+    VehicleView,
+)
 from fleet.dispatching.prelim import cover_time, preliminary_astar
-from fleet.mission.spec import Strategy
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
-from fleet.planning.trajectory import Pose
-
-
-class TaskKind(Enum):
-    DELIVER = "deliver"  # to a shelf cluster (put goods in fill, take goods in empty)
-    RETURN = "return"  # to a picking station
-
-
-@dataclass(frozen=True)
-class VehicleView:
-    vehicle: int
-    pose: Pose
-    t_free: float  # end of its last trajectory plus handling time
-    next_task: TaskKind
-    linked_cluster: str | None  # cluster of its current or last subtask (MLP input, Eq. 7)
-    linked_kind: TaskKind | None
-
-
-@dataclass(frozen=True)
-class Target:
-    """A candidate goal: a cluster's next stack, or a station."""
-
-    name: str  # cluster or station name
-    goals: tuple[Pose, ...]  # poses with the forks at the stack / station
-    stack_cell: Cell | None = None
-    stack_index: int | None = None
-    remaining: int = 0  # G_d: stacks of the cluster still to do
-    far: bool = False  # s1/s2-like clusters far from the stations (C5, C7)
 
 
 @dataclass(frozen=True)
@@ -69,20 +48,11 @@ class Score:
 
 
 @dataclass(frozen=True)
-class Decision:
-    vehicle: int
-    t_i: float
-    kind: TaskKind
-    target: Target
+class ScoredDecision(Decision):
+    """A decision with the scores of every target it was chosen among (what the MLP's
+    training learns from, fleet/mission/training.py)."""
+
     scores: tuple[Score, ...]
-    postponed: bool
-
-
-@dataclass
-class DispatchOutcome:
-    decision: Decision | None
-    failures: int  # times n_current or t_i changed without a decision (the seed's count)
-    postponements: dict[int, float] = field(default_factory=dict)  # vehicle -> new t_free
 
 
 def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = ()) -> list[int]:
@@ -96,8 +66,24 @@ def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = ()) -> list[in
 MlpFn = Callable[[list[float]], list[float]]
 
 
+def mlp_inputs(cluster_names: Sequence[str], vehicles: Sequence[VehicleView],
+               remaining: dict[str, int]) -> list[float]:
+    """Equation (7): u_d = G_d if a delivery is linked to cluster d, -G_d for a return or
+    both, 0 if none."""
+    linked: dict[str, set[TaskKind]] = {}
+    for v in vehicles:
+        if v.linked_cluster is not None and v.linked_kind is not None:
+            linked.setdefault(v.linked_cluster, set()).add(v.linked_kind)
+    u = []
+    for name in cluster_names:
+        kinds = linked.get(name, set())
+        g = remaining.get(name, 0)
+        u.append(0.0 if not kinds else float(g) if kinds == {TaskKind.DELIVER} else -float(g))
+    return u
+
+
 @dataclass
-class Dispatcher:
+class Algorithm1:
     """Scores targets and runs Algorithm 1 for one decision at a time."""
 
     grid_for: Callable[[], GridMap]
@@ -107,21 +93,6 @@ class Dispatcher:
     cluster_names: tuple[str, ...] = ()
     mlp: MlpFn | None = None
     entrance_cells: Callable[[Target], tuple[Cell, ...]] = lambda t: ()
-
-    def mlp_inputs(self, vehicles: Sequence[VehicleView],
-                   remaining: dict[str, int]) -> list[float]:
-        """Equation (7): u_d = G_d if a delivery is linked to cluster d, -G_d for a return or
-        both, 0 if none."""
-        linked: dict[str, set[TaskKind]] = {}
-        for v in vehicles:
-            if v.linked_cluster is not None and v.linked_kind is not None:
-                linked.setdefault(v.linked_cluster, set()).add(v.linked_kind)
-        u = []
-        for name in self.cluster_names:
-            kinds = linked.get(name, set())
-            g = remaining.get(name, 0)
-            u.append(0.0 if not kinds else float(g) if kinds == {TaskKind.DELIVER} else -float(g))
-        return u
 
     def score_clusters(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
                        u: list[float]) -> list[Score]:
@@ -198,7 +169,7 @@ class Dispatcher:
         selected: set[int] = set(failed)
         failures = 0
         postponements: dict[int, float] = {}
-        u = self.mlp_inputs(vehicles, remaining)
+        u = mlp_inputs(self.cluster_names, vehicles, remaining)
         for _ in range(self.params.iter_dispatch):
             postponed = False
             fresh = [v for v in order if v not in selected]
@@ -219,8 +190,8 @@ class Dispatcher:
                 scores = self.score_stations(view, t_i, targets)
             best = self.accepted(scores, view.next_task)
             if best is not None:
-                return DispatchOutcome(Decision(current, t_i, view.next_task, best.target,
-                                                tuple(scores), postponed), failures,
-                                       postponements)
+                return DispatchOutcome(ScoredDecision(current, t_i, view.next_task,
+                                                      best.target, postponed, tuple(scores)),
+                                       failures, postponements)
             failures += 1
         return DispatchOutcome(None, failures, postponements)

@@ -6,10 +6,69 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from dataclasses import dataclass, field
 from typing import Any
 
-from fleet.mission.engine import MissionRecord, subtask_event
+from fleet.dispatching.decision import TaskKind
+from fleet.mission.spec import Mission
+from fleet.planning.geometry import Cell
+from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.protocol import SubtaskEvent, body_of
+
+
+@dataclass(frozen=True)
+class Subtask:
+    vehicle: int
+    kind: TaskKind
+    target: str  # cluster or station
+    stack_index: int | None
+    stack_cell: Cell | None
+    t_i: float
+    t_end: float
+    t_done: float  # after claiming / unloading
+    trajectory: Trajectory
+    postponed: bool
+
+
+@dataclass(frozen=True)
+class FailureEvent:
+    t: float
+    vehicle: int | None
+    stage: str  # "dispatch" or "plan"
+    reason: str
+
+
+@dataclass
+class MissionRecord:
+    mission: Mission
+    layout: str
+    vehicles: tuple[int, ...]
+    starts: tuple[Pose, ...]
+    subtasks: list[Subtask] = field(default_factory=list)
+    failures: list[FailureEvent] = field(default_factory=list)
+    decision_failures: int = 0
+    end_time: float = 0.0  # the last stack done
+    all_parked_time: float = 0.0  # every vehicle at rest for good
+    stacks_done: list[tuple[str, int, float]] = field(default_factory=list)
+    busy_s: dict[int, float] = field(default_factory=dict)
+    wait_s: dict[int, float] = field(default_factory=dict)
+    halts: list[tuple[int, float, str]] = field(default_factory=list)  # vehicle, t, cause
+    resumes: list[tuple[int, float]] = field(default_factory=list)
+    cut_subtasks: list[int] = field(default_factory=list)  # indices of subtasks cut short
+
+    @property
+    def total_wait_s(self) -> float:
+        return sum(self.wait_s.values())
+
+
+def subtask_event(s: Subtask) -> SubtaskEvent:
+    """A subtask as the dispatcher announces it (and as mission records hold it)."""
+    return SubtaskEvent(
+        s.vehicle, s.kind.value, s.target, s.stack_index, s.t_i, s.t_end, s.t_done,
+        s.postponed,
+        [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
+         for st in s.trajectory.steps],
+        [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in s.trajectory.intervals])
 
 
 def _time(t: float) -> float | str:

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
-from fleet.dispatching.algorithm1 import TaskKind
+from fleet.dispatching.decision import TaskKind
 from fleet.errors import UserError
 from fleet.mission.freeze import Disruption, Freeze
 from fleet.planning.geometry import Cell

@@ -5,22 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 
+from fleet.dispatching.decision import Strategy
 from fleet.planning.trajectory import Pose
 
 
 class MissionKind(Enum):
     FILL = "fill"  # goods picked at stations, delivered to stacks in fill order
     EMPTY = "empty"  # goods fetched from stacks in reverse fill order, dropped at stations
-
-
-class Strategy(Enum):
-    """The five dispatching strategies of seed 000, Section 6.2."""
-
-    GREEDY = "greedy"  # argmax I_d
-    TRAFFIC = "traffic"  # traffic-jam removal: argmax J_d,0
-    BALANCE = "balance"  # argmax G_d
-    COMPREHENSIVE = "comprehensive"  # argmax S_d,0
-    ANN = "ann"  # argmax S_d (Equation 9): comprehensive corrected by the MLP
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,55 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from fleet.dispatching.algorithm1 import ScoredDecision, mlp_inputs
+from fleet.dispatching.decision import Strategy, TaskKind
 from fleet.dispatching.mlp import ClusterMLPs
 from fleet.errors import UserError
-from fleet.mission.engine import EngineOptions, run_mission
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.engine import EngineOptions, Planned, run_mission
+from fleet.mission.spec import Mission, MissionKind
+from fleet.params import DispatchParams
 from fleet.world.layout import Layout
+
+Sample = tuple[tuple[float, ...], int, float]  # MLP input U, cluster, target
+
+
+class SampleCollector:
+    """Hears every planned decision of one mission (EngineOptions.planned) and keeps, for
+    every delivery, the training target of Equation (6) (Equation (10) under the ANN
+    strategy) of each cluster it scored."""
+
+    def __init__(self, layout: Layout, strategy: Strategy,
+                 params: DispatchParams | None = None) -> None:
+        self.clusters = tuple(c.name for c in layout.clusters)
+        self.strategy = strategy
+        self.params = params or DispatchParams()
+        self.trip_times: list[float] = []  # every committed subtask's, so far
+        self.samples: list[Sample] = []
+
+    def planned(self, planned: Planned) -> None:
+        decision, traj = planned.decision, planned.trajectory
+        if decision.kind is TaskKind.DELIVER and isinstance(decision, ScoredDecision):
+            self._collect(planned, decision)
+        if traj is not None:
+            self.trip_times.append(traj.t_end - decision.t_i)
+
+    def _collect(self, planned: Planned, decision: ScoredDecision) -> None:
+        p = self.params
+        traj = planned.trajectory
+        u = tuple(mlp_inputs(self.clusters, planned.fleet, planned.remaining))
+        mean_trip = sum(self.trip_times) / len(self.trip_times) if self.trip_times else 0.0
+        for score in decision.scores:
+            base = score.value - p.C1 * score.target.remaining if \
+                self.strategy is Strategy.ANN else score.J0
+            if score.target.name == decision.target.name:
+                if traj is None:
+                    target = p.C5
+                else:
+                    norm = p.C7 if score.target.far else p.C8
+                    target = base - p.C6 * (traj.t_end - decision.t_i - mean_trip + norm)
+            else:
+                target = base
+            self.samples.append((u, self.clusters.index(score.target.name), target))
 
 
 @dataclass(frozen=True)
@@ -42,7 +86,7 @@ def train(layout: Layout, cycles: int, seed: int, lm_steps: int = 50,
     names = tuple(c.name for c in layout.clusters)
     biggest = max(len(layout.cluster_stacks(n)) for n in names)
     mlps = ClusterMLPs.fresh(names, biggest, seed, layout.name)
-    samples: list[tuple[tuple[float, ...], int, float]] = []
+    samples: list[Sample] = []
     reports = []
     best: tuple[float, dict] | None = None  # (end time, networks used) of the best ANN cycle
     for cycle in range(1, cycles + 1):
@@ -54,13 +98,14 @@ def train(layout: Layout, cycles: int, seed: int, lm_steps: int = 50,
 
         mission = Mission(layout=layout.name, kind=MissionKind.FILL, strategy=strategy,
                           seed=seed)
-        options = EngineOptions(mlp=mlps if cycle > 1 else None, collect_training=True,
-                                progress=step)
+        collector = SampleCollector(layout, strategy)
+        options = EngineOptions(mlp=mlps if cycle > 1 else None, progress=step,
+                                planned=collector.planned)
         used = mlps.to_json()
         record = run_mission(mission, options, layout)
         if cycle > 1 and (best is None or record.end_time < best[0]):
             best = (record.end_time, used)
-        samples.extend(record.training_samples)
+        samples.extend(collector.samples)
         fits = mlps.fit(samples, lm_steps)
         first = [r.initial for r in fits.values() if r.losses]
         last = [r.losses[-1] for r in fits.values() if r.losses]

@@ -11,16 +11,16 @@ from __future__ import annotations
 import math
 import time
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fleet.dispatching.algorithm1 import TaskKind
+from fleet.mission.drive_log import AddLeg, CutAt, DriveLog, ResumeAt, StopAt
 from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
-from fleet.mission.engine import Engine, EngineOptions, MissionRecord
+from fleet.mission.engine import Engine, EngineOptions
 from fleet.mission.faults import Scenario
 from fleet.mission.freeze import ScheduledPacer
-from fleet.mission.record import digest_of, record_to_dict
-from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.record import MissionRecord, digest_of, record_to_dict
+from fleet.mission.spec import Mission
 from fleet.recording.mcapfile import RecordingWriter, mission_info
 from fleet.runtime.bus import Keys
 from fleet.wire.protocol import Change, Message, MissionDone, MissionInfo, Progress, encode
@@ -37,30 +37,27 @@ class Outgoing:
 
 
 def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
-                   drive_log: dict[int, list[tuple]] | None = None) -> list[Outgoing]:
+                   drive_log: DriveLog) -> list[Outgoing]:
     """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick,
-    driven as its agent was told to (`Engine.drive_log`; without one, every subtask of the
-    record); a forklift that is down says nothing until it moves again."""
+    driven as its agent was told to (`Engine.drive_log`); a forklift that is down says
+    nothing until it moves again."""
     until = max(record.end_time, record.all_parked_time)
-    fill = record.mission.kind is MissionKind.FILL
     out = []
     for vehicle, start in zip(record.vehicles, record.starts, strict=True):
         drive = Drive(vehicle, start, layout)
         silent: list[tuple[float, float]] = []
-        ops = drive_log[vehicle] if drive_log is not None else [
-            ("add", s.trajectory, (s.kind is TaskKind.DELIVER) == fill)
-            for s in record.subtasks if s.vehicle == vehicle]
-        for op, *args in ops:
-            if op == "add":
-                drive.add(*args)
-            elif op == "cut":
-                drive.cut(args[0])
-            elif op == "stop":
-                drive.stop(args[0])
-                silent.append((args[0], math.inf))
-            elif op == "resume":
-                drive.resume(args[0])
-                silent[-1] = (silent[-1][0], args[0])
+        for order in drive_log[vehicle]:
+            match order:
+                case AddLeg(trajectory, loaded):
+                    drive.add(trajectory, loaded)
+                case CutAt(t):
+                    drive.cut(t)
+                case StopAt(t):
+                    drive.stop(t)
+                    silent.append((t, math.inf))
+                case ResumeAt(t):
+                    drive.resume(t)
+                    silent[-1] = (silent[-1][0], t)
         out += [Outgoing(keys.vehicle_state(vehicle), drive.state_at(t), f"vehicle-{vehicle}",
                          t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
                 if not any(t0 <= t < t1 for t0, t1 in silent)]
@@ -69,7 +66,7 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
 
 def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
                      events: list[tuple[Message, float]], changes: list[Change],
-                     done: MissionDone, drive_log: dict[int, list[tuple]],
+                     done: MissionDone, drive_log: DriveLog,
                      keys: Keys | None = None) -> list[Outgoing]:
     """Everything a run of processes would have published, in sim-time order."""
     keys = keys or Keys()
@@ -102,8 +99,8 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
         if told is not None:
             told(done, total, t, failures)
 
-    options.progress = progress
-    options.events = lambda message, t: events.append((message, t))
+    options = replace(options, progress=progress,
+                      events=lambda message, t: events.append((message, t)))
     t0 = time.perf_counter()
     pacer = ScheduledPacer(scenario) if scenario is not None else None
     engine = Engine(mission, options, layout, pacer=pacer)

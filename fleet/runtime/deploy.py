@@ -11,8 +11,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import PurePosixPath
 
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.spec import MissionKind, Strategy
+from fleet.mission.spec import MissionKind
 from fleet.runtime.access import (
     DISPATCHER,
     OPERATOR,

@@ -4,7 +4,7 @@ values, time order) and raises ProtocolError naming the field."""
 
 from __future__ import annotations
 
-from fleet.dispatching.algorithm1 import TaskKind
+from fleet.dispatching.decision import TaskKind
 from fleet.mission.seam import Task
 from fleet.planning.maneuvers import Manner
 from fleet.planning.reservations import Interval

@@ -1,0 +1,68 @@
+"""What the engine and a dispatch policy say to each other, whichever the policy: the strategy
+a mission names, the vehicles as a policy sees them, the targets it may send one to, and the
+decision it answers with (fleet/dispatching/policy.py has the policy interface)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+from fleet.planning.geometry import Cell
+from fleet.planning.trajectory import Pose
+
+
+class Strategy(Enum):
+    """What a mission names to choose its dispatch policy (fleet/dispatching/policy.py maps
+    each to one). Today the five dispatching strategies of seed 000, Section 6.2, all
+    Algorithm 1."""
+
+    GREEDY = "greedy"  # argmax I_d
+    TRAFFIC = "traffic"  # traffic-jam removal: argmax J_d,0
+    BALANCE = "balance"  # argmax G_d
+    COMPREHENSIVE = "comprehensive"  # argmax S_d,0
+    ANN = "ann"  # argmax S_d (Equation 9): comprehensive corrected by the MLP
+
+
+class TaskKind(Enum):
+    DELIVER = "deliver"  # to a shelf cluster (put goods in fill, take goods in empty)
+    RETURN = "return"  # to a picking station
+
+
+@dataclass(frozen=True)
+class VehicleView:
+    vehicle: int
+    pose: Pose
+    t_free: float  # end of its last trajectory plus handling time
+    next_task: TaskKind
+    linked_cluster: str | None  # cluster of its current or last subtask (MLP input, Eq. 7)
+    linked_kind: TaskKind | None
+
+
+@dataclass(frozen=True)
+class Target:
+    """A candidate goal: a cluster's next stack, or a station."""
+
+    name: str  # cluster or station name
+    goals: tuple[Pose, ...]  # poses with the forks at the stack / station
+    stack_cell: Cell | None = None
+    stack_index: int | None = None
+    remaining: int = 0  # G_d: stacks of the cluster still to do
+    far: bool = False  # s1/s2-like clusters far from the stations (C5, C7)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Which vehicle goes where, from which instant."""
+
+    vehicle: int
+    t_i: float
+    kind: TaskKind
+    target: Target
+    postponed: bool  # decided for a later instant than the vehicle was free at
+
+
+@dataclass
+class DispatchOutcome:
+    decision: Decision | None
+    failures: int  # times n_current or t_i changed without a decision (the seed's count)
+    postponements: dict[int, float] = field(default_factory=dict)  # vehicle -> new t_free

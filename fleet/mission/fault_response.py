@@ -1,0 +1,188 @@
+"""How the engine answers a disruption of the schedule: who is frozen (the cascade of
+fleet/mission/freeze.py), what is cancelled, and how a forklift that was down moves again
+(docs/faults.md).
+
+It keeps what that needs and nothing else does: what each forklift has committed (to find
+where it is at any instant), its state before each subtask (to undo a subtask cut before it
+arrived), and which forklifts are down.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+from fleet.dispatching.decision import TaskKind
+from fleet.mission.drive_log import CutAt, DriveLog, ResumeAt, StopAt
+from fleet.mission.freeze import (
+    BREAKDOWN,
+    Disruption,
+    Freeze,
+    Motion,
+    VehicleDown,
+    VehicleUp,
+    cascade,
+)
+from fleet.mission.record import MissionRecord
+from fleet.mission.seam import Executor
+from fleet.mission.vehicle_slot import VehicleSlot
+from fleet.mission.work import MissionWork
+from fleet.planning.geometry import Cell
+from fleet.planning.maneuvers import Manner, world_pose
+from fleet.planning.trajectory import Pose, Trajectory
+from fleet.wire.protocol import Halt, Message, Resume, StackReopened, ZoneClosed
+from fleet.world.layout import Layout
+
+Emit = Callable[[Message, float], None]
+
+
+class FaultResponse:
+    """Freeze, cancel, resume, on the engine's fleet, work and record."""
+
+    def __init__(self, fleet: dict[int, VehicleSlot], starts: tuple[Pose, ...],
+                 executor: Executor, work: MissionWork, record: MissionRecord,
+                 drive_log: DriveLog, layout: Layout, emit: Emit) -> None:
+        self.fleet = fleet
+        self.starts = starts
+        self.executor = executor
+        self.work = work
+        self.record = record
+        self.drive_log = drive_log
+        self.layout = layout
+        self.emit = emit
+        self.down: dict[int, Freeze] = {}  # forklifts that cannot move, and where they stopped
+        self.before: list[VehicleSlot] = []  # each forklift's slot before each subtask
+        self.driven: dict[int, list[Trajectory]] = {v: [] for v in fleet}
+
+    def committed(self, before: VehicleSlot, traj: Trajectory) -> None:
+        """A subtask's trajectory was committed; `before` is its forklift's slot until then."""
+        self.before.append(before)
+        self.driven[before.vehicle].append(traj)
+
+    def picked_up(self, legs: dict[int, Trajectory]) -> None:
+        """A restarted dispatcher: each forklift's last committed leg, as its agent holds it."""
+        for vehicle, leg in legs.items():
+            self.driven[vehicle] = [leg]
+
+    def disrupt(self, disruption: Disruption) -> None:
+        """Apply what the clock reports: a forklift down or back, a zone closed."""
+        if isinstance(disruption, VehicleUp):
+            self._resume(disruption)
+            return
+        if isinstance(disruption, VehicleDown):
+            if disruption.vehicle in self.down:
+                return
+            first, zone, until = {disruption.vehicle}, frozenset(), disruption.t
+            cause = disruption.cause
+        else:
+            first, zone, until = set(), disruption.cells, disruption.until
+            cause = "zone closed"
+        t = disruption.t
+        motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]))
+                   for v in self.fleet if v not in self.down}
+        result = cascade(self.executor.store, t, motions, first, self._goods_pending(t), zone,
+                         until)
+        goods: list[Cell] = []
+        for vehicle, freeze in sorted(result.freezes.items()):
+            goods += self._freeze(freeze)
+            down = vehicle in first
+            if down:
+                self.down[vehicle] = freeze
+            why = cause if down or zone else "its plan crossed a stopped forklift's cells"
+            self.record.halts.append((vehicle, t, why))
+            self.drive_log[vehicle].append(StopAt(t) if down else CutAt(t))
+            self.emit(halt_message(freeze, why, not down, self.layout), t)
+        if zone:
+            self.emit(ZoneClosed(sorted(result.zone), t, until), t)
+        broken = isinstance(disruption, VehicleDown) and disruption.cause == BREAKDOWN
+        self.executor.freeze(t, list(result.freezes.values()), goods, result.zone, until,
+                             moving=[v for v in result.freezes if v not in self.down],
+                             standing=sorted(first) if broken else [])
+
+    def _goods_pending(self, t: float) -> Callable[[Cell], int | None]:
+        """Which forklift's delivery, not yet arrived at t, reserved goods on a cell."""
+        cut = set(self.record.cut_subtasks)
+        pending = {s.stack_cell: s.vehicle for i, s in enumerate(self.record.subtasks)
+                   if i not in cut and s.kind is TaskKind.DELIVER and s.t_end > t and
+                   s.stack_cell is not None}
+        return pending.get
+
+    def _freeze(self, freeze: Freeze) -> list[Cell]:
+        """Cut the forklift's plan after the maneuver in progress at freeze.t: its subtasks
+        not yet arrived are cancelled (a delivery's stack goes back to the queue). Returns
+        the stack cells whose goods reservations go with them."""
+        t, vehicle = freeze.t, freeze.vehicle
+        v = self.fleet[vehicle]
+        cut = set(self.record.cut_subtasks)
+        undone = [i for i, s in enumerate(self.record.subtasks)
+                  if s.vehicle == vehicle and i not in cut and s.t_end > t]
+        goods = []
+        if undone:
+            before = self.before[undone[0]]
+            v.next_task, v.linked_cluster, v.linked_kind = \
+                before.next_task, before.linked_cluster, before.linked_kind
+            v.busy_s, v.wait_s = before.busy_s, before.wait_s
+            v.t_free = freeze.t_stand
+        else:
+            v.t_free = max(v.t_free, freeze.t_stand)
+        for i in undone:
+            self.record.cut_subtasks.append(i)
+            s = self.record.subtasks[i]
+            if s.kind is TaskKind.DELIVER and s.stack_index is not None:
+                goods.append(self._reopen(s.target, s.stack_index, s.t_done, s.vehicle, t))
+        v.pose = freeze.pose
+        self.driven[vehicle] = [c for c in (_truncated(traj, freeze)
+                                            for traj in self.driven[vehicle]) if c is not None]
+        return goods
+
+    def _reopen(self, cluster: str, index: int, t_done: float, vehicle: int, t: float) -> Cell:
+        cell = self.work.reopen(cluster, index)
+        self.record.stacks_done.remove((cluster, index, t_done))
+        self.record.end_time = max((d[2] for d in self.record.stacks_done), default=0.0)
+        self.emit(StackReopened(cluster, index, vehicle, t), t)
+        return cell
+
+    def _resume(self, up: VehicleUp) -> None:
+        freeze = self.down.pop(up.vehicle, None)
+        if freeze is None:
+            return
+        v = self.fleet[up.vehicle]
+        shift = up.t - freeze.t
+        t_stand = up.t
+        if freeze.step is not None:  # the rest of the maneuver, from where it stood
+            step = dataclasses.replace(freeze.step, t0=freeze.step.t0 + shift,
+                                       t1=freeze.step.t1 + shift)
+            t_stand = step.t1
+            self.driven[up.vehicle].append(Trajectory(up.vehicle, step.start, step.end,
+                                                      step.t0, (step,), (), 0))
+        v.t_free = max(v.t_free, t_stand)
+        self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task))
+        self.record.resumes.append((up.vehicle, up.t))
+        self.drive_log[up.vehicle].append(ResumeAt(up.t))
+        self.emit(Resume(up.vehicle, up.t, t_stand), up.t)
+
+
+def halt_message(freeze: Freeze, cause: str, moving: bool, layout: Layout) -> Halt:
+    """The dispatcher's word that a forklift stops, with where it stands in the world."""
+    step = freeze.step
+    if step is None:
+        at, heading, manner, s = freeze.pose.cell, freeze.pose.heading, Manner.STOP, 0.0
+    else:
+        at, heading, manner, s = step.start.cell, step.start.heading, step.manner, \
+            freeze.fraction
+    x, y, theta = world_pose(at, heading, manner, s, layout.cell_size)
+    ox, oy = layout.origin
+    return Halt(freeze.vehicle, freeze.t, cause, moving, str(freeze.pose), freeze.t_stand,
+                sorted(freeze.cells), x + ox, y + oy, theta)
+
+
+def _truncated(traj: Trajectory, freeze: Freeze) -> Trajectory | None:
+    """The part of a trajectory driven up to the end of the maneuver in progress at the
+    freeze (None if none of it is)."""
+    kept = tuple(s for s in traj.steps if s.t0 < freeze.t)
+    if not kept:
+        return None
+    if len(kept) == len(traj.steps):
+        return traj
+    return Trajectory(traj.vehicle, traj.start, kept[-1].end, traj.t_start, kept, (),
+                      traj.expansions)

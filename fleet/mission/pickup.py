@@ -1,0 +1,67 @@
+"""A restarted dispatcher picks a fill mission up: the state the engine starts from, from the
+goods the reservation service holds and what each forklift's agent says it committed
+(dispatcher/pickup.py asks them; docs/faults.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fleet.planning.geometry import Cell
+from fleet.planning.maneuvers import fork_target
+from fleet.planning.trajectory import Pose, Trajectory
+
+
+@dataclass(frozen=True)
+class HeldLeg:
+    """One forklift as its agent holds it (a VehicleStatus, decoded)."""
+
+    vehicle: int
+    pose: Pose  # where it stands once everything committed is driven
+    leg: Trajectory | None  # its last committed leg
+    loaded: bool
+    kind: str  # what the leg was for: "deliver", "return", or "" (none, or cut short)
+    down: bool
+
+
+@dataclass(frozen=True)
+class Recovered:
+    """A fill mission picked up mid-way: what the engine starts from."""
+
+    done: tuple[tuple[str, int, float], ...]  # stacks done: cluster, index, t_done
+    undelivered: tuple[tuple[str, int, float, int], ...]  # committed, goods not reserved yet
+    poses: dict[int, Pose]
+    t_free: dict[int, float]
+    delivers_next: dict[int, bool]
+    legs: dict[int, Trajectory]
+    t: float  # the clock's last instant: nothing is decided before it
+
+
+def recovered_state(stacks, goods: dict[Cell, float], held: list[HeldLeg], t: float,
+                    t_claim: float, t_unload: float) -> Recovered:
+    """`stacks`: the layout's (cluster, index, cell); `goods`: stack cells holding goods from
+    an instant on (the store's GOODS reservations). A forklift whose last leg is a committed
+    delivery arrives whatever happened to the dispatcher: its stack is done, and if its
+    goods are not reserved yet (the dispatcher died in between) they are to be."""
+    by_cell = {cell: (cluster, index) for cluster, index, cell in stacks}
+    done = [(*by_cell[c], t0 + t_unload) for c, t0 in goods.items() if c in by_cell]
+    undelivered = []
+    poses, t_free, delivers_next, legs = {}, {}, {}, {}
+    for h in held:
+        poses[h.vehicle] = h.pose
+        end = h.leg.t_end if h.leg else 0.0
+        if h.leg is None:  # never moved: it claimed goods at its station
+            delivers_next[h.vehicle], handling = True, t_claim
+        elif h.kind == "deliver":
+            delivers_next[h.vehicle], handling = False, t_unload
+            stack = fork_target(h.pose.cell, h.pose.heading)
+            if stack in by_cell and stack not in goods:
+                undelivered.append((*by_cell[stack], end, h.vehicle))
+        elif h.kind == "return":
+            delivers_next[h.vehicle], handling = True, t_claim
+        else:  # cut short: still carrying goods, or still on its way back
+            delivers_next[h.vehicle], handling = h.loaded, 0.0
+        t_free[h.vehicle] = max(end + handling, t)
+        if h.leg is not None:
+            legs[h.vehicle] = h.leg
+    return Recovered(tuple(sorted(done, key=lambda d: d[2])), tuple(undelivered), poses,
+                     t_free, delivers_next, legs, t)

@@ -1,0 +1,46 @@
+"""One forklift as the engine keeps it: where it will stand, when it is free, what it does
+next, and the time it spent (the wire's VehicleState is what its agent says instead)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fleet.dispatching.decision import TaskKind, VehicleView
+from fleet.planning.maneuvers import Manner
+from fleet.planning.trajectory import Pose, Trajectory
+
+
+@dataclass
+class VehicleSlot:
+    vehicle: int
+    pose: Pose
+    t_free: float
+    next_task: TaskKind
+    linked_cluster: str | None = None
+    linked_kind: TaskKind | None = None
+    busy_s: float = 0.0  # driving (maneuvers other than stop)
+    wait_s: float = 0.0  # stop maneuvers and postponements
+
+    def view(self) -> VehicleView:
+        return VehicleView(self.vehicle, self.pose, self.t_free, self.next_task,
+                           self.linked_cluster, self.linked_kind)
+
+    def wait_until(self, t: float) -> None:
+        """Free only from t on (a pacer's or a postponement's later instant): waiting."""
+        self.wait_s += t - self.t_free
+        self.t_free = t
+
+    def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float) -> None:
+        """A subtask committed: it stands at the goal from t_done on, and does the other
+        kind of subtask next."""
+        stops = sum(s.t1 - s.t0 for s in traj.steps if s.manner is Manner.STOP)
+        self.busy_s += traj.t_end - traj.t_start - stops
+        self.wait_s += stops
+        self.pose = traj.goal
+        self.t_free = t_done
+        deliver = kind is TaskKind.DELIVER
+        self.next_task = TaskKind.RETURN if deliver else TaskKind.DELIVER
+        if deliver:
+            self.linked_cluster, self.linked_kind = target, TaskKind.DELIVER
+        else:
+            self.linked_kind = TaskKind.RETURN if self.linked_cluster else None

@@ -1,0 +1,278 @@
+"""The mission-kind seam: the work a mission is made of, owned by one object the engine asks.
+
+A mission kind says what is left and in which order it is done, where a vehicle may go next,
+whether it carries goods there, how long handling takes at the end, what an arrival changes
+and when the mission is done. The engine decides through it and never asks which kind it
+runs. Fill and empty (seed 000) are the first two kinds: both work through the stacks of each
+cluster in a fixed order, one goods-carrying trip and one empty trip per stack. A kind for
+order streams (seeds 002 and 004: orders -> shelf -> station -> slot) is another class with
+these methods and an entry in WORK_KINDS.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Protocol
+
+from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
+from fleet.mission.spec import MissionKind
+from fleet.params import DispatchParams
+from fleet.planning.geometry import Cell
+from fleet.planning.planner import PlannerCache
+from fleet.planning.reservations import Interval, ReservationView
+from fleet.planning.trajectory import Pose
+from fleet.world.layout import Layout, Stack
+
+
+@dataclass(frozen=True)
+class StackServed:
+    """A delivery arrived: its stack is done at t_done, and the goods hold its cell over
+    `goods` (owner GOODS in the table)."""
+
+    cluster: str
+    index: int
+    t_done: float
+    goods: Interval
+
+
+class MissionWork(Protocol):
+    @property
+    def ready_at(self) -> float:
+        """When every vehicle is free for its first subtask."""
+
+    @property
+    def total(self) -> int:
+        """Units of work in the whole mission (what progress counts up to)."""
+
+    @property
+    def filled(self) -> frozenset[Cell]:
+        """The cells goods stand on now: what a planner and the dispatcher's map see."""
+
+    def work_left(self) -> bool:
+        """Whether anything is still to be assigned (False: the mission is done once every
+        vehicle is home)."""
+
+    def remaining(self) -> dict[str, int]:
+        """Work still to be assigned, per group of targets (per cluster)."""
+
+    def targets(self, view: VehicleView, poses: dict[int, Pose]) -> list[Target]:
+        """Where the vehicle may go for its next subtask, in the order they are offered;
+        `poses` are where every vehicle of the fleet stands (or will once it arrives)."""
+
+    @abstractmethod
+    def loaded(self, kind: TaskKind) -> bool:
+        """Whether a vehicle carries goods on a subtask of this kind."""
+
+    @abstractmethod
+    def handling(self, kind: TaskKind) -> float:
+        """Seconds from arrival to being free again (claiming or unloading)."""
+
+    def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
+        """A decided subtask was committed: the work it does is no longer left."""
+
+    def reopen(self, cluster: str, index: int) -> Cell:
+        """A delivery was cut short before it arrived: its stack is to do again. Returns the
+        stack's cell."""
+
+    def pick_up(self, cluster: str, index: int) -> None:
+        """A restarted dispatcher found the stack done."""
+
+
+def _far_clusters(layout: Layout) -> set[str]:
+    """Clusters whose route to the stations is longest (s1 and s2 on the paper layout): the
+    third with the largest mean distance from their stacks to the nearest station dock."""
+    dist = {}
+    for cluster in layout.clusters:
+        cells = [s.cell for s in layout.stacks if s.cluster == cluster.name]
+        dist[cluster.name] = sum(min(abs(c[0] - st.dock.cell[0]) + abs(c[1] - st.dock.cell[1])
+                                     for st in layout.stations) for c in cells) / len(cells)
+    ranked = sorted(dist, key=lambda n: (-dist[n], n))
+    return set(ranked[: max(1, len(ranked) // 3)])
+
+
+class StackWork(ABC):
+    """Seed 000's work: the stacks of each cluster one after another in a fixed order, each
+    served by a delivery (to the cluster) and then a return (to a station). The subclasses
+    say which way the goods go."""
+
+    def __init__(self, layout: Layout, params: DispatchParams, store: ReservationView,
+                 planners: PlannerCache) -> None:
+        self.layout = layout
+        self.params = params
+        self.store = store
+        self.planners = planners
+        self.queue: dict[str, list[Stack]] = {}  # stacks not yet assigned, in their order
+        for s in layout.stacks:
+            self.queue.setdefault(s.cluster, []).append(s)
+        for stacks in self.queue.values():
+            stacks.sort(key=self.order)
+        self.present = self.initially_present()  # stack cells with goods on them
+        self.far = _far_clusters(layout)
+
+    # what a kind says
+    @property
+    @abstractmethod
+    def ready_at(self) -> float: ...
+
+    @abstractmethod
+    def order(self, stack: Stack) -> int:
+        """Sorts a cluster's stacks in the order they are done."""
+
+    @abstractmethod
+    def initially_present(self) -> set[Cell]: ...
+
+    @abstractmethod
+    def loaded(self, kind: TaskKind) -> bool: ...
+
+    @abstractmethod
+    def handling(self, kind: TaskKind) -> float: ...
+
+    @abstractmethod
+    def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
+        """The goods' hold on a served stack's cell."""
+
+    @abstractmethod
+    def _served(self, cell: Cell) -> None:
+        """The goods on a served stack's cell as they are once it is served."""
+
+    def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
+                   ) -> list[Pose]:
+        """The poses a vehicle may serve the stack from (none: not now)."""
+        return self.layout.unload_poses(stack.cell, self.present - {stack.cell})
+
+    # what the engine asks
+    @property
+    def total(self) -> int:
+        return len(self.layout.stacks)
+
+    @property
+    def filled(self) -> frozenset[Cell]:
+        return frozenset(self.present)
+
+    def work_left(self) -> bool:
+        return any(self.queue.values())
+
+    def remaining(self) -> dict[str, int]:
+        return {name: len(q) for name, q in self.queue.items()}
+
+    def targets(self, view: VehicleView, poses: dict[int, Pose]) -> list[Target]:
+        if view.next_task is TaskKind.RETURN:
+            return [Target(st.name, (st.dock,)) for st in self.layout.stations]
+        targets = []
+        for cluster in self.layout.clusters:
+            queue = self.queue.get(cluster.name, [])
+            if not queue:
+                continue
+            stack = queue[0]
+            goals = self._candidate(view, stack, poses)
+            if goals:
+                targets.append(Target(cluster.name, tuple(goals), stack.cell, stack.index,
+                                      len(queue), cluster.name in self.far))
+        return targets
+
+    def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
+        if decision.kind is not TaskKind.DELIVER:
+            return None
+        stack = self.queue[decision.target.name].pop(0)
+        self._served(stack.cell)
+        return StackServed(decision.target.name, stack.index, t_done,
+                           self.goods_after(stack.cell, t_end, t_done))
+
+    def reopen(self, cluster: str, index: int) -> Cell:
+        stack = next(st for st in self.layout.stacks
+                     if st.cluster == cluster and st.index == index)
+        queue = self.queue[cluster]
+        queue.append(stack)
+        queue.sort(key=self.order)
+        self.present.discard(stack.cell)
+        return stack.cell
+
+    def pick_up(self, cluster: str, index: int) -> None:
+        stack = next(s for s in self.queue[cluster] if s.index == index)
+        self.queue[cluster].remove(stack)
+        self._served(stack.cell)
+
+
+class FillWork(StackWork):
+    """Goods claimed at a station go to the stacks in each cluster's fill order."""
+
+    @property
+    def ready_at(self) -> float:
+        return self.params.t_claim  # each forklift first claims goods at its station
+
+    def order(self, stack: Stack) -> int:
+        return stack.index
+
+    def initially_present(self) -> set[Cell]:
+        return set()
+
+    def loaded(self, kind: TaskKind) -> bool:
+        return kind is TaskKind.DELIVER
+
+    def handling(self, kind: TaskKind) -> float:
+        return self.params.t_unload if kind is TaskKind.DELIVER else self.params.t_claim
+
+    def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
+        return Interval(cell, t_end, math.inf)  # placed on arrival, for good
+
+    def _served(self, cell: Cell) -> None:
+        self.present.add(cell)
+
+    def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
+                   ) -> list[Pose]:
+        if self.store.conflict(view.vehicle, stack.cell, view.t_free, math.inf) is not None:
+            return []  # another forklift stands on or will cross the stack's cell
+        others = [p for v, p in poses.items() if v != view.vehicle]
+        return self.poses_with_a_way_out(super()._candidate(view, stack, poses),
+                                         self.present | {stack.cell}, others)
+
+    def poses_with_a_way_out(self, poses: list[Pose], after: set[Cell],
+                             others: list[Pose]) -> list[Pose]:
+        """Unload poses from which a station dock is still reachable once the stack is filled
+        (a pose beside the stack may be reachable only by sweeping the stack's own cell); none
+        if filling the stack would wall in another forklift where it stands."""
+        planner = self.planners.get(frozenset(after))
+        docks = {planner.component(st.dock) for st in self.layout.stations}
+        now = self.planners.get(frozenset(self.present))
+        docks_now = {now.component(st.dock) for st in self.layout.stations}
+        if any(planner.component(p) not in docks and now.component(p) in docks_now
+               for p in others):
+            return []
+        return [p for p in poses if planner.component(p) in docks]
+
+
+class EmptyWork(StackWork):
+    """Goods taken from the stacks in reverse fill order go to a station."""
+
+    @property
+    def ready_at(self) -> float:
+        return 0.0
+
+    def order(self, stack: Stack) -> int:
+        return -stack.index
+
+    def initially_present(self) -> set[Cell]:
+        return {s.cell for s in self.layout.stacks}
+
+    def loaded(self, kind: TaskKind) -> bool:
+        return kind is TaskKind.RETURN
+
+    def handling(self, kind: TaskKind) -> float:
+        return self.params.t_claim if kind is TaskKind.DELIVER else self.params.t_unload
+
+    def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
+        return Interval(cell, 0.0, t_done)  # there until claimed
+
+    def _served(self, cell: Cell) -> None:
+        self.present.discard(cell)
+
+
+WORK_KINDS: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,
+                                                 MissionKind.EMPTY: EmptyWork}
+
+
+def mission_work(kind: MissionKind, layout: Layout, params: DispatchParams,
+                 store: ReservationView, planners: PlannerCache) -> MissionWork:
+    return WORK_KINDS[kind](layout, params, store, planners)
