@@ -29,10 +29,9 @@ from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.record import digest_of, record_to_dict
 from fleet.mission.seam import ZONE
-from fleet.recording.mcapfile import mission_info
+from fleet.recording.writer import mission_info
 from fleet.runtime.argtypes import positive_float, scenario_arg
 from fleet.runtime.bus import (
-    Keys,
     Requester,
     RequestFailed,
     Stream,
@@ -43,18 +42,13 @@ from fleet.runtime.bus import (
     stop_on_signals,
 )
 from fleet.wire.protocol import (
-    DecisionFailure,
-    Halt,
     MissionDone,
+    MissionInfo,
     Progress,
     ProtocolError,
-    Resume,
-    StackDone,
-    StackReopened,
-    SubtaskEvent,
-    ZoneClosed,
     encode,
 )
+from fleet.wire.topics import DISPATCHER, Keys, published_by
 from fleet.world.layout import load_layout
 from reservation.mirror import TableMirror, follow
 
@@ -144,20 +138,13 @@ def serve(args: argparse.Namespace) -> int:
         vehicles = list(range(1, n + 1))
         token = session.liveliness().declare_token(keys.dispatcher_alive)
         info = mission_info(mission, layout, n, args.clock, args.speed, args.command)
-        info_pub = Stream(session, keys.dispatch_mission, SENDER, reliable=True)
+        # Each of the dispatcher's topics, by the message it carries (every event must reach
+        # the recorder: its publishers wait rather than drop).
+        streams = {cls: Stream(session, topic.key(keys.run), topic.sender, topic.reliable)
+                   for cls, topic in published_by(DISPATCHER).items()}
+        info_pub, done_pub = streams[MissionInfo], streams[MissionDone]
         info_answer = session.declare_queryable(  # for a recorder that joins late
             keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0)))
-        # Every event must reach the recorder: publishers wait rather than drop.
-        streams = {kind: Stream(session, key, SENDER, reliable=True)
-                   for kind, key in ((Progress.TYPE, keys.dispatch_progress),
-                                     (SubtaskEvent.TYPE, keys.dispatch_subtask),
-                                     (StackDone.TYPE, keys.dispatch_stack),
-                                     (DecisionFailure.TYPE, keys.dispatch_failure),
-                                     (Halt.TYPE, keys.dispatch_halt),
-                                     (Resume.TYPE, keys.dispatch_resume),
-                                     (StackReopened.TYPE, keys.dispatch_reopen),
-                                     (ZoneClosed.TYPE, keys.dispatch_zone))}
-        done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
         recorded = threading.Event()
         status = follow_recorded(session, keys, recorded, log)
@@ -165,7 +152,7 @@ def serve(args: argparse.Namespace) -> int:
             in_mission.set()
             info_pub.put(info, 0.0)
             done = run_mission(session, keys, args, mission, layout, options, vehicles,
-                               liveness, lambda message, t: streams[message.TYPE].put(
+                               liveness, lambda message, t: streams[type(message)].put(
                                    message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
@@ -179,7 +166,7 @@ def serve(args: argparse.Namespace) -> int:
             log.warning("the recorder had not recorded the result within %g s",
                         RECORDED_WAIT_S)
         liveness.close()
-        for declared in (done_pub, info_pub, info_answer, *streams.values(), token, status):
+        for declared in (info_answer, *streams.values(), token, status):
             declared.undeclare()
     finally:
         if claims is not None:

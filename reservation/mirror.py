@@ -18,8 +18,9 @@ import zenoh
 
 from fleet.planning.reservations import Reservation, ReservationTable
 from fleet.planning.reservations import Snapshot as TableSnapshot
-from fleet.runtime.bus import Keys, Requester, received
+from fleet.runtime.bus import Requester, received
 from fleet.wire.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
+from fleet.wire.topics import Keys
 from reservation.store import table_change
 
 MAX_BUFFERED = 10_000

@@ -33,7 +33,8 @@ from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import recorded_run
-from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.recording.reader import RecordingError, read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
@@ -727,7 +728,7 @@ def test_any_message_handed_to_the_store_is_answered_and_a_refusal_changes_nothi
         assert table_state(store) == before and outcome.published == []
 
 
-# -- fleet.recording.mcapfile.read_recording --------------------------------------------------
+# -- fleet.recording.reader.read_recording ---------------------------------------------------
 
 @pytest.fixture(scope="module")
 def recording_bytes(tmp_path_factory) -> tuple[bytes, list, int]:

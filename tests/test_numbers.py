@@ -17,9 +17,11 @@ from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN, engine_options
 from fleet.mission.record import subtask_dict
 from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
-from fleet.recording.mcapfile import NS, RecordingWriter, read_recording
 from fleet.recording.mission_record import dispatcher_restarts
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,

@@ -20,7 +20,7 @@ from fleet.errors import UserError
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Trajectory
-from fleet.recording.mcapfile import RecordingWriter, expected_sender
+from fleet.recording.writer import RecordingWriter
 from fleet.views.drawing import draw_layout, map_figure, plan_figure
 from fleet.views.palette import forklift_color
 from fleet.views.plots import (
@@ -33,6 +33,7 @@ from fleet.views.plots import (
     snapshot,
 )
 from fleet.wire.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
+from fleet.wire.topics import expected_sender
 from fleet.world.layout import Layout, load_layout, parse_layout
 from fleet.world.places import resolve
 

@@ -19,7 +19,7 @@ from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.planning.velocity import Speed
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.world.layout import load_layout
 
 

@@ -26,11 +26,10 @@ from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import vehicle_states
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.runtime.bus import (
     PARENT_ENV,
     BusConfig,
-    Keys,
     Requester,
     free_port,
     open_session,
@@ -47,6 +46,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
+from fleet.wire.topics import Keys
 from fleet.world.layout import load_layout
 from reservation.mirror import TableMirror, follow
 
@@ -108,7 +108,7 @@ class Intruder:
         self.subscriber = session.declare_subscriber(keys.vehicle_state("*"), self._on_state)
 
     def _on_state(self, sample) -> None:
-        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        vehicle = Keys.vehicle_in(str(sample.key_expr))
         self.states[vehicle].append(decode(sample.payload.to_bytes()).sim_time)
 
     def on_progress(self, progress: Progress) -> None:

@@ -20,7 +20,8 @@ from test_recording_plots import recorded, two_forklift_record
 from websockets.sync.client import connect
 
 from fleet.planning.geometry import body_corners
-from fleet.recording.mcapfile import RecordingWriter, read_recording
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.views.palette import GOODS_COLOR, forklift_color
 from fleet.views.plots import gantt, snapshot
 from fleet.views.scene import FRAME, HORIZON_S, SceneViews

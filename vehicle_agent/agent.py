@@ -28,7 +28,7 @@ from fleet.mission.seam import Task
 from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import PlannerCache
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, received, wait_alive
+from fleet.runtime.bus import Requester, RequestFailed, Stream, received, wait_alive
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
     ClockAck,
@@ -49,6 +49,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
+from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
 from reservation.mirror import TableMirror, follow, resync
 from reservation.store import to_wire
@@ -130,7 +131,7 @@ class Agent:
         self.keys = keys
         self.vehicle = vehicle
         self.layout = layout
-        self.sender = f"vehicle-{vehicle}"
+        self.sender = vehicle_sender(vehicle)
         self.requester = Requester(session, self.sender)
         self.mirror = TableMirror()
         self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)

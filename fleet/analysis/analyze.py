@@ -15,7 +15,6 @@ from __future__ import annotations
 import bisect
 import itertools
 import math
-import re
 from collections import Counter, defaultdict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,15 +30,9 @@ from fleet.analysis.safety import (
 )
 from fleet.analysis.time_use import VehicleStats, time_use
 from fleet.mission.driving import state_period
-from fleet.recording.mcapfile import (
-    NS,
-    Recorded,
-    RecorderGap,
-    Recording,
-    RecordingError,
-    message_type,
-)
+from fleet.recording.format import NS
 from fleet.recording.mission_record import RESTART_DROP, dispatcher_restarts, record_of
+from fleet.recording.reader import Recorded, RecorderGap, Recording, RecordingError
 from fleet.wire.protocol import (
     Change,
     Halt,
@@ -49,6 +42,7 @@ from fleet.wire.protocol import (
     StackReopened,
     VehicleState,
 )
+from fleet.wire.topics import message_type, vehicle_of
 
 GOODS_OWNER = 0  # the reservation table's owner of stacks with goods (fleet.mission.seam.GOODS)
 
@@ -603,10 +597,9 @@ def _while_down(hole: Hole, down_halts: list[Halt], late: float) -> bool:
     went down (cut off, stalled: they never left it), rather than lost on the way: the
     hole spans its halt, or on the real-time clock began at most `late` before it (a link
     cut shorter than that may be back before the forklift is frozen)."""
-    match = re.fullmatch(r"vehicle-(\d+)", hole.sender)
-    if match is None:
+    vehicle = vehicle_of(hole.sender)
+    if vehicle is None:
         return False
-    vehicle = int(match.group(1))
     t0 = hole.left.envelope.sim_time if hole.left is not None else 0.0
     return any(h.vehicle == vehicle and t0 <= h.t <= max(hole.right.envelope.sim_time,
                                                          t0 + late) for h in down_halts)

@@ -18,7 +18,8 @@ from typing import Any
 
 from fleet.analysis.analyze import analyze
 from fleet.commands.plot import read_run
-from fleet.recording.mcapfile import RUN_FILE, Recording
+from fleet.recording.reader import Recording
+from fleet.recording.segments import RUN_FILE
 
 
 def register(sub: argparse._SubParsersAction) -> None:

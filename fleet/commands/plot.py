@@ -9,7 +9,8 @@ from pathlib import Path
 
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
-from fleet.recording.mcapfile import RUN_FILE, Recording, read_recording, recording_file
+from fleet.recording.reader import Recording, read_recording, recording_file
+from fleet.recording.segments import RUN_FILE
 from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
 
 FRAMES = 150

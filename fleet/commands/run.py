@@ -22,7 +22,7 @@ from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.argtypes import (
     integer,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fleet.mission.record import subtask_dict
-from fleet.recording.mcapfile import Recorded, Recording, RecordingError
+from fleet.recording.reader import Recorded, Recording, RecordingError
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
