@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from enum import Flag, auto
 
 from fleet.wire.protocol import (
-    Change,
     ClockAck,
     ClockTick,
     CommitRequest,
@@ -45,6 +44,7 @@ from fleet.wire.protocol import (
     VehicleClaim,
     VehicleFault,
     VehicleState,
+    WireChange,
     ZoneClosed,
 )
 
@@ -142,7 +142,8 @@ class Keys:
     # forklift may ask only under its own name and change only its own reservations).
     reservation_request = Topic("reservation/request/{principal}", Kind.QUERYABLE,
                                 (CommitRequest, ReleaseRequest, SnapshotRequest), PRINCIPAL)
-    reservation_change = Topic("reservation/change", Kind.PUBLICATION, (Change,), RESERVATION)
+    reservation_change = Topic("reservation/change", Kind.PUBLICATION, (WireChange,),
+                               RESERVATION)
     reservation_alive = Topic("reservation/alive", Kind.TOKEN, sender=RESERVATION)
     # A forklift's agent.
     vehicle_state = Topic("vehicle/{vehicle}/state", Kind.PUBLICATION, (VehicleState,),
