@@ -107,7 +107,7 @@ class _Timeline:
 
 def time_use(subtasks: list[dict[str, Any]], halts: list[Halt], resumes: list[Resume],
              vehicles: int, span_s: float, kind: str, cell_size: float) -> list[VehicleStats]:
-    """Each forklift's time over [0, span_s], from the subtasks (record_io.subtask_dict, as
+    """Each forklift's time over [0, span_s], from the subtasks (fleet.mission.record.SubtaskRecord, as
     announced) and the halts and resumes of a recording. A subtask decided before a halt (its
     t_i earlier) is cut by it; the engine applies a fault before any decision at its instant."""
     claim = DispatchParams().t_claim if kind == "fill" else 0.0

@@ -104,9 +104,6 @@ class Scenario:
         times = {f.at for f in self.faults} | {f.until for f in self.faults}
         return sorted(t for t in times if math.isfinite(t))
 
-    def vehicle_faults(self) -> list[Fault]:
-        return [f for f in self.faults if f.kind in VEHICLE_KINDS]
-
 
 def builtin_scenarios() -> list[str]:
     files = resources.files("fleet.mission.scenarios")

@@ -1,5 +1,5 @@
-"""The seam between the dispatching loop and the forklifts (DESIGN.md section 7, the one
-store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
+"""The seam between the dispatching loop and the forklifts (one interface, whatever holds
+the reservations): the engine decides subtasks; an `Executor` plans and commits them, and a
 `Pacer` holds the loop to a clock.
 
 In one process, `LocalExecutor` plans with the improved hybrid A* against a

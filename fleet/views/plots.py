@@ -42,7 +42,7 @@ from fleet.views.drawing import (
     Z_FORKLIFT_TEXT,
     Z_RESERVED,
     Z_STACK_TEXT,
-    _cell_square,
+    cell_square,
     draw_layout,
     forklift_handles,
     forklift_patch,
@@ -95,7 +95,7 @@ def filling_sequence(layout: Layout, record: dict) -> Figure:
     cell_of = {(s.cluster, s.index): s.cell for s in layout.stacks}
     for order, (cluster, index, t) in enumerate(record["stacks_done"], start=1):
         cell = cell_of[cluster, index]
-        ax.add_patch(_cell_square(layout, cell, color=QUARTER_COLORS[min(3, int(4 * t / end))],
+        ax.add_patch(cell_square(layout, cell, color=QUARTER_COLORS[min(3, int(4 * t / end))],
                                   alpha=0.8))
         x, y = layout.cell_center(cell)
         ax.text(x, y - 0.12 * layout.cell_size, str(order), ha="center", va="center",
@@ -193,7 +193,7 @@ def snapshot(layout: Layout, record: dict, t: float, ahead: float = SHOW_AHEAD_S
         color = forklift_color(v)
         for vehicle, cell, t0, t1 in held:
             if vehicle == v and t0 < t + ahead and t1 > t:
-                ax.add_patch(_cell_square(
+                ax.add_patch(cell_square(
                     layout, cell, color=color, zorder=Z_RESERVED,
                     alpha=HELD_NOW_ALPHA if t0 <= t else HELD_SOON_ALPHA))
         x, y, th = pose_at(record, v, t, layout)
@@ -261,7 +261,7 @@ def heat_map(layout: Layout, record: dict, states: Iterable[tuple[float, Vehicle
         lo, hi = float(values.min()), float(values.max())
         # Log scale: parked forklifts hold a few cells for hundreds of seconds while a lane
         # sees seconds to minutes; a linear scale would show little but the parking spots.
-        squares = PatchCollection([_cell_square(layout, c) for c in seconds], cmap="YlOrRd",
+        squares = PatchCollection([cell_square(layout, c) for c in seconds], cmap="YlOrRd",
                                   norm=LogNorm(vmin=lo, vmax=max(hi, 2 * lo)), alpha=0.85,
                                   edgecolor="none")
         squares.set_array(values)
@@ -318,7 +318,7 @@ class _RunArtists:
                                     for s in layout.stacks])
         self.stack_rgba = np.tile(to_rgba(GOODS_COLOR), (len(layout.stacks), 1))
         self.stacks = ax.add_collection(PatchCollection(
-            [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
+            [cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
         # White numbers on present stacks (the background's dark ones show on the others),
         # as glyph outlines in one collection: a frame draws them at once, not as 136 texts.
         self.numbers = ax.add_collection(_stack_numbers(layout))
@@ -333,7 +333,7 @@ class _RunArtists:
         self.held_t1 = np.array([h[3] for h in held], dtype=float)
         self.held_rgba = np.array([to_rgba(forklift_color(v)) for v, _ in square]).reshape(-1, 4)
         self.held = ax.add_collection(PatchCollection(
-            [_cell_square(layout, c) for _, c in square], edgecolor="none", zorder=Z_RESERVED))
+            [cell_square(layout, c) for _, c in square], edgecolor="none", zorder=Z_RESERVED))
         self.cluster_names = [t for t in ax.texts if (t.get_gid() or "").startswith("cluster/")]
         # Per-forklift records: pose_at then scans one forklift's subtasks, not the fleet's.
         self.tracks = {v: {"starts": record["starts"],
