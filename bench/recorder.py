@@ -250,7 +250,7 @@ def wall_cost(layout: str = "paper", repeats: int = 3, vehicles: int = 4,
     `vehicles` forklifts or as many as the layout has start poses."""
     from fleet.mission.spec import Mission, MissionKind, Strategy
     from fleet.runtime.local_run import RunSpec, run_processes
-    from fleet.world.layout import load_layout
+    from fleet.world.layout_file import load_layout
 
     vehicles = min(vehicles, len(load_layout(layout).vehicle_starts))
     mission = Mission(layout=layout, kind=MissionKind.FILL, strategy=Strategy.ANN,

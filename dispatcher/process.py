@@ -55,7 +55,7 @@ from fleet.wire.protocol import (
     ZoneClosed,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from reservation.mirror import TableMirror, follow
 
 log = logging.getLogger("fleet.dispatcher")

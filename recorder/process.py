@@ -45,7 +45,8 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import LayoutError, parse_layout
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import parse_layout
 
 log = logging.getLogger("fleet.recorder")
 SENDER = "recorder"

@@ -25,7 +25,7 @@ from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
 from fleet.runtime.bus import Keys
 from fleet.wire.protocol import Change, StackDone, VehicleState, encode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 

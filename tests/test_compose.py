@@ -24,7 +24,7 @@ from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.mcapfile import read_recording
 from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
 from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"

@@ -40,7 +40,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 MISSION = Mission("small", MissionKind.FILL, Strategy.ANN)
 VEHICLES = 2

@@ -31,7 +31,7 @@ from fleet.wire.protocol import (
     SubtaskEvent,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 PER_FORKLIFT = ("busy_s", "stopped_s", "postponed_s", "handling_s", "down_s", "idle_s")
 

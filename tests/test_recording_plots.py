@@ -33,7 +33,8 @@ from fleet.views.plots import (
     snapshot,
 )
 from fleet.wire.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
-from fleet.world.layout import Layout, load_layout, parse_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout, parse_layout
 from fleet.world.places import resolve
 
 STATE_PERIOD_S = 0.5  # the fast clock's state grid (fleet/mission/driving.py)

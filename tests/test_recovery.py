@@ -20,7 +20,7 @@ from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.planning.velocity import Speed
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mcapfile import read_recording
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 
 def drive_east(vehicle: int, row: int, cols: range, t0: float, dt: float = 1.0) -> Trajectory:

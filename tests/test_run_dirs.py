@@ -37,7 +37,7 @@ from fleet.recording.mcapfile import (
 from fleet.recording.rundir import MARKER, claim, claim_new, default_name, run_id_of
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import MissionInfo, VehicleState, encode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from recorder.process import output_in
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -47,7 +47,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from reservation.mirror import TableMirror, follow
 
 ROOT = Path(__file__).resolve().parent.parent

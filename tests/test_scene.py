@@ -25,7 +25,7 @@ from fleet.views.palette import GOODS_COLOR, forklift_color
 from fleet.views.plots import gantt, snapshot
 from fleet.views.scene import FRAME, HORIZON_S, SceneViews
 from fleet.wire.protocol import Change, Progress, StackDone, VehicleState
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from recorder.live import LiveView
 
 BASE = 1_700_000_000 * 10**9

@@ -45,7 +45,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from fleet.errors import UserError
 from fleet.planning.geometry import Cell
-from fleet.world.layout import Layout, parse_cells
+from fleet.world.layout import Layout
+from fleet.world.layout_file import parse_cells
 
 
 class ScenarioError(UserError):

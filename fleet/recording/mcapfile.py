@@ -64,7 +64,8 @@ from fleet.wire.protocol import (
     decode,
 )
 from fleet.wire.protocol import Message as WireMessage
-from fleet.world.layout import Layout, layout_source, parse_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import layout_source, parse_layout
 
 PROFILE = "forklift-fleet"
 SEGMENT_METADATA = "segment"  # {"run_id": the run directory's}: which run a file is of

@@ -207,7 +207,8 @@ class Progress(Message):
 
 @dataclass(frozen=True)
 class MissionDone(Message):
-    """The dispatcher's last word: the mission record (fleet.mission.record: MissionSummary.to_dict) or an error."""
+    """The dispatcher's last word: the mission record (fleet.mission.record:
+    MissionSummary.to_dict) or an error."""
 
     TYPE: ClassVar[str] = "dispatch.done"
     ok: bool
