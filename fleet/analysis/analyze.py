@@ -39,7 +39,7 @@ from fleet.recording.mcapfile import (
     RecordingError,
     message_type,
 )
-from fleet.recording.mission_record import RESTART_DROP, dispatcher_restarts, record_of
+from fleet.recording.mission_record import RESTART_DROP, dispatcher_restarts, summary_of
 from fleet.wire.protocol import (
     Change,
     Halt,
@@ -349,7 +349,7 @@ def analyze(recording: Recording) -> Report:
                              f"recorded, so the run is unknown (was the recorder started "
                              f"after the mission?)")
     layout = recording.layout()
-    record = record_of(recording)
+    record = summary_of(recording)
     dims = layout.vehicle.dims
     body = Body(dims.front, dims.rear, dims.width, layout.cell_size, layout.origin)
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
@@ -393,20 +393,20 @@ def analyze(recording: Recording) -> Report:
                  "speed": info.speed},
         finished=bool(done) and done[-1].ok,
         mission_error=done[-1].error if done else "",
-        end_time_s=record["end_time_s"],
-        all_parked_s=record["all_parked_s"],
+        end_time_s=record.end_time_s,
+        all_parked_s=record.all_parked_s,
         stacks_expected=len(expected),
         stacks_done=len(seen | from_record),
         stacks_duplicated=sorted(f"{c}#{i}" for (c, i), n in stacks.items() if n > 1),
         stacks_lost=sorted(f"{c}#{i}" for c, i in expected - seen - from_record),
-        subtasks=len(record["subtasks"]),
-        decision_failures=record["decision_failures"],
-        plans_failed=sum(f["stage"] == "plan" for f in record["failures"]),
-        undecided=sum(f["stage"] == "dispatch" for f in record["failures"]),
+        subtasks=len(record.subtasks),
+        decision_failures=record.decision_failures,
+        plans_failed=sum(f.stage == "plan" for f in record.failures),
+        undecided=sum(f.stage == "dispatch" for f in record.failures),
         commit_conflicts=len(done[-1].rejections) if done else 0,
-        vehicles=time_use(record["subtasks"], [m for _, m in recording.of(Halt)],
+        vehicles=time_use(record.subtasks, [m for _, m in recording.of(Halt)],
                           [m for _, m in recording.of(Resume)], info.vehicles,
-                          max(record["end_time_s"], record["all_parked_s"]), info.kind,
+                          max(record.end_time_s, record.all_parked_s), info.kind,
                           layout.cell_size),
         messages=dict(Counter(r.envelope.message.TYPE for r in recording.messages
                               if r.genuine)),
@@ -432,7 +432,7 @@ def analyze(recording: Recording) -> Report:
         double_bookings_unverified=[d for d, ok in zip(bookings, booked, strict=True)
                                     if not ok],
         stacks_not_recorded=sorted(f"{c}#{i}" for c, i in from_record),
-        incomplete=record["incomplete"],
+        incomplete=list(record.incomplete),
     )
 
 
