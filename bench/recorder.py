@@ -151,7 +151,7 @@ def _wait_drained(session, keys, sent: int) -> tuple[int | None, float]:
 def measure_rate(endpoint: str, launcher, tmp: Path, rate: int, publishers: int,
                  seconds: float, session) -> dict:
     """One target rate against a fresh recorder."""
-    from fleet.analysis.analyze import sequence_gaps
+    from fleet.analysis.streams import sequence_gaps
     from fleet.recording.mcapfile import read_recording
     from fleet.runtime.bus import Keys, wait_alive
     from fleet.wire.protocol import VehicleState

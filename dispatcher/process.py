@@ -28,7 +28,6 @@ from fleet.errors import UserError
 from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.record import MissionSummary, digest_of
-from fleet.mission.seam import ZONE
 from fleet.recording.mcapfile import mission_info
 from fleet.runtime.argtypes import positive_float, scenario_arg
 from fleet.runtime.bus import (
@@ -43,6 +42,7 @@ from fleet.runtime.bus import (
     stop_on_signals,
 )
 from fleet.wire.protocol import (
+    ZONE,
     DecisionFailure,
     Halt,
     MissionDone,

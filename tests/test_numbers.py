@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from fleet.analysis.analyze import Report, analyze
+from fleet.analysis.analyze import analyze
+from fleet.analysis.report import Report
 from fleet.analysis.time_use import maneuver_length, time_use
 from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN, engine_options

@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
+from fleet.analysis.analyze import analyze
+from fleet.analysis.streams import sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.commands.run import engine_options
 from fleet.mission.spec import Mission, MissionKind, Strategy

@@ -42,7 +42,7 @@ from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
 
 if TYPE_CHECKING:
-    from fleet.analysis.analyze import Report
+    from fleet.analysis.report import Report
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -26,7 +26,7 @@ from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
-from fleet.wire.protocol import Change
+from fleet.wire.protocol import GOODS, ZONE, Change
 
 
 class VehicleLost(UserError):
@@ -96,10 +96,6 @@ class Pacer(Protocol):
     def instant(self, t: float) -> float:
         """The first sim instant, not before t, at which a change decided now can still take
         effect (a freeze every forklift must hear of before it)."""
-
-
-GOODS = 0  # owner id of stacks with goods on them, in the reservation table
-ZONE = -1  # owner id of closed zones
 
 
 class LocalExecutor:

@@ -46,6 +46,10 @@ ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
 
+# Reservation owners that are no forklift (forklifts are 1..N), in every commit and change.
+GOODS = 0  # the goods on the stacks
+ZONE = -1  # closed zones
+
 
 @dataclass(frozen=True)
 class Message:
