@@ -53,7 +53,6 @@ from fleet.mission.driving import state_period
 from fleet.recording.mcapfile import NS, Recording, RecordingError, message_type
 from fleet.recording.mission_record import dispatcher_restarts, summary_of
 from fleet.wire.protocol import (
-    Change,
     Halt,
     MissionDone,
     MissionInfo,
@@ -61,6 +60,7 @@ from fleet.wire.protocol import (
     StackDone,
     StackReopened,
     VehicleState,
+    WireChange,
 )
 
 Finding = TypeVar("Finding")
@@ -201,8 +201,8 @@ def standing_samples(recording: Recording, instants: list[float]) -> list[Sample
 
 def _unique_revisions(recording: Recording) -> list[tuple]:
     """The table's changes in revision order, each once (a retried publish may repeat)."""
-    by_revision: dict[int, Change] = {}
-    for _, m in recording.of(Change):
+    by_revision: dict[int, WireChange] = {}
+    for _, m in recording.of(WireChange):
         by_revision.setdefault(m.revision, m)
     return [(m.op, m.vehicle, m.intervals, m.release_from, m.release_cells)
             for _, m in sorted(by_revision.items())]

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from fleet.analysis.streams import Hole
 from fleet.recording.mcapfile import NS, RecorderGap, Recording, message_type
-from fleet.wire.protocol import Change, Halt, MissionDone, StackDone, VehicleState
+from fleet.wire.protocol import Halt, MissionDone, StackDone, VehicleState, WireChange
 
 SILENT = "silent from its fault until the freeze"
 
@@ -99,10 +99,10 @@ def unverified_windows(recording: Recording, unrecorded: list[Hole],
             found.append(Unverified("states", h.right.envelope.message.vehicle, start,
                                     h.right.envelope.sim_time,
                                     f"{h.missing} states not recorded"))
-        elif cls is Change:
+        elif cls is WireChange:
             table_holes.append((h, min([start, *around])))
     if table_holes:
-        changes = recording.of(Change)
+        changes = recording.of(WireChange)
         info = recording.info
         owners = sorted({m.vehicle for _, m in changes}
                         | set(range(1, (info.vehicles if info else 0) + 1)))
