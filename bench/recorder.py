@@ -152,7 +152,7 @@ def _wait_drained(session, keys, sent: int) -> tuple[int | None, float]:
 def measure_rate(endpoint: str, launcher, tmp: Path, rate: int, publishers: int,
                  seconds: float, session) -> dict:
     """One target rate against a fresh recorder."""
-    from fleet.analysis.analyze import sequence_gaps
+    from fleet.analysis.streams import sequence_gaps
     from fleet.recording.reader import read_recording
     from fleet.runtime.bus import wait_alive
     from fleet.wire.protocol import VehicleState
@@ -252,7 +252,7 @@ def wall_cost(layout: str = "paper", repeats: int = 3, vehicles: int = 4,
     `vehicles` forklifts or as many as the layout has start poses."""
     from fleet.mission.spec import Mission, MissionKind, Strategy
     from fleet.runtime.local_run import RunSpec, run_processes
-    from fleet.world.layout import load_layout
+    from fleet.world.layout_file import load_layout
 
     vehicles = min(vehicles, len(load_layout(layout).vehicle_starts))
     mission = Mission(layout=layout, kind=MissionKind.FILL, strategy=Strategy.ANN,

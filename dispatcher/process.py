@@ -27,8 +27,7 @@ from fleet.commands.run import add_mission_args, engine_options, mission_from_ar
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import load_scenario
-from fleet.mission.record import digest_of, record_to_dict
-from fleet.mission.seam import ZONE
+from fleet.mission.record import MissionSummary, digest_of
 from fleet.recording.writer import mission_info
 from fleet.runtime.argtypes import positive_float, scenario_arg
 from fleet.runtime.bus import (
@@ -42,6 +41,7 @@ from fleet.runtime.bus import (
     stop_on_signals,
 )
 from fleet.wire.protocol import (
+    ZONE,
     MissionDone,
     MissionInfo,
     Progress,
@@ -49,7 +49,7 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.wire.topics import DISPATCHER, Keys, published_by
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
@@ -228,7 +228,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         options.events = publish
         record = Engine(mission, options, layout, executor, clock, recovered).run()
         changes.undeclare()
-        as_dict = record_to_dict(record)
+        as_dict = MissionSummary.of_record(record).to_dict()
         return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                            wall_s=time.perf_counter() - t0, rejections=executor.rejections,
                            detections=getattr(clock, "detected", []))

@@ -14,7 +14,7 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.mission.freeze import Freeze
-from fleet.mission.seam import GOODS, Task, VehicleLost, freeze_changes
+from fleet.mission.seam import Task, VehicleLost, freeze_changes
 from fleet.planning.geometry import Cell
 from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.reservations import Interval, ReservationTable
@@ -22,6 +22,7 @@ from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, RequestFailed
 from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
 from fleet.wire.protocol import (
+    GOODS,
     HaltRequest,
     Message,
     Reply,

@@ -47,7 +47,8 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.wire.topics import RECORDER, Keys
-from fleet.world.layout import LayoutError, parse_layout
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import parse_layout
 
 log = logging.getLogger("fleet.recorder")
 SENDER = RECORDER

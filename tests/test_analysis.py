@@ -26,7 +26,7 @@ from fleet.recording.reader import RecordingError, read_recording
 from fleet.recording.writer import RecordingWriter
 from fleet.wire.protocol import StackDone, VehicleState, WireChange, encode
 from fleet.wire.topics import Keys
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 

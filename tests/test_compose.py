@@ -25,7 +25,7 @@ from fleet.recording.reader import read_recording
 from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
 from fleet.wire.topics import Keys
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"

@@ -25,7 +25,7 @@ from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
 from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_args
 from fleet.wire.protocol import MissionDone
 from fleet.wire.topics import Keys
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from vehicle_agent.process import claim
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -46,7 +46,7 @@ from fleet.wire.topics import (
     expected_sender,
     message_type,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 MISSION = Mission("small", MissionKind.FILL, Strategy.ANN)
 VEHICLES = 2

@@ -10,7 +10,8 @@ from pathlib import Path
 from mission_check import journal_overlaps
 
 from bench.faults import timings
-from fleet.analysis.analyze import SILENT, analyze
+from fleet.analysis.analyze import analyze
+from fleet.analysis.windows import SILENT
 from fleet.mission.faults import load_scenario
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.reader import read_recording

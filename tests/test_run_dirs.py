@@ -32,7 +32,7 @@ from fleet.recording.segments import RUN_FILE, segment_paths
 from fleet.recording.writer import RecordingWriter, mission_info
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import MissionInfo, VehicleState, encode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from recorder.process import output_in
 
 ROOT = Path(__file__).resolve().parent.parent

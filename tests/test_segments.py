@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
+from fleet.analysis.analyze import analyze
+from fleet.analysis.streams import sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.commands.run import engine_options
 from fleet.mission.spec import Mission, MissionKind, Strategy
@@ -40,7 +41,7 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.wire.topics import Keys
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent

@@ -27,7 +27,7 @@ from fleet.wire.topics import (
     vehicle_of,
     vehicle_sender,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 # A breakdown and a closed zone on the small layout: the faults' own streams (a forklift's
 # fault, the injector's acks, the dispatcher's halt, resume and zone) are heard too.

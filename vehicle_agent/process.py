@@ -23,7 +23,7 @@ from fleet.runtime.bus import (
 )
 from fleet.wire.protocol import ClaimReply, VehicleClaim
 from fleet.wire.topics import Keys, vehicle_sender
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from vehicle_agent.agent import Agent, Stopped
 
 log = logging.getLogger("fleet.agent")

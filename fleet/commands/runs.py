@@ -80,7 +80,7 @@ class RunEntry:
 
 
 def summary_of(report, run_id: str | None, segments: dict[str, int]) -> dict[str, Any]:
-    """What `fleet runs` keeps of a judged run (a fleet.analysis.analyze.Report)."""
+    """What `fleet runs` keeps of a judged run (a fleet.analysis.report.Report)."""
     verdicts = {"safety": report.safe, "work": report.work_done,
                 "messages": report.messages_lost == 0}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,

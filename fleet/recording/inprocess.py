@@ -19,7 +19,7 @@ from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
 from fleet.mission.engine import Engine, EngineOptions, MissionRecord
 from fleet.mission.faults import Scenario
 from fleet.mission.freeze import ScheduledPacer
-from fleet.mission.record import digest_of, record_to_dict
+from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.writer import RecordingWriter, mission_info
 from fleet.wire.convert import change_time, change_to_wire
@@ -111,7 +111,7 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
     pacer = ScheduledPacer(scenario) if scenario is not None else None
     engine = Engine(mission, options, layout, pacer=pacer)
     record = engine.run()
-    as_dict = record_to_dict(record)
+    as_dict = MissionSummary.of_record(record).to_dict()
     done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                        wall_s=time.perf_counter() - t0)
     info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)

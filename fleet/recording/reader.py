@@ -35,7 +35,8 @@ from fleet.recording.rundir import MARKER, run_id_of
 from fleet.recording.segments import RUN_FILE, run_dir_of, segment_paths
 from fleet.wire.protocol import Envelope, Message, MissionInfo, ProtocolError, decode
 from fleet.wire.topics import genuine
-from fleet.world.layout import Layout, parse_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import parse_layout
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,8 @@ from fleet.recording.rundir import run_id_of
 from fleet.recording.schemas import json_schema
 from fleet.wire.protocol import MissionInfo
 from fleet.wire.topics import message_type
-from fleet.world.layout import Layout, layout_source
+from fleet.world.layout import Layout
+from fleet.world.layout_file import layout_source
 
 CHUNK_BYTES = 64 * 1024  # small chunks: a crash loses at most the one being filled
 MAX_NS = 2**63 - 1  # MCAP times are unsigned 64-bit; Foxglove's are signed
