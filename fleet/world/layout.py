@@ -1,8 +1,9 @@
 """Warehouse layouts as data: a TOML file (docs/layouts.md) loaded into frozen dataclasses.
 
-Loading checks the structure (known keys, cells on the map, no element overlapping another,
-docks pointing their forks at their station, distinct start poses, and an ASCII drawing that
-agrees with the data). Whether every stack can be reached in fill order is a search on the
+Loading checks the structure (known keys, a known vehicle kind, cells on the map, no element
+overlapping another, docks working their station, distinct start poses, and an ASCII drawing
+that agrees with the data); poses and docks are checked with the vehicle kind the layout
+names. Whether every stack can be reached in fill order is a search on the
 pose graph and lives in `fleet.world.reachability`.
 """
 
@@ -20,10 +21,10 @@ from fleet.errors import UserError
 from fleet.params import VehicleDims
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
-from fleet.planning.maneuvers import body_cells_at_rest, fork_target
 from fleet.planning.trajectory import Pose
+from fleet.vehicles import registry
+from fleet.vehicles.kind import VehicleKind
 
-VEHICLE_KINDS = ("forklift", "agv", "lifting-agv")
 FREE, PASSAGE, NOTCH, STATION = ".", ":", "n", "P"
 RESERVED_SYMBOLS = {FREE, PASSAGE, NOTCH, STATION, "#", " "}
 MAX_MAP_CELLS = 1_000_000  # far beyond any warehouse here; bounds what a hostile file costs
@@ -51,7 +52,7 @@ class Cluster:
 class Station:
     name: str
     cell: Cell
-    dock: Pose  # the picking pose, forks pointing at the station
+    dock: Pose  # the picking pose, working the station
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,7 @@ class Passage:
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    kind: str = "forklift"
+    kind: str = "forklift"  # a name in fleet.vehicles.registry
     dims: VehicleDims = field(default_factory=VehicleDims)
     passes_under_shelves: bool = False  # seed 004: lifting AGVs drive under shelves when empty
 
@@ -92,6 +93,11 @@ class Layout:
     vehicle: VehicleSpec
     vehicle_starts: tuple[Pose, ...]
     drawing: str
+
+    @cached_property
+    def vehicle_kind(self) -> VehicleKind:
+        """The kind of vehicle the layout is for: its motion, planner and conflict policy."""
+        return registry.vehicle_kind(self.vehicle.kind, self.vehicle.dims, self.cell_size)
 
     @cached_property
     def static_blocked(self) -> frozenset[Cell]:
@@ -127,14 +133,11 @@ class Layout:
                 self.origin[1] + cell[1] * self.cell_size)
 
     def unload_poses(self, cell: Cell, filled: Iterable[Cell] = ()) -> list[Pose]:
-        """Poses whose forks point at `cell` with the whole body on free cells (E, N, W, S)."""
+        """The vehicle kind's poses that work `cell` with the whole body on free cells."""
         grid = self.grid_map(filled)
-        poses = []
-        for heading in range(4):
-            pose = _pose_behind(cell, heading)
-            if grid.all_free(body_cells_at_rest(pose.cell, pose.heading)):
-                poses.append(pose)
-        return poses
+        kind = self.vehicle_kind
+        return [pose for pose in kind.handling_poses(cell)
+                if grid.all_free(kind.body_cells_at_rest(pose))]
 
     def render_drawing(self) -> str:
         """The ASCII drawing the data implies, top row first (docs/layouts.md has the legend)."""
@@ -181,12 +184,6 @@ class Layout:
             lines.append("  passages " + ", ".join(
                 f"{p.name} ({p.kind}, {len(p.cells)} cells)" for p in self.passages))
         return "\n".join(lines)
-
-
-def _pose_behind(cell: Cell, heading: int) -> Pose:
-    """The pose with heading `heading` whose forks point at `cell`."""
-    dx, dy = ((1, 0), (0, 1), (-1, 0), (0, -1))[heading]
-    return Pose((cell[0] + dx, cell[1] + dy), heading)
 
 
 # ---------------------------------------------------------------- loading
@@ -278,6 +275,7 @@ class _Builder:
         self.data = data
         self.where = where
         self.owner: dict[Cell, str] = {}  # cell -> the element that claims it
+        self.kind: VehicleKind  # set by `vehicle`, before any pose is read
 
     def fail(self, message: str) -> LayoutError:
         return LayoutError(f"{self.where}: {message}")
@@ -329,7 +327,7 @@ class _Builder:
             pose = Pose.parse(text)
         except ValueError as exc:
             raise self.fail(f"{element}: {exc}") from None
-        for cell in body_cells_at_rest(pose.cell, pose.heading):
+        for cell in self.kind.body_cells_at_rest(pose):
             if not (0 <= cell[0] < self.cols and 0 <= cell[1] < self.rows):
                 raise self.fail(f"{element}: pose {pose} puts the body on cell {cell}, off the "
                                 f"{self.cols} x {self.rows} map")
@@ -365,7 +363,7 @@ class _Builder:
                             f"{MAX_MAP_CELLS} cells")
         origin = (x0 + cell_size / 2, y0 + cell_size / 2)
 
-        vehicle = self.vehicle(data.get("vehicle", {}))
+        vehicle = self.vehicle(data.get("vehicle", {}), cell_size)
         obstacles = [self.obstacle(t, i) for i, t in enumerate(self.tables("obstacle"))]
         stations = [self.station(t, i) for i, t in enumerate(self.tables("station"))]
         clusters, stacks = [], []
@@ -376,7 +374,7 @@ class _Builder:
         passages = [self.passage(t, i) for i, t in enumerate(self.tables("passage"))]
         self.unique_names(clusters, stations, obstacles, passages)
         for station in stations:
-            for cell in body_cells_at_rest(station.dock.cell, station.dock.heading):
+            for cell in self.kind.body_cells_at_rest(station.dock):
                 self.free_for(cell, f"station {station.name}: dock {station.dock}")
         starts = self.starts(data.get("starts", []))
         layout = Layout(name, description, self.cols, self.rows, cell_size, origin,
@@ -391,20 +389,22 @@ class _Builder:
             raise self.fail(f"{key}: must be an array of tables [[{key}]]")
         return value
 
-    def vehicle(self, table: dict) -> VehicleSpec:
+    def vehicle(self, table: dict, cell_size: float) -> VehicleSpec:
         if not isinstance(table, dict):
             raise self.fail("vehicle: must be a table [vehicle]")
         fields = {"front_overhang", "rear_overhang", "wheelbase", "width"}
         self.keys(table, {"kind", "passes_under_shelves"} | fields, "vehicle")
         kind = self.get(table, "kind", str, "vehicle", "forklift")
-        if kind not in VEHICLE_KINDS:
-            raise self.fail(f"vehicle: kind {kind!r} is not one of {', '.join(VEHICLE_KINDS)}")
         defaults = VehicleDims()
         dims = VehicleDims(**{f: self.get(table, f, float, "vehicle", getattr(defaults, f))
                               for f in sorted(fields)})
         if min(dims.__dict__.values()) <= 0:
             raise self.fail("vehicle: every dimension must be positive")
-        under = table.get("passes_under_shelves", kind == "lifting-agv")
+        try:
+            self.kind = registry.vehicle_kind(kind, dims, cell_size)
+        except registry.UnknownVehicleKind as exc:
+            raise self.fail(f"vehicle: {exc}") from None
+        under = table.get("passes_under_shelves", False)
         if not isinstance(under, bool):
             raise self.fail("vehicle: passes_under_shelves must be true or false")
         return VehicleSpec(kind, dims, under)
@@ -433,9 +433,10 @@ class _Builder:
         cell = cells[0]
         self.claim([cell], element)
         dock = self.pose(self.get(table, "dock", str, element), element)
-        if fork_target(dock.cell, dock.heading) != cell:
-            raise self.fail(f"{element}: dock {dock} points its forks at "
-                            f"{fork_target(dock.cell, dock.heading)}, not at the station {cell}")
+        worked = self.kind.handled_cell(dock)
+        if worked != cell:
+            raise self.fail(f"{element}: dock {dock} works cell {worked}, not the station "
+                            f"{cell}")
         return Station(name, cell, dock)
 
     def cluster(self, table: dict, i: int) -> tuple[Cluster, list[Stack]]:
@@ -513,7 +514,7 @@ class _Builder:
         for i, text in enumerate(texts, start=1):
             element = f"start {i}"
             pose = self.pose(text, element)
-            for cell in body_cells_at_rest(pose.cell, pose.heading):
+            for cell in self.kind.body_cells_at_rest(pose):
                 if cell in self.owner and "stack" in self.owner[cell]:
                     raise self.fail(f"{element}: pose {pose} stands on {self.owner[cell]}, "
                                     f"which would block it from being filled")
