@@ -2,7 +2,7 @@
 store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
 `Pacer` holds the loop to a clock.
 
-In one process, `LocalExecutor` plans with the improved hybrid A* against a
+In one process, `LocalExecutor` plans with the vehicle kind's planner against a
 `ReservationTable` it owns and `NoPacer` lets the loop run flat out. The distributed runtime
 implements the same two interfaces over zenoh (`dispatcher.remote`): a task goes to the
 forklift's agent process, which plans against its mirror of the reservation service and
@@ -22,10 +22,9 @@ from fleet.dispatching.algorithm1 import TaskKind
 from fleet.errors import UserError
 from fleet.mission.freeze import Disruption, Freeze
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.vehicles.kind import Planners, VehicleKind
 from fleet.wire.protocol import Change
 
 
@@ -105,7 +104,8 @@ ZONE = -1  # owner id of closed zones
 class LocalExecutor:
     """Plans in this process against a table this process owns."""
 
-    def __init__(self, planners: PlannerCache) -> None:
+    def __init__(self, vehicle_kind: VehicleKind, planners: Planners) -> None:
+        self.vehicle_kind = vehicle_kind
         self.planners = planners
         self.table = ReservationTable()
         self.changes: list[Change] = []  # what a reservation service would have published
@@ -123,7 +123,7 @@ class LocalExecutor:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        cells = body_cells_at_rest(pose.cell, pose.heading)
+        cells = self.vehicle_kind.body_cells_at_rest(pose)
         conflict = self.table.park(vehicle, cells, 0.0)
         if conflict is not None:
             raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
@@ -133,13 +133,14 @@ class LocalExecutor:
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
                                                      task.goals, self.table)
-        if isinstance(result, Trajectory):
-            conflict = self.table.commit(task.vehicle, result.intervals,
-                                         release_from=result.t_start)
-            if conflict is not None:  # the planner checked against this very table
-                raise AssertionError(f"planned trajectory conflicts: {conflict}")
-            self._log(task.vehicle, result.intervals, result.t_start)
-        return result
+        if isinstance(result, PlanFailure):
+            return result
+        leg = self.vehicle_kind.conflict_policy.commitment(result, self.table)
+        conflict = self.table.commit(task.vehicle, leg.intervals, release_from=leg.release_from)
+        if conflict is not None:  # the policy settled against this very table
+            raise AssertionError(f"planned trajectory conflicts: {conflict}")
+        self._log(task.vehicle, leg.intervals, leg.release_from)
+        return leg.trajectory
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
         if self.table.commit(GOODS, intervals) is None:
