@@ -380,7 +380,7 @@ def test_a_hostile_result_becomes_a_trajectory_or_is_refused_naming_the_field(pl
 
 # -- fleet.world.layout.parse_layout ---------------------------------------------------------------
 
-PAPER = (ROOT / "fleet" / "layouts" / "paper.toml").read_text()
+PAPER = (ROOT / "fleet" / "world" / "layouts" / "paper.toml").read_text()
 PAPER_LINES = PAPER.split("\n")
 ASSIGNMENTS = [k for k, line in enumerate(PAPER_LINES)
                if re.match(r"^\s*[a-z_]+\s*=\s*[^\s\"]|^\s*[a-z_]+\s*=\s*\"[^\"]", line)
@@ -473,7 +473,8 @@ def test_absurd_layout_values_are_refused_naming_them(old, new, reason):
 
 # -- the MLP weights -------------------------------------------------------------------------
 
-WEIGHTS = {name: json.loads((ROOT / "fleet" / "weights" / f"{name}.json").read_text())
+WEIGHTS = {name: json.loads((ROOT / "fleet" / "dispatching" / "weights" / f"{name}.json")
+                            .read_text())
            for name in ("small", "paper")}
 JSON_VALUES = (st.none() | st.booleans() | SMALL_INT | st.integers() | st.floats()
                | st.sampled_from([10**400, -10**400, 2**63, -1, 0, 12, 12.0, "12", "",
