@@ -56,7 +56,8 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.world.layout import load_layout
-from reservation.mirror import TableMirror, follow
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
 RECORDED_WAIT_S = 10.0
@@ -214,10 +215,11 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
     try:
         liveness.wait_for_service(args.startup_timeout)
         mirror = TableMirror()
-        changes = follow(session, keys, mirror, Requester(session, SENDER))
+        reservations = ReservationClient(session, keys, Requester(session, SENDER))
+        changes = reservations.follow(mirror)
         liveness.wait_for(vehicles, args.startup_timeout)
         log.info("%d forklifts and the reservation service are up", len(vehicles))
-        executor = RemoteExecutor(session, keys, mirror, liveness, vehicles,
+        executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
                                   layout.vehicle_kind)
         recovered, tick, wall = None, 0, 0.0
         if args.recover:

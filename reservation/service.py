@@ -29,17 +29,18 @@ from fleet.runtime.bus import (
     received,
     stop_on_signals,
 )
+from fleet.wire.convert import change_time
 from fleet.wire.protocol import (
-    Change,
     CommitRequest,
     MissionDone,
     ProtocolError,
     ReleaseRequest,
     Reply,
+    WireChange,
     decode,
     encode,
 )
-from reservation.store import ReservationStore, change_time
+from reservation.store import ReservationStore
 
 log = logging.getLogger("fleet.reservation")
 SENDER = "reservation"
@@ -70,7 +71,7 @@ class ReservationService:
             queryable.undeclare()
             publisher.undeclare()
 
-    def answer(self, query: zenoh.Query) -> list[Change]:
+    def answer(self, query: zenoh.Query) -> list[WireChange]:
         """Reply to one query; the changes to publish."""
         try:
             payload = query.payload.to_bytes() if query.payload is not None else b""

@@ -48,7 +48,7 @@ def test_the_forklift_drives_inside_what_its_planner_commits(other):
     planned = kind.planner(layout.grid_map()).plan(1, start, 3.0, [Pose((1, 4), 2)], table)
     assert isinstance(planned, Trajectory)
     leg = kind.conflict_policy.commitment(planned, table)
-    assert table.commit(1, leg.intervals, release_from=leg.release_from) is None
+    assert table.commit(1, leg.intervals, release_from=leg.release_from).ok
     traj = leg.trajectory
     outline = kind.outline
     body = Body(outline.front, outline.rear, outline.width, layout.cell_size, (0.0, 0.0))

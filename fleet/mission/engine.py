@@ -36,6 +36,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planner
+from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
@@ -91,7 +92,7 @@ def subtask_event(s: Subtask) -> SubtaskEvent:
         s.postponed,
         [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
          for st in s.trajectory.steps],
-        [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in s.trajectory.intervals])
+        intervals_to_wire(s.trajectory.intervals))
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,6 @@ from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planners, VehicleKind
-from fleet.wire.protocol import Change
 
 
 class VehicleLost(UserError):
@@ -102,33 +101,24 @@ ZONE = -1  # owner id of closed zones
 
 
 class LocalExecutor:
-    """Plans in this process against a table this process owns."""
+    """Plans in this process against a table this process owns, and writes it directly (the
+    table is a `ReservationWriter`, as the reservation service's client is across processes).
+    The table's change log is what a reservation service would have published."""
 
     def __init__(self, vehicle_kind: VehicleKind, planners: Planners) -> None:
         self.vehicle_kind = vehicle_kind
         self.planners = planners
         self.table = ReservationTable()
-        self.changes: list[Change] = []  # what a reservation service would have published
-
-    def _log(self, vehicle: int, intervals: Sequence[Interval],
-             release_from: float | None, cells: Sequence[Cell] | None = None) -> None:
-        op = "commit" if intervals else "release"
-        self.changes.append(Change(self.table.revision, op, vehicle,
-                                   [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals],
-                                   release_from,
-                                   release_cells=None if cells is None else list(cells)))
 
     @property
     def store(self) -> ReservationTable:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        cells = self.vehicle_kind.body_cells_at_rest(pose)
-        conflict = self.table.park(vehicle, cells, 0.0)
-        if conflict is not None:
+        written = self.table.park(vehicle, self.vehicle_kind.body_cells_at_rest(pose), 0.0)
+        if not written.ok:
             raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
-                             f"{conflict.other}")
-        self._log(vehicle, [Interval(c, 0.0, math.inf) for c in cells], None)
+                             f"{written.conflict_vehicle}")
 
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
@@ -136,27 +126,22 @@ class LocalExecutor:
         if isinstance(result, PlanFailure):
             return result
         leg = self.vehicle_kind.conflict_policy.commitment(result, self.table)
-        conflict = self.table.commit(task.vehicle, leg.intervals, release_from=leg.release_from)
-        if conflict is not None:  # the policy settled against this very table
-            raise AssertionError(f"planned trajectory conflicts: {conflict}")
-        self._log(task.vehicle, leg.intervals, leg.release_from)
+        written = self.table.commit(task.vehicle, leg.intervals, leg.release_from)
+        if not written.ok:  # the policy settled against this very table
+            raise AssertionError(f"planned trajectory conflicts: {written.reason}")
         return leg.trajectory
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
-        if self.table.commit(GOODS, intervals) is None:
-            self._log(GOODS, intervals, None)
+        self.table.commit(GOODS, intervals)  # refused where a vehicle holds the cell
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
                zone_until: float, moving: list[int], standing: list[int]) -> None:
-        for change in freeze_changes(t, freezes, goods, zone, zone_until):
-            owner, intervals, release_from, cells = change
-            if intervals:
-                conflict = self.table.commit(owner, intervals)
-                if conflict is not None:  # the cascade left nothing in the way
-                    raise AssertionError(f"freeze at t={t} conflicts: {conflict}")
-            else:
+        for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
+                                                                    zone_until):
+            written = self.table.commit(owner, intervals) if intervals else \
                 self.table.release(owner, release_from, cells)
-            self._log(owner, intervals, release_from, cells)
+            if not written.ok:  # the cascade left nothing in the way
+                raise AssertionError(f"freeze at t={t} conflicts: {written.reason}")
 
     def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
         pass  # the table already holds the forklift's cells to infinity
