@@ -206,7 +206,8 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         changes = reservations.follow(mirror)
         liveness.wait_for(vehicles, args.startup_timeout)
         log.info("%d forklifts and the reservation service are up", len(vehicles))
-        executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles)
+        executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
+                                  layout.vehicle_kind)
         recovered, tick, wall = None, 0, 0.0
         if args.recover:
             recovered, tick, wall = pick_up(executor, layout, vehicles, options.params)

@@ -16,10 +16,10 @@ from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.mission.freeze import Freeze
 from fleet.mission.seam import Task, VehicleLost, freeze_changes
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, RequestFailed
+from fleet.vehicles.kind import VehicleKind
 from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
 from fleet.wire.protocol import (
     GOODS,
@@ -43,8 +43,10 @@ SYNC_TIMEOUT_S = 30.0
 
 class RemoteExecutor:
     def __init__(self, session: zenoh.Session, keys: Keys, reservations: ReservationClient,
-                 mirror: TableMirror, liveness: Liveness, vehicles: list[int]) -> None:
+                 mirror: TableMirror, liveness: Liveness, vehicles: list[int],
+                 vehicle_kind: VehicleKind) -> None:
         self.keys = keys
+        self.vehicle_kind = vehicle_kind
         self.reservations = reservations  # follows into `mirror`
         self.mirror = mirror
         self.liveness = liveness
@@ -60,7 +62,7 @@ class RemoteExecutor:
         return self.mirror.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        cells = set(body_cells_at_rest(pose.cell, pose.heading))
+        cells = set(self.vehicle_kind.body_cells_at_rest(pose))
 
         def parked(table: ReservationTable) -> bool:
             return cells <= {r.cell for r in table.reservations(vehicle) if r.t1 == math.inf}

@@ -13,7 +13,7 @@ import pytest
 
 from fleet.analysis.analyze import analyze
 from fleet.analysis.report import Report
-from fleet.analysis.time_use import maneuver_length, time_use
+from fleet.analysis.time_use import time_use
 from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN, engine_options
 from fleet.mission.record import SubtaskRecord
@@ -23,6 +23,7 @@ from fleet.recording.inprocess import Outgoing, recorded_run
 from fleet.recording.mission_record import dispatcher_restarts
 from fleet.recording.reader import read_recording
 from fleet.recording.writer import RecordingWriter
+from fleet.vehicles.forklift import Forklift
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
@@ -164,7 +165,8 @@ def test_a_cut_plan_counts_only_what_was_driven_and_the_wait_for_the_next():
     # progress (to 10), drives none of the rest, and starts again at 12 (postponed 2 s).
     plan = [subtask(1, 0.0, [("forward", 0.0, 10.0), ("forward", 10.0, 20.0)]),
             subtask(1, 12.0, [("stop", 12.0, 14.0), ("forward", 14.0, 24.0)])]
-    (v,) = time_use(plan, [halt(5.0, 10.0, moving=True)], [], 1, 40.0, "empty", 1.0)
+    (v,) = time_use(plan, [halt(5.0, 10.0, moving=True)], [], 1, 40.0, "empty",
+                    Forklift(cell_size=1.0))
     assert (v.busy_s, v.stopped_s, v.postponed_s, v.handling_s, v.down_s, v.idle_s) == \
         pytest.approx((20.0, 2.0, 2.0, 5.0, 0.0, 11.0))
     assert v.waiting_s == pytest.approx(4.0) and v.subtasks == 2
@@ -177,10 +179,11 @@ def test_a_forklift_down_part_way_finishes_its_maneuver_after_the_resume():
     plan = [subtask(1, 5.0, [("forward", 5.0, 15.0), ("forward", 15.0, 25.0)]),
             subtask(1, 41.0, [("forward", 41.0, 51.0)])]
     resume = Resume(1, 35.0, 41.0)
-    (v,) = time_use(plan, [halt(9.0, 15.0, moving=False)], [resume], 1, 60.0, "fill", 2.0)
+    (v,) = time_use(plan, [halt(9.0, 15.0, moving=False)], [resume], 1, 60.0, "fill",
+                    Forklift(cell_size=2.0))
     assert (v.busy_s, v.postponed_s, v.down_s, v.handling_s, v.idle_s) == \
         pytest.approx((20.0, 0.0, 26.0, 10.0, 4.0))
-    assert v.distance_m == pytest.approx(2 * 2.0 * maneuver_length("forward"))
+    assert v.distance_m == pytest.approx(2 * 2.0)  # two forward maneuvers of one 2 m cell
 
 
 # -- a run recorded in segments: what no recorder heard is taken from the dispatcher's record

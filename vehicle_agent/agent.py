@@ -1,12 +1,12 @@
-"""The vehicle agent process: one forklift (DESIGN.md section 2).
+"""The vehicle agent process: one vehicle of the kind the layout names (DESIGN.md section 2).
 
 It declares a liveliness token, parks at its start pose (a reservation to infinity), keeps a
 mirror of the reservation service's table, and answers tasks on fleet/<run>/vehicle/<id>/task:
-plan with the improved hybrid A* against the mirror, commit through the service, replan when
-the service refuses the commit (another forklift got there first), answer with the committed
-trajectory. It drives what it committed on the clock and publishes its state on a grid of
-instants every forklift shares: every 0.5 s of sim time in fast mode (then acknowledges the
-tick), at 10 Hz in real time.
+plan with its kind's planner against the mirror, commit what its kind's conflict policy says
+through the service, replan when the service refuses the commit (another vehicle got there
+first), answer with the committed trajectory. It drives what it committed on the clock and
+publishes its state on a grid of instants every vehicle shares: every 0.5 s of sim time in
+fast mode (then acknowledges the tick), at 10 Hz in real time.
 
 Zenoh callbacks only enqueue; one worker thread does everything that blocks, in arrival order.
 """
@@ -25,11 +25,10 @@ import zenoh
 
 from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 from fleet.mission.seam import Task
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, Stream, received, wait_alive
+from fleet.vehicles.kind import Commitment
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
     ClockAck,
@@ -133,7 +132,8 @@ class Agent:
         self.layout = layout
         self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
-        self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)
+        self.vehicle_kind = layout.vehicle_kind
+        self.planners = self.vehicle_kind.planners(layout.grid_map)
         self.drive = Drive(vehicle, start, layout)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()
@@ -218,7 +218,7 @@ class Agent:
         raise Stopped("stopped by a signal")
 
     def _park(self) -> None:
-        cells = body_cells_at_rest(self.drive.pose.cell, self.drive.pose.heading)
+        cells = self.vehicle_kind.body_cells_at_rest(self.drive.pose)
         written = self.reservations.commit(self.vehicle, [Interval(c, 0.0, math.inf)
                                                           for c in cells],
                                            request_id=f"{self.sender}:park")
@@ -269,10 +269,11 @@ class Agent:
             self.reservations.resync(self.mirror)
         rejections: list[str] = []
         for attempt in range(MAX_COMMIT_ATTEMPTS):
-            result = self._plan(task)
-            if isinstance(result, PlanFailure):
-                return result_to_wire(message.task_id, self.vehicle, result,
-                                      self.mirror.revision, rejections)
+            leg = self._plan(task)
+            if isinstance(leg, PlanFailure):
+                return result_to_wire(message.task_id, self.vehicle, leg, self.mirror.revision,
+                                      rejections)
+            result = leg.trajectory
             if self.clock.realtime and self.clock.now() > result.t_start:
                 return self._failed(message, FailureReason.LATE,
                                     f"planned for t={result.t_start:.2f} but it is already "
@@ -280,7 +281,7 @@ class Agent:
             log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
             start = self.clock.wall_at(result.t_start)
             written = self.reservations.commit(
-                self.vehicle, result.intervals, result.t_start, based_on=message.revision,
+                self.vehicle, leg.intervals, leg.release_from, based_on=message.revision,
                 deadline=None if start is None else start - COMMIT_SLACK_S,
                 request_id=f"{self.sender}:{message.task_id}:{attempt}")
             if written.ok:
@@ -299,12 +300,15 @@ class Agent:
                             f"{len(rejections)} commits refused; last: {rejections[-1]}",
                             rejections)
 
-    def _plan(self, task: Task) -> Trajectory | PlanFailure:
+    def _plan(self, task: Task) -> Commitment | PlanFailure:
+        """Plan against the mirror, and settle what to commit against the same table."""
         planner = self.planners.get(task.filled)
         started = time.perf_counter()
         with self.mirror.frozen():
             result = planner.plan(self.vehicle, task.start, task.t_i, task.goals,
                                   self.mirror.table)
+            if isinstance(result, Trajectory):
+                result = self.vehicle_kind.conflict_policy.commitment(result, self.mirror.table)
         if self.slow > 1:  # an injected slow planner: as if the search ran on a slower CPU
             time.sleep((self.slow - 1) * (time.perf_counter() - started))
         return result

@@ -76,8 +76,8 @@ def analyze(recording: Recording) -> Report:
                              f"after the mission?)")
     layout = recording.layout()
     record = summary_of(recording)
-    dims = layout.vehicle.dims
-    body = Body(dims.front, dims.rear, dims.width, layout.cell_size, layout.origin)
+    outline = layout.vehicle_kind.outline  # numbers only: the verifier has its own geometry
+    body = Body(outline.front, outline.rear, outline.width, layout.cell_size, layout.origin)
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
     usable = [(t, m) for t, m in states
               if all(math.isfinite(v) for v in (t, m.x, m.y, m.theta))]
@@ -129,7 +129,7 @@ def analyze(recording: Recording) -> Report:
         vehicles=time_use(record.subtasks, [m for _, m in recording.of(Halt)],
                           [m for _, m in recording.of(Resume)], info.vehicles,
                           max(record.end_time_s, record.all_parked_s), info.kind,
-                          layout.cell_size),
+                          layout.vehicle_kind),
         messages=dict(Counter(r.envelope.message.TYPE for r in recording.messages
                               if r.genuine)),
         messages_lost=sum(g.missing for g in gaps), gaps=gaps,

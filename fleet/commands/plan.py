@@ -10,8 +10,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fleet.errors import UserError
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.argtypes import (
@@ -22,6 +20,7 @@ from fleet.runtime.argtypes import (
     sim_seconds,
     text_file,
 )
+from fleet.vehicles.kind import Planner
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
@@ -64,7 +63,8 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
     scene = Scene()
     scene.filled = filled_counts(layout, data.get("filled", {}))
     scene.start = resolve(layout, my_start, scene.filled)[0]
-    table.park(me, body_cells_at_rest(scene.start.cell, scene.start.heading), 0.0)
+    kind = layout.vehicle_kind
+    table.park(me, kind.body_cells_at_rest(scene.start), 0.0)
     planner = planner_for(scene.filled)
     vehicles = data.get("vehicle", [])
     starts = {}
@@ -74,7 +74,7 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if vid == me:
             raise UserError(f"{where}: id {vid} is the planning vehicle itself")
         starts[vid] = resolve(layout, entry["from"], scene.filled)[0]
-        parked = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading), 0.0)
+        parked = table.park(vid, kind.body_cells_at_rest(starts[vid]), 0.0)
         if not parked.ok:
             other = parked.conflict_vehicle
             who = "the planning vehicle" if other == me else f"vehicle {other}"
@@ -88,8 +88,9 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if isinstance(result, PlanFailure):
             raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be planned: "
                             f"{result.reason.value}: {result.detail}")
-        table.commit(vid, result.intervals, release_from=result.t_start)
-        scene.others.append(result)
+        leg = kind.conflict_policy.commitment(result, table)
+        table.commit(vid, leg.intervals, release_from=leg.release_from)
+        scene.others.append(leg.trajectory)
     for i, entry in enumerate(data.get("reservation", [])):
         iv = Interval(entry["cell"], entry["t0"], entry.get("t1", math.inf))
         written = table.commit(entry["vehicle"], [iv])
@@ -207,13 +208,10 @@ def run(args: argparse.Namespace) -> int:
                         f"{forklifts}" if forklifts else
                         f"--vehicle {args.vehicle}: layout {layout.name} has no forklifts "
                         f"(no start poses)")
-    planners: dict[frozenset, HybridAStar] = {}
+    planners = layout.vehicle_kind.planners(layout.grid_map)
 
-    def planner_for(filled) -> HybridAStar:
-        key = frozenset(filled)
-        if key not in planners:
-            planners[key] = HybridAStar(layout.grid_map(key), layout.vehicle.dims)
-        return planners[key]
+    def planner_for(filled) -> Planner:
+        return planners.get(frozenset(filled))
 
     table = ReservationTable()
     scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle, args.start)

@@ -33,10 +33,9 @@ from fleet.mission.seam import Executor, LocalExecutor, NoPacer, Pacer, Task, Ve
 from fleet.mission.spec import Mission, MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import Manner, world_pose
-from fleet.planning.planner import HybridAStar, PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.vehicles.kind import Planner
 from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
     DecisionFailure,
@@ -167,8 +166,9 @@ class Engine:
         self.mission = mission
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
-        self.planners = PlannerCache(self.layout.grid_map, self.layout.vehicle.dims)
-        self.executor = executor or LocalExecutor(self.planners)
+        self.vehicle_kind = self.layout.vehicle_kind
+        self.planners = self.vehicle_kind.planners(self.layout.grid_map)
+        self.executor = executor or LocalExecutor(self.vehicle_kind, self.planners)
         self.pacer = pacer or NoPacer()
         starts = list(mission.starts or self.layout.vehicle_starts)
         n = mission.vehicles if mission.vehicles is not None else len(starts)
@@ -219,7 +219,7 @@ class Engine:
         self.planning_wall_s = 0.0
 
     # -- helpers -------------------------------------------------------------------------------
-    def planner(self, filled: set[Cell] | None = None) -> HybridAStar:
+    def planner(self, filled: set[Cell] | None = None) -> Planner:
         """The planner for a fill state (default: the current one)."""
         return self.planners.get(frozenset(self.present if filled is None else filled))
 
@@ -410,7 +410,8 @@ class Engine:
             if self.options.collect_training:
                 self._collect(decision, traj, remaining)
         self.before.append(dataclasses.replace(v))
-        stops = sum(s.t1 - s.t0 for s in traj.steps if s.manner is Manner.STOP)
+        stops = sum(s.t1 - s.t0 for s in traj.steps
+                    if self.vehicle_kind.is_wait(s.manner.label))
         v.busy_s += traj.t_end - traj.t_start - stops
         v.wait_s += stops
         v.pose = traj.goal
@@ -540,16 +541,11 @@ class Engine:
         self._emit(Resume(up.vehicle, up.t, t_stand), up.t)
 
     def _halt_event(self, freeze: Freeze, cause: str, moving: bool) -> Halt:
-        step = freeze.step
-        if step is None:
-            at, heading, manner, s = freeze.pose.cell, freeze.pose.heading, Manner.STOP, 0.0
-        else:
-            at, heading, manner, s = step.start.cell, step.start.heading, step.manner, \
-                freeze.fraction
-        x, y, theta = world_pose(at, heading, manner, s, self.layout.cell_size)
+        at = self.vehicle_kind.at_rest(freeze.pose) if freeze.step is None else \
+            self.vehicle_kind.on_step(freeze.step, freeze.t)
         ox, oy = self.layout.origin
         return Halt(freeze.vehicle, freeze.t, cause, moving, str(freeze.pose), freeze.t_stand,
-                    sorted(freeze.cells), x + ox, y + oy, theta)
+                    sorted(freeze.cells), at.x + ox, at.y + oy, at.theta)
 
     def _collect(self, decision: Decision, traj: Trajectory | None,
                  remaining: dict[str, int]) -> None:
@@ -590,10 +586,10 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
     order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
     empty = ReservationTable()
-    planners: dict[frozenset[Cell], HybridAStar] = {}
+    planners = layout.vehicle_kind.planners(layout.grid_map)
     for stack in order:
         key = frozenset(present - {stack.cell})
-        planner = planners.setdefault(key, HybridAStar(layout.grid_map(key), layout.vehicle.dims))
+        planner = planners.get(key)
         goals = layout.unload_poses(stack.cell, key)
         best = math.inf
         for st in layout.stations:

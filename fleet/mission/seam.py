@@ -2,7 +2,7 @@
 the reservations): the engine decides subtasks; an `Executor` plans and commits them, and a
 `Pacer` holds the loop to a clock.
 
-In one process, `LocalExecutor` plans with the improved hybrid A* against a
+In one process, `LocalExecutor` plans with the vehicle kind's planner against a
 `ReservationTable` it owns and `NoPacer` lets the loop run flat out. The distributed runtime
 implements the same two interfaces over zenoh (`dispatcher.remote`): a task goes to the
 forklift's agent process, which plans against its mirror of the reservation service and
@@ -22,10 +22,9 @@ from fleet.dispatching.algorithm1 import TaskKind
 from fleet.errors import UserError
 from fleet.mission.freeze import Disruption, Freeze
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.vehicles.kind import Planners, VehicleKind
 from fleet.wire.protocol import GOODS, ZONE
 
 
@@ -103,7 +102,8 @@ class LocalExecutor:
     table is a `ReservationWriter`, as the reservation service's client is across processes).
     The table's change log is what a reservation service would have published."""
 
-    def __init__(self, planners: PlannerCache) -> None:
+    def __init__(self, vehicle_kind: VehicleKind, planners: Planners) -> None:
+        self.vehicle_kind = vehicle_kind
         self.planners = planners
         self.table = ReservationTable()
 
@@ -112,7 +112,7 @@ class LocalExecutor:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        written = self.table.park(vehicle, body_cells_at_rest(pose.cell, pose.heading), 0.0)
+        written = self.table.park(vehicle, self.vehicle_kind.body_cells_at_rest(pose), 0.0)
         if not written.ok:
             raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
                              f"{written.conflict_vehicle}")
@@ -120,11 +120,13 @@ class LocalExecutor:
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
                                                      task.goals, self.table)
-        if isinstance(result, Trajectory):
-            written = self.table.commit(task.vehicle, result.intervals, result.t_start)
-            if not written.ok:  # the planner checked against this very table
-                raise AssertionError(f"planned trajectory conflicts: {written.reason}")
-        return result
+        if isinstance(result, PlanFailure):
+            return result
+        leg = self.vehicle_kind.conflict_policy.commitment(result, self.table)
+        written = self.table.commit(task.vehicle, leg.intervals, leg.release_from)
+        if not written.ok:  # the policy settled against this very table
+            raise AssertionError(f"planned trajectory conflicts: {written.reason}")
+        return leg.trajectory
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
         self.table.commit(GOODS, intervals)  # refused where a vehicle holds the cell

@@ -16,8 +16,9 @@ from fleet.errors import UserError
 from fleet.params import VehicleDims
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
-from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.trajectory import Pose
+from fleet.vehicles import registry
+from fleet.vehicles.kind import VehicleKind
 
 # The drawing's symbols (docs/layouts.md): clusters and obstacles bring their own.
 FREE, PASSAGE, NOTCH, STATION = ".", ":", "n", "P"
@@ -45,7 +46,7 @@ class Cluster:
 class Station:
     name: str
     cell: Cell
-    dock: Pose  # the picking pose, forks pointing at the station
+    dock: Pose  # the picking pose, working the station
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ class Passage:
 
 @dataclass(frozen=True)
 class VehicleSpec:
-    kind: str = "forklift"
+    kind: str = "forklift"  # a name in fleet.vehicles.registry
     dims: VehicleDims = field(default_factory=VehicleDims)
     passes_under_shelves: bool = False  # seed 004: lifting AGVs drive under shelves when empty
 
@@ -86,6 +87,11 @@ class Layout:
     vehicle: VehicleSpec
     vehicle_starts: tuple[Pose, ...]
     drawing: str
+
+    @cached_property
+    def vehicle_kind(self) -> VehicleKind:
+        """The kind of vehicle the layout is for: its motion, planner and conflict policy."""
+        return registry.vehicle_kind(self.vehicle.kind, self.vehicle.dims, self.cell_size)
 
     @cached_property
     def static_blocked(self) -> frozenset[Cell]:
@@ -121,14 +127,11 @@ class Layout:
                 self.origin[1] + cell[1] * self.cell_size)
 
     def unload_poses(self, cell: Cell, filled: Iterable[Cell] = ()) -> list[Pose]:
-        """Poses whose forks point at `cell` with the whole body on free cells (E, N, W, S)."""
+        """The vehicle kind's poses that work `cell` with the whole body on free cells."""
         grid = self.grid_map(filled)
-        poses = []
-        for heading in range(4):
-            pose = _pose_behind(cell, heading)
-            if grid.all_free(body_cells_at_rest(pose.cell, pose.heading)):
-                poses.append(pose)
-        return poses
+        kind = self.vehicle_kind
+        return [pose for pose in kind.handling_poses(cell)
+                if grid.all_free(kind.body_cells_at_rest(pose))]
 
     def render_drawing(self) -> str:
         """The ASCII drawing the data implies, top row first (docs/layouts.md has the legend)."""
@@ -154,7 +157,3 @@ class Layout:
             yield station.cell, STATION
 
 
-def _pose_behind(cell: Cell, heading: int) -> Pose:
-    """The pose with heading `heading` whose forks point at `cell`."""
-    dx, dy = ((1, 0), (0, 1), (-1, 0), (0, -1))[heading]
-    return Pose((cell[0] + dx, cell[1] + dy), heading)

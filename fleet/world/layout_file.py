@@ -18,8 +18,9 @@ from pathlib import Path
 from fleet.errors import UserError
 from fleet.params import VehicleDims
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest, fork_target
 from fleet.planning.trajectory import Pose
+from fleet.vehicles import registry
+from fleet.vehicles.kind import VehicleKind
 from fleet.world.layout import (
     FREE,
     NOTCH,
@@ -35,7 +36,6 @@ from fleet.world.layout import (
     VehicleSpec,
 )
 
-VEHICLE_KINDS = ("forklift", "agv", "lifting-agv")
 RESERVED_SYMBOLS = {FREE, PASSAGE, NOTCH, STATION, "#", " "}
 MAX_MAP_CELLS = 1_000_000  # far beyond any warehouse here; bounds what a hostile file costs
 
@@ -126,6 +126,7 @@ class _Builder:
         self.data = data
         self.where = where
         self.owner: dict[Cell, str] = {}  # cell -> the element that claims it
+        self.kind: VehicleKind  # set by `vehicle`, before any pose is read
 
     def fail(self, message: str) -> LayoutError:
         return LayoutError(f"{self.where}: {message}")
@@ -177,7 +178,7 @@ class _Builder:
             pose = Pose.parse(text)
         except ValueError as exc:
             raise self.fail(f"{element}: {exc}") from None
-        for cell in body_cells_at_rest(pose.cell, pose.heading):
+        for cell in self.kind.body_cells_at_rest(pose):
             if not (0 <= cell[0] < self.cols and 0 <= cell[1] < self.rows):
                 raise self.fail(f"{element}: pose {pose} puts the body on cell {cell}, off the "
                                 f"{self.cols} x {self.rows} map")
@@ -213,7 +214,7 @@ class _Builder:
                             f"{MAX_MAP_CELLS} cells")
         origin = (x0 + cell_size / 2, y0 + cell_size / 2)
 
-        vehicle = self.vehicle(data.get("vehicle", {}))
+        vehicle = self.vehicle(data.get("vehicle", {}), cell_size)
         obstacles = [self.obstacle(t, i) for i, t in enumerate(self.tables("obstacle"))]
         stations = [self.station(t, i) for i, t in enumerate(self.tables("station"))]
         clusters, stacks = [], []
@@ -224,7 +225,7 @@ class _Builder:
         passages = [self.passage(t, i) for i, t in enumerate(self.tables("passage"))]
         self.unique_names(clusters, stations, obstacles, passages)
         for station in stations:
-            for cell in body_cells_at_rest(station.dock.cell, station.dock.heading):
+            for cell in self.kind.body_cells_at_rest(station.dock):
                 self.free_for(cell, f"station {station.name}: dock {station.dock}")
         starts = self.starts(data.get("starts", []))
         layout = Layout(name, description, self.cols, self.rows, cell_size, origin,
@@ -239,20 +240,22 @@ class _Builder:
             raise self.fail(f"{key}: must be an array of tables [[{key}]]")
         return value
 
-    def vehicle(self, table: dict) -> VehicleSpec:
+    def vehicle(self, table: dict, cell_size: float) -> VehicleSpec:
         if not isinstance(table, dict):
             raise self.fail("vehicle: must be a table [vehicle]")
         fields = {"front_overhang", "rear_overhang", "wheelbase", "width"}
         self.keys(table, {"kind", "passes_under_shelves"} | fields, "vehicle")
         kind = self.get(table, "kind", str, "vehicle", "forklift")
-        if kind not in VEHICLE_KINDS:
-            raise self.fail(f"vehicle: kind {kind!r} is not one of {', '.join(VEHICLE_KINDS)}")
         defaults = VehicleDims()
         dims = VehicleDims(**{f: self.get(table, f, float, "vehicle", getattr(defaults, f))
                               for f in sorted(fields)})
         if min(dims.__dict__.values()) <= 0:
             raise self.fail("vehicle: every dimension must be positive")
-        under = table.get("passes_under_shelves", kind == "lifting-agv")
+        try:
+            self.kind = registry.vehicle_kind(kind, dims, cell_size)
+        except registry.UnknownVehicleKind as exc:
+            raise self.fail(f"vehicle: {exc}") from None
+        under = table.get("passes_under_shelves", False)
         if not isinstance(under, bool):
             raise self.fail("vehicle: passes_under_shelves must be true or false")
         return VehicleSpec(kind, dims, under)
@@ -281,9 +284,10 @@ class _Builder:
         cell = cells[0]
         self.claim([cell], element)
         dock = self.pose(self.get(table, "dock", str, element), element)
-        if fork_target(dock.cell, dock.heading) != cell:
-            raise self.fail(f"{element}: dock {dock} points its forks at "
-                            f"{fork_target(dock.cell, dock.heading)}, not at the station {cell}")
+        worked = self.kind.handled_cell(dock)
+        if worked != cell:
+            raise self.fail(f"{element}: dock {dock} works cell {worked}, not the station "
+                            f"{cell}")
         return Station(name, cell, dock)
 
     def cluster(self, table: dict, i: int) -> tuple[Cluster, list[Stack]]:
@@ -361,7 +365,7 @@ class _Builder:
         for i, text in enumerate(texts, start=1):
             element = f"start {i}"
             pose = self.pose(text, element)
-            for cell in body_cells_at_rest(pose.cell, pose.heading):
+            for cell in self.kind.body_cells_at_rest(pose):
                 if cell in self.owner and "stack" in self.owner[cell]:
                     raise self.fail(f"{element}: pose {pose} stands on {self.owner[cell]}, "
                                     f"which would block it from being filled")
