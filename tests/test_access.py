@@ -183,7 +183,7 @@ def fleet(tmp_path_factory):
         fleet.start()
         yield fleet
     finally:
-        if fleet.runtime.router.poll() is None:
+        if fleet.router.poll() is None:
             fleet.stop()
 
 

@@ -18,11 +18,11 @@ from hypothesis import strategies as st
 
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
-from fleet.commands.run import engine_options
 from fleet.errors import UserError
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import Keys
 from fleet.wire.protocol import Change, StackDone, VehicleState, encode
 from fleet.world.layout import load_layout

@@ -23,7 +23,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleet.commands.run import engine_options
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.seam import Task
@@ -34,6 +33,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import recorded_run
 from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.runtime.args import engine_options
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,

@@ -14,12 +14,13 @@ import pytest
 from fleet.analysis.analyze import Report, analyze
 from fleet.analysis.time_use import maneuver_length, time_use
 from fleet.cli import main
-from fleet.commands.run import VALUE_COLUMN, engine_options
+from fleet.commands.run import VALUE_COLUMN
 from fleet.mission.record import subtask_dict
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import Outgoing, recorded_run
 from fleet.recording.mcapfile import NS, RecordingWriter, read_recording
 from fleet.recording.mission_record import dispatcher_restarts
+from fleet.runtime.args import engine_options
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,

@@ -21,7 +21,6 @@ import zenoh
 
 from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
 from fleet.cli import main
-from fleet.commands.run import engine_options
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import Outgoing, recorded_run
 from fleet.recording.mcapfile import (
@@ -35,6 +34,7 @@ from fleet.recording.mcapfile import (
     segment_paths,
 )
 from fleet.recording.rundir import claim
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, Keys, Stream, free_port, open_session
 from fleet.wire.protocol import (
     Change,

@@ -31,6 +31,7 @@ from fleet.analysis.safety import (
 )
 from fleet.analysis.time_use import VehicleStats, time_use
 from fleet.mission.driving import state_period
+from fleet.mission.spec import ClockMode
 from fleet.recording.mcapfile import (
     NS,
     Recorded,
@@ -365,7 +366,7 @@ def analyze(recording: Recording) -> Report:
     holes = sequence_holes(recording)
     down_halts = [m for _, m in recording.of(Halt) if not m.moving]
     # On the fast clock a forklift is stopped between two ticks: nothing of it is in flight.
-    cut_off = [h for h in holes if not h.window and info.clock == "realtime" and
+    cut_off = [h for h in holes if not h.window and info.clock == ClockMode.REALTIME and
                _while_down(h, down_halts, LOSS_NOTICED_WALL_S * info.speed)]
     lost = [h for h in holes if not h.window and h not in cut_off]
     unrecorded = [h for h in holes if h.window]
