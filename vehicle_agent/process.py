@@ -4,21 +4,32 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from collections.abc import Sequence
 from contextlib import suppress
 
 import zenoh
 
 from fleet.errors import UserError
-from fleet.runtime.access import read_dictionary, vehicle_user
+from fleet.planning.trajectory import Pose
+from fleet.runtime.access import DISPATCHER, read_dictionary, vehicle_user
 from fleet.runtime.bus import Keys, Requester, RequestFailed, open_session
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
 from fleet.runtime.process_configs import AgentConfig
-from fleet.wire.protocol import ClaimReply, VehicleClaim
-from fleet.world.layout import load_layout
+from fleet.wire.protocol import (
+    ClaimReply,
+    MissionInfo,
+    ProtocolError,
+    VehicleClaim,
+    decode,
+)
+from fleet.world.layout import Layout, load_layout, parse_layout
 from vehicle_agent.agent import Agent
 
 log = logging.getLogger("fleet.agent")
+MISSION_WAIT_S = 120.0  # for the dispatcher to say what the mission is (as it waits for us)
+ASK_TIMEOUT_S = 5.0
+ASK_PERIOD_S = 0.5
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -26,7 +37,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def serve(config: AgentConfig) -> int:
-    layout = load_layout(config.layout)
+    given = load_layout(config.layout) if config.layout is not None else None  # at once
     keys = Keys(config.bus.run)
     bus = config.bus.config()
     logins = read_dictionary(config.logins) if config.logins else {}
@@ -43,13 +54,18 @@ def serve(config: AgentConfig) -> int:
         if user not in logins:
             raise UserError(f"--logins {config.logins} has no login for {user}")
         bus = dataclasses.replace(bus, user=user, password=logins[user])
-    start = config.start
-    if start is None:
-        if not 1 <= vehicle <= len(layout.vehicle_starts):
-            raise UserError(f"forklift {vehicle}: layout {layout.name} has start poses for "
-                            f"forklifts 1 to {len(layout.vehicle_starts)}; give --start")
-        start = layout.vehicle_starts[vehicle - 1]
     with open_session(bus) as session:
+        if given is not None:
+            layout, starts, whose = given, given.vehicle_starts, f"layout {given.name}"
+        else:
+            layout, starts = mission_layout(session, keys)
+            whose = "the mission"
+        start = config.start
+        if start is None:
+            if not 1 <= vehicle <= len(starts):
+                raise UserError(f"forklift {vehicle}: {whose} has start poses for forklifts 1 "
+                                f"to {len(starts)}; give --start")
+            start = starts[vehicle - 1]
         if config.id_file is not None:
             config.id_file.parent.mkdir(parents=True, exist_ok=True)
             config.id_file.write_text(f"{vehicle}\n")
@@ -58,6 +74,48 @@ def serve(config: AgentConfig) -> int:
         with suppress(Stopped):  # a clean stop: the session is closed on the way out
             agent.run(exit_when_done=config.exit_when_done)
     return 0
+
+
+def mission_layout(session: zenoh.Session, keys: Keys,
+                   timeout_s: float = MISSION_WAIT_S) -> tuple[Layout, tuple[Pose, ...]]:
+    """The layout the dispatcher's mission runs on and its forklifts' start poses, from what
+    the dispatcher says the run is (dispatch/mission, as a recorder learns it), so every
+    process plans on the very map the dispatcher decides on; asked until it answers."""
+    deadline = time.monotonic() + timeout_s
+    said = False
+    while True:
+        for reply in session.get(keys.dispatch_mission, timeout=ASK_TIMEOUT_S):
+            info = _mission_info(reply)
+            if info is not None:
+                try:
+                    starts = tuple(Pose.parse(p) for p in info.starts)
+                    return parse_layout(info.layout_toml, f"the mission's layout "
+                                        f"{info.layout}"), starts
+                except ValueError as exc:  # a LayoutError too
+                    raise UserError(f"the dispatcher's mission: {exc}") from None
+        if time.monotonic() > deadline:
+            raise UserError(f"no dispatcher said what the mission is (on "
+                            f"{keys.dispatch_mission}) within {timeout_s:g} s")
+        if not said:
+            log.info("waiting for the dispatcher to say what the mission is")
+            said = True
+        time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
+
+
+def _mission_info(reply: zenoh.Reply) -> MissionInfo | None:
+    """The run's description in a reply, believed only from the dispatcher."""
+    if reply.ok is None:
+        return None
+    try:
+        envelope = decode(reply.ok.payload.to_bytes())
+    except ProtocolError as exc:
+        log.warning("rejected a reply on %s: %s", reply.ok.key_expr, exc)
+        return None
+    if not isinstance(envelope.message, MissionInfo) or envelope.sender != DISPATCHER:
+        log.warning("ignored a %s from %r on %s: only the dispatcher says what the mission "
+                    "is", envelope.message.TYPE, envelope.sender, reply.ok.key_expr)
+        return None
+    return envelope.message
 
 
 def claim(session: zenoh.Session, keys: Keys, name: str, timeout_s: float) -> int:

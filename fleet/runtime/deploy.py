@@ -126,8 +126,8 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
         return RouterConfig((f"tcp/0.0.0.0:{ROUTER_PORT}",), exit_when_idle_s=5.0, **secure)
     if service == "vehicle":  # logged in as any forklift, then as the one it claimed
         logins = Path(SECRETS / "fleet_vehicle_logins") if config.secure else None
-        return AgentConfig(bus(config, ""), None, layout=config.layout, logins=logins,
-                           id_file=Path(VEHICLE_ID_FILE), exit_when_done=True)
+        return AgentConfig(bus(config, ""), None, logins=logins, id_file=Path(VEHICLE_ID_FILE),
+                           exit_when_done=True)
     if service == "reservation":
         return ReservationConfig(bus(config, service), Path(JOURNAL), exit_when_done=True)
     if service == "recorder":

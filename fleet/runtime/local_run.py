@@ -164,7 +164,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         if kind.startswith("agent-"):
             v = int(kind.split("-")[1])
             connect = f"tcp/127.0.0.1:{proxies[v].port}" if v in proxies else endpoint
-            return AgentConfig(bus(vehicle_user(v), connect), v, layout=spec.mission.layout)
+            return AgentConfig(bus(vehicle_user(v), connect), v)
         if kind == "dispatcher":  # a restart picks the mission up where it was
             return dispatcher_config(spec, bus(DISPATCHER), recover=again)
         raise RunFailed(f"cannot restart a {kind} process")

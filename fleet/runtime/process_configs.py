@@ -176,8 +176,8 @@ class AgentConfig(ProcessConfig):
     # The name to claim under: the host name, which a restarted container keeps.
     claim_as: str = field(default_factory=socket.gethostname)
     claim_timeout_s: float = 120.0
-    layout: str = "paper"
-    start: Pose | None = None  # None: the layout's start pose for the id
+    layout: str | None = None  # None: the layout of the dispatcher's mission
+    start: Pose | None = None  # None: the start pose the layout (or mission) gives the id
     logins: Path | None = None  # the forklifts' logins: claim as any, run as vehicle-ID
     id_file: Path | None = None  # the id, once known (a container's health check)
     exit_when_done: bool = False
@@ -194,8 +194,9 @@ class AgentConfig(ProcessConfig):
         p.add_argument("--claim-timeout", type=positive_float, default=cls.claim_timeout_s,
                        metavar="SECONDS",
                        help="--id auto: seconds to keep asking for an id (default 120)")
-        p.add_argument("--layout", default=cls.layout, type=layout_arg,
-                       help="layout name or TOML file (default paper)")
+        p.add_argument("--layout", type=layout_arg,
+                       help="layout name or TOML file (default: the one the dispatcher's "
+                       "mission runs on, which it says on dispatch/mission)")
         p.add_argument("--start", type=pose, metavar="POSE",
                        help="start pose 'col,row,H' (default: the layout's start pose for --id)")
         p.add_argument("--logins", type=Path, metavar="FILE",
@@ -219,7 +220,7 @@ class AgentConfig(ProcessConfig):
                 "--id", "auto" if claiming else str(self.vehicle),
                 *(_flag("--claim-as", self.claim_as, socket.gethostname()) if claiming else []),
                 *_flag("--claim-timeout", self.claim_timeout_s, AgentConfig.claim_timeout_s),
-                "--layout", self.layout, *_flag("--start", self.start),
+                *_flag("--layout", self.layout), *_flag("--start", self.start),
                 *_flag("--id-file", self.id_file),
                 *_flag("--exit-when-done", self.exit_when_done, False)]
 

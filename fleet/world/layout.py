@@ -8,6 +8,7 @@ pose graph and lives in `fleet.world.reachability`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from collections.abc import Iterable, Iterator
@@ -383,7 +384,7 @@ class _Builder:
                         tuple(clusters), tuple(stacks), tuple(stations), tuple(obstacles),
                         tuple(passages), vehicle, tuple(starts), "")
         drawing = self.drawing(data.get("drawing"), layout)
-        return Layout(**{**layout.__dict__, "drawing": drawing})
+        return dataclasses.replace(layout, drawing=drawing)
 
     def tables(self, key: str) -> list[dict]:
         value = self.data.get(key, [])
