@@ -126,26 +126,26 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
         return RouterConfig((f"tcp/0.0.0.0:{ROUTER_PORT}",), exit_when_idle_s=5.0, **secure)
     if service == "vehicle":  # logged in as any forklift, then as the one it claimed
         logins = Path(SECRETS / "fleet_vehicle_logins") if config.secure else None
-        return AgentConfig(bus(config, ""), None, logins=logins, id_file=Path(VEHICLE_ID_FILE),
+        return AgentConfig(_bus(config, ""), None, logins=logins, id_file=Path(VEHICLE_ID_FILE),
                            exit_when_done=True)
     if service == "reservation":
-        return ReservationConfig(bus(config, service), Path(JOURNAL), exit_when_done=True)
+        return ReservationConfig(_bus(config, service), Path(JOURNAL), exit_when_done=True)
     if service == "recorder":
-        return RecorderConfig(bus(config, service), out_dir=Path(RECORDINGS),
+        return RecorderConfig(_bus(config, service), out_dir=Path(RECORDINGS),
                               exit_when_done=True, foxglove=FOXGLOVE_PORT,
                               foxglove_host="0.0.0.0")
     fleet = None if config.vehicles == "auto" else int(config.vehicles)
     mission = Mission(config.layout, MissionKind(config.mission), Strategy(config.strategy),
                       fleet, config.seed)
     return DispatcherConfig(
-        bus(config, service), mission, clock=ClockMode(config.clock), speed=config.speed,
+        _bus(config, service), mission, clock=ClockMode(config.clock), speed=config.speed,
         command=f"docker compose (FLEET_LAYOUT={config.layout} "
         f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})", recorded=True,
         exit_when_done=True, claims=True, gather_s=config.gather_s,
         restart_marker=Path(RESTART_MARKER))
 
 
-def bus(config: DeployConfig, principal: str) -> BusFlags:
+def _bus(config: DeployConfig, principal: str) -> BusFlags:
     """How a service reaches the router: by its host name, logged in as `principal` in a
     secure deployment ("": no login of its own)."""
     if not (config.secure and principal):
