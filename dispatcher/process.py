@@ -61,7 +61,8 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.world.layout import Layout, load_layout
-from reservation.mirror import TableMirror, follow
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
 RECORDED_WAIT_S = 10.0
@@ -213,10 +214,11 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
         try:
             liveness.wait_for_service(config.startup_timeout_s)
             mirror = TableMirror()
-            scope.enter_context(follow(session, keys, mirror, Requester(session, SENDER)))
+            reservations = ReservationClient(session, keys, Requester(session, SENDER))
+            scope.enter_context(reservations.follow(mirror))
             liveness.wait_for(vehicles, config.startup_timeout_s)
             log.info("%d forklifts and the reservation service are up", len(vehicles))
-            executor = RemoteExecutor(session, keys, mirror, liveness, vehicles)
+            executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
                 recovered, tick, wall = pick_up(executor, setup.layout, vehicles,

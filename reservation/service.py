@@ -24,17 +24,18 @@ import zenoh
 from fleet.runtime.bus import Keys, Stream, open_session, received
 from fleet.runtime.lifecycle import process_main, stop_on_signals
 from fleet.runtime.process_configs import ReservationConfig
+from fleet.wire.convert import change_time
 from fleet.wire.protocol import (
-    Change,
     CommitRequest,
     MissionDone,
     ProtocolError,
     ReleaseRequest,
     Reply,
+    WireChange,
     decode,
     encode,
 )
-from reservation.store import ReservationStore, change_time
+from reservation.store import ReservationStore
 
 log = logging.getLogger("fleet.reservation")
 SENDER = "reservation"
@@ -60,7 +61,7 @@ class ReservationService:
                 for change in self.answer(query):
                     publisher.put(change, change_time(change))
 
-    def answer(self, query: zenoh.Query) -> list[Change]:
+    def answer(self, query: zenoh.Query) -> list[WireChange]:
         """Reply to one query; the changes to publish."""
         try:
             payload = query.payload.to_bytes() if query.payload is not None else b""

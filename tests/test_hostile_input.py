@@ -38,7 +38,6 @@ from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire,
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
-    Change,
     CommitRequest,
     ManeuverLabel,
     ManeuverOrRest,
@@ -47,6 +46,7 @@ from fleet.wire.protocol import (
     ProtocolError,
     TaskRequest,
     TaskResult,
+    WireChange,
     body_of,
     build_message,
     decode,
@@ -380,7 +380,7 @@ def test_a_hostile_result_becomes_a_trajectory_or_is_refused_naming_the_field(pl
 
 # -- fleet.world.layout.parse_layout ---------------------------------------------------------------
 
-PAPER = (ROOT / "fleet" / "layouts" / "paper.toml").read_text()
+PAPER = (ROOT / "fleet" / "world" / "layouts" / "paper.toml").read_text()
 PAPER_LINES = PAPER.split("\n")
 ASSIGNMENTS = [k for k, line in enumerate(PAPER_LINES)
                if re.match(r"^\s*[a-z_]+\s*=\s*[^\s\"]|^\s*[a-z_]+\s*=\s*\"[^\"]", line)
@@ -473,8 +473,8 @@ def test_absurd_layout_values_are_refused_naming_them(old, new, reason):
 
 # -- the MLP weights -------------------------------------------------------------------------
 
-WEIGHTS = {name: json.loads((ROOT / "fleet" / "weights" / f"{name}.json").read_text())
-           for name in ("small", "paper")}
+WEIGHTS = {name: json.loads((ROOT / "fleet" / "dispatching" / "weights" / f"{name}.json")
+                            .read_text()) for name in ("small", "paper")}
 JSON_VALUES = (st.none() | st.booleans() | SMALL_INT | st.integers() | st.floats()
                | st.sampled_from([10**400, -10**400, 2**63, -1, 0, 12, 12.0, "12", "",
                                   "x" * 10_000, [], {}, [[]], [1e308] * 3])
@@ -588,7 +588,7 @@ CHANGES = st.lists(st.builds(
     st.none() | st.floats(0, 1e4), st.text(max_size=6)), min_size=1, max_size=8)
 
 
-def journal_of(tmp_path: Path, ops) -> tuple[Path, list[Change], list[int]]:
+def journal_of(tmp_path: Path, ops) -> tuple[Path, list[WireChange], list[int]]:
     """A journal written by Journal.append, its changes and where each record ends."""
     path = tmp_path / "journal.msgpack"
     path.unlink(missing_ok=True)
@@ -596,10 +596,10 @@ def journal_of(tmp_path: Path, ops) -> tuple[Path, list[Change], list[int]]:
     changes, ends = [], []
     for revision, (op, vehicle, cells, t0, dt, release, rid) in enumerate(ops, start=1):
         intervals = [(c, r, t0, t0 + dt) for c, r in cells] if op == "commit" else []
-        change = Change(revision, op, vehicle, intervals,
+        change = WireChange(revision, op, vehicle, intervals,
                         release if op == "commit" else (release or 0.0), rid)
         journal.append(change)
-        changes.append(build_message(Change, body_of(change)))  # as replay builds it
+        changes.append(build_message(WireChange, body_of(change)))  # as replay builds it
         ends.append(path.stat().st_size)
     journal.close()
     return path, changes, ends

@@ -40,7 +40,7 @@ def commit(table: ReservationTable, traj: Trajectory) -> None:
     intervals = [Interval(c, s.t0, s.t1) for s in traj.steps for c in s.cells]
     end = traj.goal.cell
     intervals += [Interval(c, traj.t_end, math.inf) for c in (end, (end[0] + 1, end[1]))]
-    assert table.commit(traj.vehicle, intervals, release_from=traj.t_start) is None
+    assert table.commit(traj.vehicle, intervals, release_from=traj.t_start).ok
 
 
 def test_a_frozen_forklift_keeps_the_cells_of_its_maneuver_in_progress():
@@ -85,7 +85,7 @@ def test_goods_a_cancelled_delivery_reserved_go_with_it():
     commit(table, a)
     b = drive_east(2, 3, range(0, 3), t0=0.0)  # delivering: goods on (3, 0) from t=20
     commit(table, b)
-    assert table.commit(GOODS, [Interval((3, 0), 20.0, math.inf)]) is None
+    assert table.commit(GOODS, [Interval((3, 0), 20.0, math.inf)]).ok
     motions = {1: Motion(1, a.start, (a,)), 2: Motion(2, b.start, (b,))}
     found = cascade(table, 2.5, motions, {1}, {(3, 0): 2}.get)
     assert set(found.freezes) == {1, 2}
@@ -96,7 +96,7 @@ def test_a_zone_closes_around_whoever_stands_in_it_and_stops_who_would_enter():
     a = drive_east(1, 0, range(0, 8), t0=0.0)  # will cross the zone
     commit(table, a)
     parked = Interval((6, 3), 0.0, math.inf)  # forklift 2 parked inside the zone
-    assert table.commit(2, [parked, Interval((7, 3), 0.0, math.inf)]) is None
+    assert table.commit(2, [parked, Interval((7, 3), 0.0, math.inf)]).ok
     motions = {1: Motion(1, a.start, (a,)), 2: Motion(2, Pose((6, 3), 0))}
     zone = frozenset({(5, 0), (6, 0), (6, 3), (5, 3)})
     found = cascade(table, 1.5, motions, set(), lambda cell: None, zone, 50.0)
@@ -112,7 +112,7 @@ def _apply(table, freezes, goods, zone, until) -> None:
     for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
                                                                 until):
         if intervals:
-            assert table.commit(owner, intervals) is None
+            assert table.commit(owner, intervals).ok
         else:
             table.release(owner, release_from, cells)
 
@@ -146,8 +146,9 @@ def test_random_faults_never_make_a_forklift_collide_or_a_stack_repeat(seed):
     except MissionStuck:
         done = engine.record.stacks_done
         assert len({(c, i) for c, i, _ in done}) == len(done)
-        held = replay([("commit" if c.intervals else "release", c.vehicle, c.intervals,
-                        c.release_from, c.release_cells) for c in engine.executor.changes])
+        held = replay([("commit" if c.intervals else "release", c.vehicle,
+                        [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in c.intervals],
+                        c.release_from, c.release_cells) for c in engine.executor.store.changes])
         assert double_bookings(held) == []
         return
     assert len(engine.record.stacks_done) == len(layout.stacks)

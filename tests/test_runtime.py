@@ -48,7 +48,8 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.world.layout import load_layout
-from reservation.mirror import TableMirror, follow
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -299,7 +300,7 @@ def test_conflicting_commits_one_wins_the_other_is_told_why_and_replans(tmp_path
         for v in agents:
             assert wait_alive(session, keys.vehicle_alive(v), 60)
         mirror = TableMirror()
-        changes = follow(session, keys, mirror, Requester(session, "test"))
+        changes = ReservationClient(session, keys, Requester(session, "test")).follow(mirror)
         assert mirror.wait_until(lambda table: table.vehicles() == [1, 2], 30)
         starts = load_layout("small").vehicle_starts
         goals = ["1,4,W", "1,3,W"]  # both forklifts prefer the same one

@@ -37,11 +37,11 @@ from fleet.recording.rundir import claim
 from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, Keys, Stream, free_port, open_session
 from fleet.wire.protocol import (
-    Change,
     MissionInfo,
     RecorderStatus,
     StackDone,
     VehicleState,
+    WireChange,
     decode,
     encode,
 )
@@ -261,7 +261,7 @@ def test_a_window_without_a_recorder_is_not_recorded_rather_than_lost(clean_stre
             own = [o.sim_time for o in states if o.message.vehicle == u.vehicle]
             assert u.sim_from_s < own[0] and own[-1] < u.sim_to_s
     # Table changes sent then: each forklift's reservations are unknown until it commits anew.
-    if any(isinstance(o.message, Change) for o, _, _ in items[start:end]):
+    if any(isinstance(o.message, WireChange) for o, _, _ in items[start:end]):
         assert {("reservations", 1), ("reservations", 2)} <= windows
     # Work: stacks announced then are known from the dispatcher's final record.
     unheard = sorted(f"{o.message.cluster}#{o.message.index}" for o, _, _ in items[start:end]

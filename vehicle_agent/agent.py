@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import queue
 import threading
 import time
@@ -28,14 +29,14 @@ from fleet.mission.seam import Task
 from fleet.mission.spec import ClockMode
 from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import PlannerCache
+from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, asked, received, wait_alive
+from fleet.runtime.bus import Keys, Requester, Stream, asked, received, wait_alive
 from fleet.runtime.lifecycle import Stopped
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
     ClockAck,
     ClockTick,
-    CommitRequest,
     HaltRequest,
     InjectFault,
     Message,
@@ -51,8 +52,8 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.world.layout import Layout
-from reservation.mirror import TableMirror, follow, resync
-from reservation.store import to_wire
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 from vehicle_agent.clock import SimClock, tick_problem
 
 log = logging.getLogger("fleet.agent")
@@ -103,12 +104,13 @@ class Agent:
         self.vehicle = vehicle
         self.layout = layout
         self.sender = f"vehicle-{vehicle}"
-        self.requester = Requester(session, self.sender)
         self.mirror = TableMirror()
         self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)
         self.drive = Drive(vehicle, start, layout)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()
+        self.reservations = ReservationClient(session, keys, Requester(session, self.sender),
+                                              self.clock.now)
         self.inbox: queue.Queue[_Task | _Tick | _Inject | _Done] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
         self.seq = itertools.count(1)  # of task replies (each stream counts its own)
@@ -132,7 +134,7 @@ class Agent:
             raise RuntimeError(f"no reservation service on {self.keys.root} within "
                                f"{service_timeout_s:g} s")
         with ExitStack() as scope:
-            scope.enter_context(follow(self.session, self.keys, self.mirror, self.requester))
+            scope.enter_context(self.reservations.follow(self.mirror))
             if self.mirror.table.reservations(self.vehicle):
                 # The table holds cells of ours: this is a restart. Where the forklift stands
                 # is what the store holds and the dispatcher says; wait for its ResumeRequest.
@@ -180,7 +182,7 @@ class Agent:
                     log.info("vehicle %d: the mission is over", self.vehicle)
                     return
             if self.mirror.needs_resync:
-                resync(self.mirror, self.keys, self.requester)
+                self.reservations.resync(self.mirror)
 
     def stop(self) -> None:
         """Stop now, from a signal handler (it runs in the main thread, which is the worker):
@@ -191,12 +193,13 @@ class Agent:
 
     def _park(self) -> None:
         cells = body_cells_at_rest(self.drive.pose.cell, self.drive.pose.heading)
-        reply = self._commit(f"{self.sender}:park", [(c[0], c[1], 0.0, float("inf"))
-                                                       for c in cells], None)
-        if not reply.ok:
+        written = self.reservations.commit(self.vehicle, [Interval(c, 0.0, math.inf)
+                                                          for c in cells],
+                                           request_id=f"{self.sender}:park")
+        if not written.ok:
             raise RuntimeError(f"cannot park at the start pose {self.drive.pose}: "
-                               f"{reply.reason}")
-        self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+                               f"{written.reason}")
+        self.mirror.wait_for(written.revision, SYNC_TIMEOUT_S)
 
     # -- tasks ---------------------------------------------------------------------------------
     def _answer(self, query: zenoh.Query) -> None:
@@ -234,7 +237,7 @@ class Agent:
                                 f"the task starts at {task.start} but the forklift will "
                                 f"stand at {self.drive.pose}")
         if not self.mirror.wait_for(message.revision, SYNC_TIMEOUT_S):
-            resync(self.mirror, self.keys, self.requester)
+            self.reservations.resync(self.mirror)
         rejections: list[str] = []
         for attempt in range(MAX_COMMIT_ATTEMPTS):
             result = self._plan(task)
@@ -247,21 +250,22 @@ class Agent:
                                     f"t={self.clock.now():.2f}", rejections)
             log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
             start = self.clock.wall_at(result.t_start)
-            reply = self._commit(f"{self.sender}:{message.task_id}:{attempt}",
-                                 to_wire(result.intervals), result.t_start, message.revision,
-                                 None if start is None else start - COMMIT_SLACK_S)
-            if reply.ok:
+            written = self.reservations.commit(
+                self.vehicle, result.intervals, result.t_start, based_on=message.revision,
+                deadline=None if start is None else start - COMMIT_SLACK_S,
+                request_id=f"{self.sender}:{message.task_id}:{attempt}")
+            if written.ok:
                 with self.drive_lock:
                     self.drive.add(result, task.loaded)
                 self.last_kind = message.kind
-                return result_to_wire(message.task_id, self.vehicle, result, reply.revision,
+                return result_to_wire(message.task_id, self.vehicle, result, written.revision,
                                       rejections)
-            rejections.append(reply.reason)
-            if reply.conflict_vehicle is None:  # halted since, or too late: replanning won't do
-                return self._failed(message, FailureReason.REFUSED, reply.reason, rejections)
+            rejections.append(written.reason)
+            if written.conflict_vehicle is None:  # halted since, or too late: no replanning
+                return self._failed(message, FailureReason.REFUSED, written.reason, rejections)
             log.info("task %s: the store refused the commit (%s); replanning",
-                     message.task_id, reply.reason)
-            self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+                     message.task_id, written.reason)
+            self.mirror.wait_for(written.revision, SYNC_TIMEOUT_S)
         return self._failed(message, FailureReason.REFUSED,
                             f"{len(rejections)} commits refused; last: {rejections[-1]}",
                             rejections)
@@ -307,7 +311,7 @@ class Agent:
                 if message.step is not None else None
         except (ValueError, ProtocolError) as exc:
             return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
-        resync(self.mirror, self.keys, self.requester)
+        self.reservations.resync(self.mirror)
         with self.drive_lock:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
         with self.status_lock:  # ticks before t_resume may still list us as down
@@ -358,21 +362,6 @@ class Agent:
         log.warning("task %s failed: %s: %s", message.task_id, reason.value, detail)
         return result_to_wire(message.task_id, self.vehicle, PlanFailure(reason, detail, 0),
                               self.mirror.revision, rejections or [])
-
-    def _commit(self, request_id: str, intervals, release_from: float | None,
-                based_on: int | None = None, deadline: float | None = None) -> Reply:
-        """Commit through the service (the requester retries a lost reply with the same
-        request id, which the store applies once)."""
-        request = CommitRequest(request_id, self.vehicle, intervals, release_from, based_on,
-                                deadline)
-        try:
-            reply = self.requester.request(self.keys.reservation_request(self.sender), request,
-                                           self.clock.now()).message
-        except RequestFailed as exc:
-            raise RuntimeError(f"commit {request_id}: {exc}") from None
-        if not isinstance(reply, Reply):
-            raise RuntimeError(f"commit {request_id}: the service answered a {reply.TYPE}")
-        return reply
 
     # -- the clock and the state stream --------------------------------------------------------
     def _on_clock(self, sample: zenoh.Sample) -> None:

@@ -42,13 +42,13 @@ from fleet.recording.mcapfile import (
 )
 from fleet.recording.mission_record import RESTART_DROP, dispatcher_restarts, record_of
 from fleet.wire.protocol import (
-    Change,
     Halt,
     MissionDone,
     Resume,
     StackDone,
     StackReopened,
     VehicleState,
+    WireChange,
 )
 
 GOODS_OWNER = 0  # the reservation table's owner of stacks with goods (fleet.mission.seam.GOODS)
@@ -459,8 +459,8 @@ def standing_samples(recording: Recording, instants: list[float]) -> list[Sample
 
 def _unique_revisions(recording: Recording) -> list[tuple]:
     """The table's changes in revision order, each once (a retried publish may repeat)."""
-    by_revision: dict[int, Change] = {}
-    for _, m in recording.of(Change):
+    by_revision: dict[int, WireChange] = {}
+    for _, m in recording.of(WireChange):
         by_revision.setdefault(m.revision, m)
     return [(m.op, m.vehicle, m.intervals, m.release_from, m.release_cells)
             for _, m in sorted(by_revision.items())]
@@ -560,10 +560,10 @@ def unverified_windows(recording: Recording, unrecorded: list[Hole],
             found.append(Unverified("states", h.right.envelope.message.vehicle, start,
                                     h.right.envelope.sim_time,
                                     f"{h.missing} states not recorded"))
-        elif cls is Change:
+        elif cls is WireChange:
             table_holes.append((h, min([start, *around])))
     if table_holes:
-        changes = recording.of(Change)
+        changes = recording.of(WireChange)
         info = recording.info
         owners = sorted({m.vehicle for _, m in changes}
                         | set(range(1, (info.vehicles if info else 0) + 1)))

@@ -73,10 +73,10 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if vid == me:
             raise UserError(f"{where}: id {vid} is the planning vehicle itself")
         starts[vid] = resolve(layout, entry["from"], scene.filled)[0]
-        conflict = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading),
-                              0.0)
-        if conflict is not None:
-            who = "the planning vehicle" if conflict.other == me else f"vehicle {conflict.other}"
+        parked = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading), 0.0)
+        if not parked.ok:
+            other = parked.conflict_vehicle
+            who = "the planning vehicle" if other == me else f"vehicle {other}"
             raise UserError(f"{where}: start {starts[vid]} overlaps {who}")
     for i, entry in enumerate(vehicles):
         if "to" not in entry:
@@ -91,9 +91,10 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         scene.others.append(result)
     for i, entry in enumerate(data.get("reservation", [])):
         iv = Interval(entry["cell"], entry["t0"], entry.get("t1", math.inf))
-        conflict = table.commit(entry["vehicle"], [iv])
-        if conflict is not None:
-            raise UserError(f"{path}: reservation[{i}] overlaps vehicle {conflict.other}")
+        written = table.commit(entry["vehicle"], [iv])
+        if not written.ok:
+            raise UserError(f"{path}: reservation[{i}] overlaps vehicle "
+                            f"{written.conflict_vehicle}")
     return scene
 
 

@@ -62,7 +62,8 @@ def serve(config: ProcessConfig) -> int:
 
 def run_table(args: argparse.Namespace) -> int:
     from fleet.runtime.bus import Keys, Requester, open_session, wait_alive
-    from reservation.mirror import TableMirror, follow
+    from reservation.client import ReservationClient
+    from reservation.mirror import TableMirror
 
     keys = Keys(args.run)
     config = BusFlags.from_args(args).config()
@@ -72,8 +73,9 @@ def run_table(args: argparse.Namespace) -> int:
         if not wait_alive(session, keys.reservation_alive, SERVICE_WAIT_S):
             raise UserError(no_service(session, args.run, config.connect))
         mirror = TableMirror()
-        subscriber = follow(session, keys, mirror,
-                            Requester(session, "fleet-table", retry_s=SERVICE_WAIT_S))
+        subscriber = ReservationClient(
+            session, keys, Requester(session, "fleet-table", retry_s=SERVICE_WAIT_S)
+        ).follow(mirror)
         held: dict[int, int] = {}
         for r in mirror.table.reservations():
             held[r.vehicle] = held.get(r.vehicle, 0) + 1

@@ -37,6 +37,7 @@ from fleet.planning.maneuvers import Manner, world_pose
 from fleet.planning.planner import HybridAStar, PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
@@ -92,7 +93,7 @@ def subtask_event(s: Subtask) -> SubtaskEvent:
         s.postponed,
         [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
          for st in s.trajectory.steps],
-        [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in s.trajectory.intervals])
+        intervals_to_wire(s.trajectory.intervals))
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,9 @@ from fleet.mission.record import digest_of, record_to_dict
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.mcapfile import RecordingWriter, mission_info
 from fleet.runtime.bus import Keys
-from fleet.wire.protocol import Change, Message, MissionDone, MissionInfo, Progress, encode
+from fleet.wire.convert import change_time, change_to_wire
+from fleet.wire.protocol import Message, MissionDone, MissionInfo, Progress, WireChange, encode
 from fleet.world.layout import Layout
-from reservation.store import change_time
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
 
 
 def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
-                     events: list[tuple[Message, float]], changes: list[Change],
+                     events: list[tuple[Message, float]], changes: list[WireChange],
                      done: MissionDone, drive_log: dict[int, list[tuple]],
                      keys: Keys | None = None) -> list[Outgoing]:
     """Everything a run of processes would have published, in sim-time order."""
@@ -112,8 +112,8 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
     done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                        wall_s=time.perf_counter() - t0)
     info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)
-    return done, inprocess_stream(info, record, layout, events, engine.executor.changes, done,
-                                  engine.drive_log)
+    changes = [change_to_wire(c) for c in engine.executor.store.changes]
+    return done, inprocess_stream(info, record, layout, events, changes, done, engine.drive_log)
 
 
 def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:

@@ -43,7 +43,6 @@ from fleet.errors import UserError
 from fleet.mission.spec import Mission
 from fleet.recording.rundir import MARKER, run_id_of
 from fleet.wire.protocol import (
-    Change,
     ClockAck,
     ClockTick,
     DecisionFailure,
@@ -60,6 +59,7 @@ from fleet.wire.protocol import (
     SubtaskEvent,
     VehicleFault,
     VehicleState,
+    WireChange,
     ZoneClosed,
     decode,
 )
@@ -82,7 +82,7 @@ NS = 1_000_000_000
 KEY_TYPES: tuple[tuple[re.Pattern, type[WireMessage], str], ...] = tuple(
     (re.compile(rf"fleet/[^/]+/{pattern}"), cls, sender) for pattern, cls, sender in (
         (r"vehicle/(\d+)/state", VehicleState, "vehicle-{0}"),
-        (r"reservation/change", Change, "reservation"),
+        (r"reservation/change", WireChange, "reservation"),
         (r"clock", ClockTick, "clock"),
         (r"clock/ack/(\d+)", ClockAck, "vehicle-{0}"),
         (r"dispatch/progress", Progress, "dispatcher"),

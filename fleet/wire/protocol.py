@@ -109,8 +109,9 @@ class SnapshotRequest(Message):
 
 
 @dataclass(frozen=True)
-class Change(Message):
-    """One accepted change of the table, published and journaled."""
+class WireChange(Message):
+    """One accepted change of the table, published and journaled (the table's own `Change`
+    in fleet/planning/reservations.py, on the wire; fleet/wire/convert.py converts)."""
 
     TYPE: ClassVar[str] = "reservation.change"
     revision: int
@@ -123,11 +124,13 @@ class Change(Message):
 
 
 @dataclass(frozen=True)
-class Snapshot(Message):
+class WireSnapshot(Message):
+    """The table, or the changes since a revision (the reply to a `SnapshotRequest`)."""
+
     TYPE: ClassVar[str] = "reservation.snapshot"
     revision: int
     reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
-    changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
+    changes: list[dict] = field(default_factory=list)  # encoded WireChange bodies, for diffs
     diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
 
 
@@ -447,7 +450,7 @@ class Envelope:
 
 TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
-                              SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
+                              SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
                               SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
                               HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
