@@ -20,7 +20,7 @@ from pathlib import Path
 from fleet.analysis.analyze import analyze
 from fleet.mission.faults import DETECT_TIMEOUT_S, VEHICLE_KINDS, builtin_scenarios, load_scenario
 from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import Recording, read_recording
+from fleet.recording.reader import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume
 

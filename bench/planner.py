@@ -24,7 +24,8 @@ from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose, Trajectory
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 
 
 @dataclass(frozen=True)

@@ -37,11 +37,12 @@ from fleet.mission.freeze import (
     scheduled_at,
 )
 from fleet.mission.spec import ClockMode
-from fleet.runtime.bus import RELIABLE, Keys, received
+from fleet.runtime.bus import RELIABLE, received
 from fleet.wire.protocol import ClockAck, ClockTick, VehicleFault, encode
+from fleet.wire.topics import CLOCK, Keys
 
 log = logging.getLogger("fleet.dispatcher")
-SENDER = "clock"
+SENDER = CLOCK
 ACK_TIMEOUT_S = 60.0
 INJECTOR = 0  # the fault injector acknowledges ticks as "vehicle" 0
 RECORDER_WAIT_S = 60.0

@@ -30,13 +30,11 @@ from dispatcher.remote import SENDER, RemoteExecutor
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
-from fleet.mission.record import digest_of, record_to_dict
-from fleet.mission.seam import ZONE
+from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import ClockMode, Mission
-from fleet.recording.mcapfile import mission_info
+from fleet.recording.writer import mission_info
 from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
-    Keys,
     Requester,
     RequestFailed,
     Stream,
@@ -46,21 +44,17 @@ from fleet.runtime.bus import (
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
 from fleet.runtime.process_configs import DispatcherConfig
 from fleet.wire.protocol import (
-    DecisionFailure,
-    Halt,
+    ZONE,
     Message,
     MissionDone,
     MissionInfo,
     Progress,
     ProtocolError,
-    Resume,
-    StackDone,
-    StackReopened,
-    SubtaskEvent,
-    ZoneClosed,
     encode,
 )
-from fleet.world.layout import Layout, load_layout
+from fleet.wire.topics import DISPATCHER, Keys, published_by
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
@@ -118,24 +112,24 @@ def serve(config: DispatcherConfig) -> int:
             write_roster(marker, roster or {})
         setup = MissionSetup(config, mission, layout, options, recover)
         scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
-        info_pub = _mission_info_stream(scope, session, keys, mission_info(
-            mission, layout, len(setup.vehicles), config.clock.value, config.speed,
-            config.command))
-        publish = _event_streams(scope, session, keys)
-        done_pub = scope.enter_context(Stream(session, keys.dispatch_done, SENDER,
-                                              reliable=True))
+        info = mission_info(mission, layout, len(setup.vehicles), config.clock.value,
+                            config.speed, config.command)
+        streams = _streams(scope, session, keys)
+        scope.enter_context(session.declare_queryable(  # for a recorder that joins late
+            keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0))))
         liveness = scope.enter_context(closing(Liveness(session, keys)))
         recorded = threading.Event()
         scope.enter_context(follow_recorded(session, keys, recorded, log))
         try:
             in_mission.set()
-            info_pub()
-            done = dispatch_mission(session, keys, setup, liveness, publish)
+            streams[MissionInfo].put(info, 0.0)
+            done = dispatch_mission(session, keys, setup, liveness, lambda message, t:
+                                    streams[type(message)].put(message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
             in_mission.clear()
-        done_pub.put(done, done.record.get("end_time_s", 0.0))
+        streams[MissionDone].put(done, done.record.get("end_time_s", 0.0))
         log.info("mission %s; %s", "done" if done.ok else "failed", done.error or done.digest)
         if not config.exit_when_done:
             stop.wait()
@@ -162,29 +156,12 @@ def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
     return dataclasses.replace(mission, vehicles=len(ids)), claims.roster.ids
 
 
-def _mission_info_stream(scope: ExitStack, session: zenoh.Session, keys: Keys,
-                         info: MissionInfo) -> Callable[[], None]:
-    """Say what the run is, to a recorder that listens now (call the result) and to one that
-    joins late (it asks)."""
-    stream = scope.enter_context(Stream(session, keys.dispatch_mission, SENDER, reliable=True))
-    scope.enter_context(session.declare_queryable(
-        keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0))))
-    return lambda: stream.put(info, 0.0)
-
-
-def _event_streams(scope: ExitStack, session: zenoh.Session, keys: Keys) -> Publish:
-    """Where the mission's events go, each on its key. Every event must reach the recorder:
-    the publishers wait rather than drop."""
-    streams = {kind: scope.enter_context(Stream(session, key, SENDER, reliable=True))
-               for kind, key in ((Progress.TYPE, keys.dispatch_progress),
-                                 (SubtaskEvent.TYPE, keys.dispatch_subtask),
-                                 (StackDone.TYPE, keys.dispatch_stack),
-                                 (DecisionFailure.TYPE, keys.dispatch_failure),
-                                 (Halt.TYPE, keys.dispatch_halt),
-                                 (Resume.TYPE, keys.dispatch_resume),
-                                 (StackReopened.TYPE, keys.dispatch_reopen),
-                                 (ZoneClosed.TYPE, keys.dispatch_zone))}
-    return lambda message, t: streams[message.TYPE].put(message, t)
+def _streams(scope: ExitStack, session: zenoh.Session, keys: Keys) -> dict[type[Message], Stream]:
+    """Each of the dispatcher's topics, by the message it carries (every event must reach
+    the recorder: its publishers wait rather than drop)."""
+    return {cls: scope.enter_context(Stream(session, topic.key(keys.run), topic.sender,
+                                            topic.reliable))
+            for cls, topic in published_by(DISPATCHER).items()}
 
 
 def read_roster(path: Path) -> dict[str, int]:
@@ -242,7 +219,7 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             options = dataclasses.replace(setup.options, progress=progress, events=publish)
             record = Engine(setup.mission, options, setup.layout, executor, clock,
                             recovered).run()
-            as_dict = record_to_dict(record)
+            as_dict = MissionSummary.of_record(record).to_dict()
             return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                                wall_s=time.perf_counter() - t0, rejections=executor.rejections,
                                detections=clock.detected)

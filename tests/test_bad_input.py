@@ -29,7 +29,7 @@ from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import STRATEGIES, HelpFormatter, shows_default
 from fleet.runtime.lifecycle import EX_SOFTWARE
 from fleet.runtime.local_run import ROUTER_TIMEOUT_MS, RunSpec, run_processes
-from fleet.world.layout import layout_source
+from fleet.world.layout_file import layout_source
 from fleet.world.reachability import NO_STARTS
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -31,7 +31,7 @@ from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, Stream, asked, received, wait_alive
+from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
 from fleet.runtime.lifecycle import Stopped
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
@@ -51,6 +51,7 @@ from fleet.wire.protocol import (
     VehicleStatus,
     encode,
 )
+from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
@@ -103,7 +104,7 @@ class Agent:
         self.keys = keys
         self.vehicle = vehicle
         self.layout = layout
-        self.sender = f"vehicle-{vehicle}"
+        self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
         self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)
         self.drive = Drive(vehicle, start, layout)

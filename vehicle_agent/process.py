@@ -12,18 +12,14 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.planning.trajectory import Pose
-from fleet.runtime.access import DISPATCHER, read_dictionary, vehicle_user
-from fleet.runtime.bus import Keys, Requester, RequestFailed, open_session
+from fleet.runtime.access import read_dictionary
+from fleet.runtime.bus import Requester, RequestFailed, open_session
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
 from fleet.runtime.process_configs import AgentConfig
-from fleet.wire.protocol import (
-    ClaimReply,
-    MissionInfo,
-    ProtocolError,
-    VehicleClaim,
-    decode,
-)
-from fleet.world.layout import Layout, load_layout, parse_layout
+from fleet.wire.protocol import ClaimReply, MissionInfo, ProtocolError, VehicleClaim, decode
+from fleet.wire.topics import Keys, genuine, vehicle_sender
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout, parse_layout
 from vehicle_agent.agent import Agent
 
 log = logging.getLogger("fleet.agent")
@@ -50,7 +46,7 @@ def serve(config: AgentConfig) -> int:
         with open_session(claimant) as claiming:
             vehicle = claim(claiming, keys, config.claim_as, config.claim_timeout_s)
     if logins:
-        user = vehicle_user(vehicle)
+        user = vehicle_sender(vehicle)
         if user not in logins:
             raise UserError(f"--logins {config.logins} has no login for {user}")
         bus = dataclasses.replace(bus, user=user, password=logins[user])
@@ -111,7 +107,8 @@ def _mission_info(reply: zenoh.Reply) -> MissionInfo | None:
     except ProtocolError as exc:
         log.warning("rejected a reply on %s: %s", reply.ok.key_expr, exc)
         return None
-    if not isinstance(envelope.message, MissionInfo) or envelope.sender != DISPATCHER:
+    if not (isinstance(envelope.message, MissionInfo) and
+            genuine(str(reply.ok.key_expr), envelope)):
         log.warning("ignored a %s from %r on %s: only the dispatcher says what the mission "
                     "is", envelope.message.TYPE, envelope.sender, reply.ok.key_expr)
         return None

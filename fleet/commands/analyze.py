@@ -32,7 +32,8 @@ def print_analysis(recording: Path, as_json: bool = False) -> int:
     """Print what the recording says (as one JSON object); 1 when a verdict fails."""
     from fleet.analysis.analyze import analyze
     from fleet.commands.runs import write_summary
-    from fleet.recording.mcapfile import RUN_FILE, read_recording, recording_file
+    from fleet.recording.reader import read_recording, recording_file
+    from fleet.recording.segments import RUN_FILE
 
     first = recording_file(recording)  # refuses what is no recording, saying why
     report = analyze(read_recording(recording))

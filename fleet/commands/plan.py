@@ -22,7 +22,8 @@ from fleet.runtime.argtypes import (
     sim_seconds,
     text_file,
 )
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
 
 

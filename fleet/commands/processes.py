@@ -61,7 +61,8 @@ def serve(config: ProcessConfig) -> int:
 
 
 def run_table(args: argparse.Namespace) -> int:
-    from fleet.runtime.bus import Keys, Requester, open_session, wait_alive
+    from fleet.runtime.bus import Requester, open_session, wait_alive
+    from fleet.wire.topics import Keys
     from reservation.client import ReservationClient
     from reservation.mirror import TableMirror
 
@@ -101,7 +102,7 @@ def run_table(args: argparse.Namespace) -> int:
 def no_service(session, run: str, endpoints: tuple[str, ...]) -> str:
     """Why `fleet table` has nothing to show: no service for that run, and which runs have
     one on this bus (a mistyped --run is the usual cause)."""
-    from fleet.runtime.bus import Keys
+    from fleet.wire.topics import Keys
 
     replies = session.liveliness().get(Keys("*").reservation_alive, timeout=1.0)
     runs = sorted({str(r.ok.key_expr).split("/")[1] for r in replies if r.ok is not None})

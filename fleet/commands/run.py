@@ -20,18 +20,19 @@ from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.args import add_mission_args, engine_options, mission_from_args
 from fleet.runtime.argtypes import port, port_problem, positive_float, scenario_arg, writable_dir
 from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import strategies_epilog
 from fleet.runtime.local_run import RunSpec, run_processes
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
 
 if TYPE_CHECKING:
-    from fleet.analysis.analyze import Report
+    from fleet.analysis.report import Report
 
 
 def register(sub: argparse._SubParsersAction) -> None:

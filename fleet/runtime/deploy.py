@@ -13,14 +13,7 @@ from pathlib import Path, PurePosixPath
 
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
-from fleet.runtime.access import (
-    DISPATCHER,
-    OPERATOR,
-    RECORDER,
-    RESERVATION,
-    Credentials,
-    dictionary_text,
-)
+from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
 from fleet.runtime.args import BusFlags
 from fleet.runtime.process_configs import (
     AgentConfig,
@@ -30,6 +23,7 @@ from fleet.runtime.process_configs import (
     ReservationConfig,
     RouterConfig,
 )
+from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
 
 SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
 SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
@@ -165,7 +159,7 @@ def secret_files(credentials: Credentials) -> dict[str, str]:
     files = {"users": dictionary_text(credentials.logins.values()),
              "vehicle_logins": dictionary_text(
                  login for name, login in credentials.logins.items()
-                 if name.startswith("vehicle-"))}
+                 if vehicle_of(name) is not None)}
     for principal in SERVICES_WITH_LOGINS:
         files[f"{principal}_password"] = credentials[principal].password + "\n"
     return files
