@@ -20,11 +20,10 @@ from dataclasses import dataclass
 
 from bench.stats import percentile
 from fleet.errors import UserError
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose, Trajectory
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 
 
 @dataclass(frozen=True)
@@ -70,7 +69,7 @@ def draw_scene(layout: Layout, rng: random.Random) -> tuple[set, list[Task]] | N
             start, goals = station.dock, tuple(unload)
         else:
             start, goals = unload[0], (station.dock,)
-        cells = set(body_cells_at_rest(start.cell, start.heading))
+        cells = set(layout.vehicle_kind.body_cells_at_rest(start))
         if cells & taken:
             return None
         taken |= cells
@@ -98,12 +97,12 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         unusable = 0
         filled, tasks = scene
         t0 = time.perf_counter()
-        planner = HybridAStar(layout.grid_map(filled), layout.vehicle.dims)
+        planner = layout.vehicle_kind.planner(layout.grid_map(filled))
         planner.component(tasks[0].start)
         setup_ms.append((time.perf_counter() - t0) * 1000)
         table = ReservationTable()
         for task in tasks:
-            table.park(task.vehicle, body_cells_at_rest(task.start.cell, task.start.heading), 0)
+            table.park(task.vehicle, layout.vehicle_kind.body_cells_at_rest(task.start), 0)
         for task in tasks[:3]:
             other = planner.plan(task.vehicle, task.start, task.t_start, task.goals, table)
             if isinstance(other, Trajectory):

@@ -14,41 +14,43 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.mission.freeze import Freeze
-from fleet.mission.seam import GOODS, Task, VehicleLost, freeze_changes
+from fleet.mission.seam import Task, VehicleLost, freeze_changes
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, RequestFailed
+from fleet.runtime.bus import Requester, RequestFailed
+from fleet.vehicles.kind import VehicleKind
 from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
 from fleet.wire.protocol import (
-    CommitRequest,
+    GOODS,
     HaltRequest,
     Message,
-    ReleaseRequest,
     Reply,
     ResumeRequest,
     StatusRequest,
     TaskResult,
     VehicleStatus,
 )
+from fleet.wire.topics import DISPATCHER, Keys
+from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
-from reservation.store import to_wire
 
 log = logging.getLogger("fleet.dispatcher")
-SENDER = "dispatcher"
+SENDER = DISPATCHER
 TASK_TIMEOUT_S = 120.0  # a search is capped far below this; the agent may first resync
 SYNC_TIMEOUT_S = 30.0
 
 
 class RemoteExecutor:
-    def __init__(self, session: zenoh.Session, keys: Keys, mirror: TableMirror,
-                 liveness: Liveness, vehicles: list[int]) -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys, reservations: ReservationClient,
+                 mirror: TableMirror, liveness: Liveness, vehicles: list[int],
+                 vehicle_kind: VehicleKind) -> None:
         self.keys = keys
+        self.vehicle_kind = vehicle_kind
+        self.reservations = reservations  # follows into `mirror`
         self.mirror = mirror
         self.liveness = liveness
         self.vehicles = vehicles
-        self.store_requester = Requester(session, SENDER)
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.task_requester = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
         self.rejections: list[str] = []  # commits the store refused before an agent replanned
@@ -60,7 +62,7 @@ class RemoteExecutor:
         return self.mirror.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        cells = set(body_cells_at_rest(pose.cell, pose.heading))
+        cells = set(self.vehicle_kind.body_cells_at_rest(pose))
 
         def parked(table: ReservationTable) -> bool:
             return cells <= {r.cell for r in table.reservations(vehicle) if r.t1 == math.inf}
@@ -87,12 +89,9 @@ class RemoteExecutor:
         return result
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
-        request = CommitRequest(self.store_requester.next_id(), GOODS, to_wire(intervals))
-        reply = self.store_requester.request(self.keys.reservation_request(SENDER), request).message
-        if not isinstance(reply, Reply):
-            raise ParticipantLost(f"the reservation service answered a {reply.TYPE}")
-        if reply.ok:
-            self._sync(reply.revision)
+        written = self.reservations.commit(GOODS, intervals)
+        if written.ok:
+            self._sync(written.revision)
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
                zone_until: float, moving: list[int], standing: list[int]) -> None:
@@ -100,15 +99,12 @@ class RemoteExecutor:
         valid on its own), then tell the forklifts that can move to stop."""
         for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
                                                                     zone_until):
-            request_id = self.store_requester.next_id()
-            request: Message = CommitRequest(request_id, owner, to_wire(intervals)) \
-                if intervals else ReleaseRequest(request_id, owner, release_from, cells or [])
-            reply = self.store_requester.request(self.keys.reservation_request(SENDER), request,
-                                                 t).message
-            if not isinstance(reply, Reply) or not reply.ok:
+            written = self.reservations.commit(owner, intervals) if intervals else \
+                self.reservations.release(owner, release_from, cells)
+            if not written.ok:
                 raise ParticipantLost(f"the reservation service refused a freeze at t={t}: "
-                                      f"{getattr(reply, 'reason', reply)}")
-            self._sync(reply.revision)
+                                      f"{written.reason}")
+            self._sync(written.revision)
         for vehicle in moving:
             self._tell(vehicle, HaltRequest(self.task_requester.next_id(), vehicle, t), t)
         for vehicle in standing:  # down already: if it cannot hear, it stands all the same

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import msgpack
 
-from fleet.wire.protocol import Change, ProtocolError, body_of, build_message
+from fleet.wire.protocol import ProtocolError, WireChange, body_of, build_message
 
 
 class JournalError(ValueError):
@@ -23,7 +23,7 @@ class JournalError(ValueError):
 
 @dataclass(frozen=True)
 class Replayed:
-    changes: list[Change]
+    changes: list[WireChange]
     torn_bytes: int  # bytes of a torn last record that were cut off (0: none)
 
 
@@ -39,7 +39,7 @@ class Journal:
         data = self.path.read_bytes()
         unpacker = msgpack.Unpacker(raw=False, strict_map_key=True)
         unpacker.feed(data)
-        changes: list[Change] = []
+        changes: list[WireChange] = []
         good = 0
         try:
             for raw in unpacker:
@@ -47,11 +47,11 @@ class Journal:
                     raise JournalError(f"{self.path}: record {len(changes) + 1} at byte "
                                        f"{good} is not a map")
                 try:
-                    change = build_message(Change, raw)
+                    change = build_message(WireChange, raw)
                 except ProtocolError as exc:
                     raise JournalError(f"{self.path}: record {len(changes) + 1} at byte "
                                        f"{good}: {exc}") from None
-                assert isinstance(change, Change)
+                assert isinstance(change, WireChange)
                 changes.append(change)
                 good = unpacker.tell()
         except JournalError:
@@ -70,7 +70,7 @@ class Journal:
                 f.truncate(good)
         return Replayed(changes, torn)
 
-    def append(self, change: Change) -> None:
+    def append(self, change: WireChange) -> None:
         """Write the record and hand it to the OS before the change is answered (a killed
         process loses nothing; a power cut may lose the last records: no fsync, for speed)."""
         if self._file is None:
@@ -99,7 +99,7 @@ def _next_record(data: bytes, start: int) -> int | None:
         try:
             raw = unpacker.unpack()
             if isinstance(raw, dict):
-                build_message(Change, raw)
+                build_message(WireChange, raw)
                 return at
         except Exception:  # msgpack raises several types; not a record here: probe on
             continue

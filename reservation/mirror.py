@@ -1,5 +1,6 @@
 """A local copy of the reservation table that follows the service: agents and the dispatcher
-plan against it (it is a `ReservationView`) and commit through the service.
+plan against it (it is a `ReservationView`) and commit through the service
+(reservation/client.py, which also keeps the copy following).
 
 It starts from a snapshot and applies published changes in revision order. Changes that
 arrive before the snapshot, or out of order, wait in a buffer; a change older than the copy
@@ -9,21 +10,15 @@ a diff (`since_revision`) or a new snapshot.
 
 from __future__ import annotations
 
-import logging
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-import zenoh
-
-from fleet.planning.reservations import Reservation, ReservationTable
-from fleet.planning.reservations import Snapshot as TableSnapshot
-from fleet.runtime.bus import Keys, Requester, received
-from fleet.wire.protocol import Change, ProtocolError, Snapshot, SnapshotRequest, build_message
-from reservation.store import table_change
+from fleet.planning.reservations import Reservation, ReservationTable, Snapshot
+from fleet.wire.convert import change_from_wire
+from fleet.wire.protocol import WireChange, WireSnapshot, build_message
 
 MAX_BUFFERED = 10_000
-log = logging.getLogger("fleet.mirror")
 
 
 class TableMirror:
@@ -34,7 +29,7 @@ class TableMirror:
         self.table = ReservationTable()
         self.synced = False
         self.needs_resync = False
-        self._pending: dict[int, Change] = {}
+        self._pending: dict[int, WireChange] = {}
         self._changed = threading.Condition()
         self._frozen = 0
 
@@ -50,22 +45,22 @@ class TableMirror:
         return self.table.revision
 
     # -- following -----------------------------------------------------------------------------
-    def load(self, snapshot: Snapshot) -> None:
+    def load(self, snapshot: WireSnapshot) -> None:
         """A whole snapshot, or a diff (`changes`) on top of the current copy."""
         with self._changed:
             if snapshot.diff:  # an empty diff is "nothing new", not an empty table
                 for body in snapshot.changes:
-                    change = build_message(Change, body)
-                    assert isinstance(change, Change)
+                    change = build_message(WireChange, body)
+                    assert isinstance(change, WireChange)
                     self._pending.setdefault(change.revision, change)
             else:
-                self.table.load(TableSnapshot(
+                self.table.load(Snapshot(
                     snapshot.revision, tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1
                                              in snapshot.reservations)))
             self.synced = True
             self._drain()
 
-    def on_change(self, change: Change) -> None:
+    def on_change(self, change: WireChange) -> None:
         with self._changed:
             if change.revision <= self.table.revision and self.synced:
                 return  # already in the copy
@@ -96,7 +91,7 @@ class TableMirror:
         for old in [r for r in self._pending if r <= self.table.revision]:
             del self._pending[old]
         while (change := self._pending.pop(self.table.revision + 1, None)) is not None:
-            self.table.apply(table_change(change))
+            self.table.apply(change_from_wire(change))
         self.needs_resync = bool(self._pending)  # a gap the buffer cannot fill yet
         self._changed.notify_all()
 
@@ -109,27 +104,3 @@ class TableMirror:
         with self._changed:
             return self._changed.wait_for(lambda: predicate(self.table), timeout)
 
-
-def follow(session: zenoh.Session, keys: Keys, mirror: TableMirror,
-           requester: Requester) -> zenoh.Subscriber:
-    """Subscribe to the service's changes, then load a snapshot (changes that arrive in between
-    wait in the mirror's buffer). Returns the subscriber; undeclare it to stop following."""
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        message = received(sample, Change, log)
-        if message is not None:
-            mirror.on_change(message)
-
-    subscriber = session.declare_subscriber(keys.reservation_change, on_sample)
-    resync(mirror, keys, requester)
-    return subscriber
-
-
-def resync(mirror: TableMirror, keys: Keys, requester: Requester) -> None:
-    """Catch up: a diff when the copy is synced, else the whole table."""
-    since = mirror.revision if mirror.synced else -1
-    reply = requester.request(keys.reservation_request(requester.sender),
-                              SnapshotRequest(since)).message
-    if not isinstance(reply, Snapshot):
-        raise ProtocolError(f"expected a snapshot, got {reply.TYPE}")
-    mirror.load(reply)

@@ -7,17 +7,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.planning.reservations import Change as TableChange
-from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.reservations import Change, ReservationTable
+from fleet.wire.convert import change_from_wire, intervals_from_wire
 from fleet.wire.protocol import (
-    Change,
     CommitRequest,
     Message,
     ReleaseRequest,
     Reply,
-    Snapshot,
     SnapshotRequest,
-    WireInterval,
+    WireChange,
+    WireSnapshot,
     body_of,
 )
 from reservation.journal import Journal
@@ -25,34 +24,10 @@ from reservation.journal import Journal
 REMEMBERED_REQUESTS = 100_000  # replies kept for retries (the oldest are forgotten first)
 
 
-def to_intervals(wire: list[WireInterval]) -> tuple[Interval, ...]:
-    return tuple(Interval((c, r), t0, t1) for c, r, t0, t1 in wire)
-
-
-def to_wire(intervals) -> list[WireInterval]:
-    return [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals]
-
-
-def table_change(change: Change) -> TableChange:
-    """A published change as the table applies it."""
-    cells = None if change.release_cells is None else \
-        frozenset((c, r) for c, r in change.release_cells)
-    return TableChange(change.revision, change.vehicle, change.release_from,
-                       to_intervals(change.intervals), cells)
-
-
-def change_time(change: Change) -> float:
-    """The sim time a change is about (its publish time in a recording): where it releases
-    from, else where its first interval starts."""
-    if change.release_from is not None:
-        return change.release_from
-    return min((iv[2] for iv in change.intervals), default=0.0)
-
-
 @dataclass
 class Outcome:
     reply: Message
-    published: list[Change] = field(default_factory=list)
+    published: list[WireChange] = field(default_factory=list)
 
 
 class ReservationStore:
@@ -61,13 +36,13 @@ class ReservationStore:
         self.replies: dict[str, Reply] = {}
         self.journal = Journal(journal_path) if journal_path else None
         self.torn_bytes = 0
-        self.log: list[Change] = []
+        self.log: list[WireChange] = []
         self.halted_at: dict[int, int] = {}  # vehicle -> revision of its last release
         if self.journal is not None:
             replayed = self.journal.replay()
             self.torn_bytes = replayed.torn_bytes
             for change in replayed.changes:
-                self._apply(change)
+                self._apply(change, change_from_wire(change))
 
     @property
     def revision(self) -> int:
@@ -83,10 +58,13 @@ class ReservationStore:
         if isinstance(message, CommitRequest):
             return self._commit(message, wall)
         if isinstance(message, ReleaseRequest):
-            change = Change(self.revision + 1, "release", message.vehicle, [],
-                            message.from_t, message.request_id,
-                            [tuple(c) for c in message.cells] or None)
-            return self._accept(change)
+            cells = [tuple(c) for c in message.cells] or None
+            revision = self.revision + 1
+            return self._accept(
+                WireChange(revision, "release", message.vehicle, [], message.from_t,
+                           message.request_id, cells),
+                Change(revision, message.vehicle, message.from_t, (),
+                       None if cells is None else frozenset(cells)))
         if isinstance(message, SnapshotRequest):
             return Outcome(self.snapshot(message.since_revision))
         return Outcome(Reply("", False, self.revision,
@@ -94,7 +72,7 @@ class ReservationStore:
 
     def _commit(self, request: CommitRequest, wall: float) -> Outcome:
         try:
-            intervals = to_intervals(request.intervals)
+            intervals = intervals_from_wire(request.intervals)  # the one validation
         except ValueError as exc:
             return Outcome(Reply(request.request_id, False, self.revision, reason=str(exc)))
         halted = self.halted_at.get(request.vehicle, -1)
@@ -113,23 +91,27 @@ class ReservationStore:
         conflict = self.table.first_conflict(request.vehicle, intervals)
         if conflict is not None:
             reply = Reply(request.request_id, False, self.revision, conflict.other,
-                          list(conflict.cell), f"cell {conflict.cell} is held by vehicle "
-                          f"{conflict.other} over [{conflict.t0}, {conflict.t1})")
+                          list(conflict.cell), conflict.reason)
             self._remember(reply)
             return Outcome(reply)
-        change = Change(self.revision + 1, "commit", request.vehicle,
-                        to_wire(intervals), request.release_from, request.request_id)
-        return self._accept(change)
+        # Published as requested (decoding made the wire form canonical); the table takes the
+        # intervals just validated.
+        revision = self.revision + 1
+        return self._accept(
+            WireChange(revision, "commit", request.vehicle, request.intervals,
+                       request.release_from, request.request_id),
+            Change(revision, request.vehicle, request.release_from, intervals))
 
-    def _accept(self, change: Change) -> Outcome:
+    def _accept(self, change: WireChange, as_table: Change) -> Outcome:
         if self.journal is not None:
             self.journal.append(change)  # on disk before anyone hears of it
-        self._apply(change)
+        self._apply(change, as_table)
         return Outcome(self.replies[change.request_id] if change.request_id else
                        Reply("", True, self.revision), [change])
 
-    def _apply(self, change: Change) -> None:
-        self.table.apply(table_change(change))
+    def _apply(self, change: WireChange, as_table: Change) -> None:
+        """`change` and `as_table` are one change, in its wire and its table form."""
+        self.table.apply(as_table)
         self.log.append(change)
         if change.op == "release":  # only the dispatcher releases: a freeze (docs/faults.md)
             self.halted_at[change.vehicle] = change.revision
@@ -141,13 +123,13 @@ class ReservationStore:
         if len(self.replies) > REMEMBERED_REQUESTS:
             del self.replies[next(iter(self.replies))]
 
-    def snapshot(self, since: int = -1) -> Snapshot:
+    def snapshot(self, since: int = -1) -> WireSnapshot:
         if 0 <= since <= self.revision:  # the log holds every change since revision 0
-            return Snapshot(self.revision, [], [body_of(c) for c in self.log[since:]],
-                            diff=True)
+            return WireSnapshot(self.revision, [], [body_of(c) for c in self.log[since:]],
+                                diff=True)
         rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1)
                 for r in self.table.reservations()]
-        return Snapshot(self.revision, rows)
+        return WireSnapshot(self.revision, rows)
 
     def close(self) -> None:
         if self.journal is not None:

@@ -18,15 +18,16 @@ from hypothesis import strategies as st
 
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
-from fleet.commands.run import engine_options
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
-from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
-from fleet.runtime.bus import Keys
-from fleet.wire.protocol import Change, StackDone, VehicleState, encode
-from fleet.world.layout import load_layout
+from fleet.recording.reader import RecordingError, read_recording
+from fleet.recording.writer import RecordingWriter
+from fleet.runtime.args import engine_options
+from fleet.wire.protocol import StackDone, VehicleState, WireChange, encode
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 
@@ -165,7 +166,7 @@ def test_a_sequence_gap_is_a_lost_message(clean_stream, tmp_path, capsys):
 def test_forged_and_absurd_messages_neither_fool_nor_break_the_analysis(clean_stream,
                                                                         tmp_path):
     keys = Keys()
-    first_change = next(o for o in clean_stream if isinstance(o.message, Change))
+    first_change = next(o for o in clean_stream if isinstance(o.message, WireChange))
     forged = [
         # Someone else claiming the table released forklift 1 and a stack was done twice.
         Outgoing(keys.reservation_change, dataclasses.replace(

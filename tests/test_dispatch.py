@@ -7,7 +7,7 @@ from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 # A 12 x 5 floor split by a wall at column 6 except for a one-cell gap at row 2.
 WALL = frozenset((6, r) for r in range(5) if r != 2)

@@ -9,8 +9,8 @@ from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
 from fleet.wire.protocol import ClockTick
-from fleet.world.layout import load_layout
-from vehicle_agent.agent import tick_problem
+from fleet.world.layout_file import load_layout
+from vehicle_agent.clock import tick_problem
 
 
 def small_trip(t_start=10.0):

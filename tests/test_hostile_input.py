@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleet.commands.run import engine_options
+from fleet.commands.layout import summary
 from fleet.dispatching.decision import Strategy
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError
 from fleet.dispatching.scorer import load_scorer
@@ -34,12 +34,13 @@ from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import recorded_run
-from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.recording.reader import RecordingError, read_recording
+from fleet.recording.writer import RecordingWriter
+from fleet.runtime.args import engine_options
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
-    Change,
     CommitRequest,
     ManeuverLabel,
     ManeuverOrRest,
@@ -48,12 +49,14 @@ from fleet.wire.protocol import (
     ProtocolError,
     TaskRequest,
     TaskResult,
+    WireChange,
     body_of,
     build_message,
     decode,
     encode,
 )
-from fleet.world.layout import Layout, LayoutError, load_layout, parse_layout
+from fleet.world.layout import Layout, LayoutError
+from fleet.world.layout_file import load_layout, parse_layout
 from reservation.journal import Journal, JournalError
 from reservation.store import ReservationStore
 
@@ -379,9 +382,9 @@ def test_a_hostile_result_becomes_a_trajectory_or_is_refused_naming_the_field(pl
         assert result.reason.value == message.failure
 
 
-# -- fleet.world.layout.parse_layout ---------------------------------------------------------------
+# -- fleet.world.layout_file.parse_layout ----------------------------------------------------------
 
-PAPER = (ROOT / "fleet" / "layouts" / "paper.toml").read_text()
+PAPER = (ROOT / "fleet" / "world" / "layouts" / "paper.toml").read_text()
 PAPER_LINES = PAPER.split("\n")
 ASSIGNMENTS = [k for k, line in enumerate(PAPER_LINES)
                if re.match(r"^\s*[a-z_]+\s*=\s*[^\s\"]|^\s*[a-z_]+\s*=\s*\"[^\"]", line)
@@ -439,7 +442,7 @@ def test_a_damaged_layout_loads_or_is_refused_naming_the_problem(text):
     assert all(0 <= s.cell[0] < layout.cols and 0 <= s.cell[1] < layout.rows
                for s in layout.stacks)
     assert all(math.isfinite(v) and v > 0 for v in dataclasses.astuple(layout.vehicle.dims))
-    assert layout.summary()
+    assert summary(layout)
 
 
 def test_the_shipped_layout_itself_loads():
@@ -474,8 +477,8 @@ def test_absurd_layout_values_are_refused_naming_them(old, new, reason):
 
 # -- the MLP weights -------------------------------------------------------------------------
 
-WEIGHTS = {name: json.loads((ROOT / "fleet" / "weights" / f"{name}.json").read_text())
-           for name in ("small", "paper")}
+WEIGHTS = {name: json.loads((ROOT / "fleet" / "dispatching" / "weights" / f"{name}.json")
+                            .read_text()) for name in ("small", "paper")}
 JSON_VALUES = (st.none() | st.booleans() | SMALL_INT | st.integers() | st.floats()
                | st.sampled_from([10**400, -10**400, 2**63, -1, 0, 12, 12.0, "12", "",
                                   "x" * 10_000, [], {}, [[]], [1e308] * 3])
@@ -589,7 +592,7 @@ CHANGES = st.lists(st.builds(
     st.none() | st.floats(0, 1e4), st.text(max_size=6)), min_size=1, max_size=8)
 
 
-def journal_of(tmp_path: Path, ops) -> tuple[Path, list[Change], list[int]]:
+def journal_of(tmp_path: Path, ops) -> tuple[Path, list[WireChange], list[int]]:
     """A journal written by Journal.append, its changes and where each record ends."""
     path = tmp_path / "journal.msgpack"
     path.unlink(missing_ok=True)
@@ -597,10 +600,10 @@ def journal_of(tmp_path: Path, ops) -> tuple[Path, list[Change], list[int]]:
     changes, ends = [], []
     for revision, (op, vehicle, cells, t0, dt, release, rid) in enumerate(ops, start=1):
         intervals = [(c, r, t0, t0 + dt) for c, r in cells] if op == "commit" else []
-        change = Change(revision, op, vehicle, intervals,
+        change = WireChange(revision, op, vehicle, intervals,
                         release if op == "commit" else (release or 0.0), rid)
         journal.append(change)
-        changes.append(build_message(Change, body_of(change)))  # as replay builds it
+        changes.append(build_message(WireChange, body_of(change)))  # as replay builds it
         ends.append(path.stat().st_size)
     journal.close()
     return path, changes, ends
@@ -728,7 +731,7 @@ def test_any_message_handed_to_the_store_is_answered_and_a_refusal_changes_nothi
         assert table_state(store) == before and outcome.published == []
 
 
-# -- fleet.recording.mcapfile.read_recording --------------------------------------------------
+# -- fleet.recording.reader.read_recording ---------------------------------------------------
 
 @pytest.fixture(scope="module")
 def recording_bytes(tmp_path_factory) -> tuple[bytes, list, int]:

@@ -6,7 +6,8 @@ import pytest
 
 from fleet.planning.maneuvers import fork_target
 from fleet.world.generator import Shape, generate_layout, generate_toml
-from fleet.world.layout import LayoutError, load_layout, parse_layout
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import load_layout, parse_layout
 from fleet.world.reachability import check_layout, reachability_problems
 
 SMALL = load_layout("small")
@@ -81,8 +82,8 @@ def test_station_off_the_map():
 
 def test_dock_must_point_at_its_station():
     text = edited('dock = "5,6,S"', 'dock = "6,5,S"')
-    with pytest.raises(LayoutError, match=r"station p2: dock 6,5,S points its forks at "
-                                          r"\(6, 6\), not at the station \(5, 7\)"):
+    with pytest.raises(LayoutError, match=r"station p2: dock 6,5,S works cell \(6, 6\), "
+                                          r"not the station \(5, 7\)"):
         parse_layout(text, "t")
 
 
@@ -125,14 +126,13 @@ def test_start_cut_off_from_every_dock():
     assert [str(p) for p in problems] == ["start 2 (7,0,N): cannot reach any station dock"]
 
 
-def test_vehicle_kinds_of_the_neighbouring_systems():
-    agv = parse_layout(edited("[bounds]", '[vehicle]\nkind = "lifting-agv"\n\n[bounds]'), "t")
-    assert agv.vehicle.passes_under_shelves
-    full = {s.cell for s in agv.stacks}
-    assert not agv.grid_map(full, under_shelves=True).blocked & full
-    assert full <= agv.grid_map(full).blocked
-    with pytest.raises(LayoutError, match="vehicle: kind 'drone' is not one of"):
-        parse_layout(edited("[bounds]", '[vehicle]\nkind = "drone"\n\n[bounds]'), "t")
+def test_vehicles_that_pass_under_shelves():
+    under = parse_layout(edited("[bounds]", "[vehicle]\npasses_under_shelves = true\n\n[bounds]"),
+                         "t")
+    assert under.vehicle.passes_under_shelves
+    full = {s.cell for s in under.stacks}
+    assert not under.grid_map(full, under_shelves=True).blocked & full
+    assert full <= under.grid_map(full).blocked
 
 
 def test_generator_round_trips_and_is_reachable():

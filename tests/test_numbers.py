@@ -11,16 +11,21 @@ from pathlib import Path
 
 import pytest
 
-from fleet.analysis.analyze import Report, analyze
-from fleet.analysis.time_use import maneuver_length, time_use
+from fleet.analysis.analyze import analyze
+from fleet.analysis.report import Report
+from fleet.analysis.time_use import time_use
 from fleet.cli import main
-from fleet.commands.run import VALUE_COLUMN, engine_options
+from fleet.commands.run import VALUE_COLUMN
 from fleet.dispatching.decision import Strategy
-from fleet.mission.record import subtask_dict
+from fleet.mission.record import SubtaskRecord
 from fleet.mission.spec import Mission, MissionKind
+from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
-from fleet.recording.mcapfile import NS, RecordingWriter, read_recording
 from fleet.recording.mission_record import dispatcher_restarts
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
+from fleet.runtime.args import engine_options
+from fleet.vehicles.forklift import Forklift
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
@@ -32,7 +37,7 @@ from fleet.wire.protocol import (
     SubtaskEvent,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 PER_FORKLIFT = ("busy_s", "stopped_s", "postponed_s", "handling_s", "down_s", "idle_s")
 
@@ -146,11 +151,11 @@ def test_a_forklift_down_is_counted_down_not_waiting(tmp_path, capsys):
 
 
 def subtask(vehicle: int, t_i: float, steps: list[tuple[str, float, float]],
-            handling: float = 5.0) -> dict:
+            handling: float = 5.0) -> SubtaskRecord:
     t_end = steps[-1][2]
-    return {"vehicle": vehicle, "kind": "deliver", "t_i": t_i, "t_end": t_end,
-            "t_done": t_end + handling,
-            "steps": [[label, "0,0,E", "1,0,E", t0, t1, 1, 1] for label, t0, t1 in steps]}
+    return SubtaskRecord(vehicle, "deliver", "a", 1, t_i, t_end, t_end + handling, False,
+                         tuple((label, "0,0,E", "1,0,E", t0, t1, 1, 1)
+                               for label, t0, t1 in steps), ())
 
 
 def halt(t: float, t_stand: float, moving: bool) -> Halt:
@@ -162,7 +167,8 @@ def test_a_cut_plan_counts_only_what_was_driven_and_the_wait_for_the_next():
     # progress (to 10), drives none of the rest, and starts again at 12 (postponed 2 s).
     plan = [subtask(1, 0.0, [("forward", 0.0, 10.0), ("forward", 10.0, 20.0)]),
             subtask(1, 12.0, [("stop", 12.0, 14.0), ("forward", 14.0, 24.0)])]
-    (v,) = time_use(plan, [halt(5.0, 10.0, moving=True)], [], 1, 40.0, "empty", 1.0)
+    (v,) = time_use(plan, [halt(5.0, 10.0, moving=True)], [], 1, 40.0, "empty",
+                    Forklift(cell_size=1.0))
     assert (v.busy_s, v.stopped_s, v.postponed_s, v.handling_s, v.down_s, v.idle_s) == \
         pytest.approx((20.0, 2.0, 2.0, 5.0, 0.0, 11.0))
     assert v.waiting_s == pytest.approx(4.0) and v.subtasks == 2
@@ -175,10 +181,11 @@ def test_a_forklift_down_part_way_finishes_its_maneuver_after_the_resume():
     plan = [subtask(1, 5.0, [("forward", 5.0, 15.0), ("forward", 15.0, 25.0)]),
             subtask(1, 41.0, [("forward", 41.0, 51.0)])]
     resume = Resume(1, 35.0, 41.0)
-    (v,) = time_use(plan, [halt(9.0, 15.0, moving=False)], [resume], 1, 60.0, "fill", 2.0)
+    (v,) = time_use(plan, [halt(9.0, 15.0, moving=False)], [resume], 1, 60.0, "fill",
+                    Forklift(cell_size=2.0))
     assert (v.busy_s, v.postponed_s, v.down_s, v.handling_s, v.idle_s) == \
         pytest.approx((20.0, 0.0, 26.0, 10.0, 4.0))
-    assert v.distance_m == pytest.approx(2 * 2.0 * maneuver_length("forward"))
+    assert v.distance_m == pytest.approx(2 * 2.0)  # two forward maneuvers of one 2 m cell
 
 
 # -- a run recorded in segments: what no recorder heard is taken from the dispatcher's record
@@ -286,7 +293,7 @@ def restarted(items: list[Item], at: int) -> tuple[list[Item], int]:
         new.append((o, seq, log_ns))
     announced = [o.message for o, _, _ in new[1:] if o.sender == "dispatcher"]
     done = announced[-1]
-    record = dict(done.record, subtasks=[subtask_dict(m) for m in announced
+    record = dict(done.record, subtasks=[SubtaskRecord.of_event(m).to_dict() for m in announced
                                          if isinstance(m, SubtaskEvent)],
                   failures=[{"t": m.t, "vehicle": m.vehicle, "stage": m.stage,
                              "reason": m.reason} for m in announced

@@ -11,7 +11,7 @@ from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Trajectory
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brute_force import check_trajectory
@@ -46,7 +46,7 @@ def test_station_to_cluster_and_back(station, cluster):
     table = ReservationTable()
     docks = [s.dock for s in PAPER.stations]
     for k, dock in enumerate(docks, start=1):
-        assert table.park(k, body_cells_at_rest(dock.cell, dock.heading), 0.0) is None
+        assert table.park(k, body_cells_at_rest(dock.cell, dock.heading), 0.0).ok
     me = station + 1
     # The other three leave their stations for stacks in other clusters first.
     others = [k for k in range(1, 5) if k != me]
@@ -55,14 +55,14 @@ def test_station_to_cluster_and_back(station, cluster):
         goals = PAPER.unload_poses(target.cell, filled)
         result = planner.plan(k, docks[k - 1], 0.0, goals, table)
         assert isinstance(result, Trajectory), result
-        assert table.commit(k, result.intervals, release_from=0.0) is None
+        assert table.commit(k, result.intervals, release_from=0.0).ok
         filled = filled | {target.cell}  # its goods arrive there
     planner = HybridAStar(PAPER.grid_map(filled), PAPER.vehicle.dims)
     stack = next_stack(cluster)
     out = planner.plan(me, docks[station], 0.0, PAPER.unload_poses(stack.cell, filled), table)
     assert isinstance(out, Trajectory), out
     assert check_trajectory(out, others_of(table, me), PAPER.grid_map(filled)) == []
-    assert table.commit(me, out.intervals, release_from=0.0) is None
+    assert table.commit(me, out.intervals, release_from=0.0).ok
     t_back = out.t_end + 5.0  # t_unload
     back = planner.plan(me, out.goal, t_back, [docks[station]], table)
     assert isinstance(back, Trajectory), back

@@ -41,7 +41,7 @@ def test_random_fleets_never_overlap(seed):
     for v in range(1, 5):
         starts[v] = free_pose(rng, grid, taken)
         taken |= set(body_cells_at_rest(starts[v].cell, starts[v].heading))
-        assert table.park(v, body_cells_at_rest(starts[v].cell, starts[v].heading), 0.0) is None
+        assert table.park(v, body_cells_at_rest(starts[v].cell, starts[v].heading), 0.0).ok
     found = 0
     for v in range(1, 5):
         goal = free_pose(rng, grid, taken)
@@ -50,7 +50,7 @@ def test_random_fleets_never_overlap(seed):
             found += 1
             assert check_trajectory(result, others_of(table, v), grid) == []
             assert result.goal == goal
-            assert table.commit(v, result.intervals, release_from=result.t_start) is None
+            assert table.commit(v, result.intervals, release_from=result.t_start).ok
             taken |= set(body_cells_at_rest(goal.cell, goal.heading))
         else:
             assert result.reason in FailureReason
@@ -64,7 +64,7 @@ def test_waits_for_a_crossing_vehicle():
     from fleet.planning.reservations import Interval
     # Vehicle 2 drives north through the corridor's crossing column 6 over t in [0, 30).
     crossing = [((6, 0), 0, 30), ((6, 1), 0, 30), ((6, 2), 0, 30)]
-    assert table.commit(2, [Interval(c, a, b) for c, a, b in crossing]) is None
+    assert table.commit(2, [Interval(c, a, b) for c, a, b in crossing]).ok
     result = planner.plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
     assert isinstance(result, Trajectory)
     assert check_trajectory(result, others_of(table, 1), grid) == []

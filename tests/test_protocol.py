@@ -11,11 +11,11 @@ from hypothesis import strategies as st
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
-    Change,
     CommitRequest,
     ProtocolError,
     Reply,
     VehicleState,
+    WireChange,
     decode,
     encode,
 )
@@ -35,7 +35,7 @@ def test_commit_round_trip(request_id, vehicle, ivs, release_from):
 
 def test_every_type_round_trips():
     samples = [VehicleState(3, "1,2,N", 1, "forward", True, 1.0, 2.0, 0.5),
-               Reply("r", False, 9, 4, [3, 5], "held"), Change(4, "release", 2, [], 7.5, "q")]
+               Reply("r", False, 9, 4, [3, 5], "held"), WireChange(4, "release", 2, [], 7.5, "q")]
     for msg in samples:
         assert decode(encode(msg, "s", 1, 0.0)).message == msg
     assert {type(m).TYPE for m in samples} <= set(TYPES)

@@ -10,11 +10,12 @@ from pathlib import Path
 from mission_check import journal_overlaps
 
 from bench.faults import timings
-from fleet.analysis.analyze import SILENT, analyze
+from fleet.analysis.analyze import analyze
+from fleet.analysis.windows import SILENT
 from fleet.dispatching.decision import Strategy
 from fleet.mission.faults import load_scenario
-from fleet.mission.spec import Mission, MissionKind
-from fleet.recording.mcapfile import read_recording
+from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.recording.reader import read_recording
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume, VehicleState, ZoneClosed
 from reservation.journal import Journal
@@ -73,7 +74,7 @@ def test_every_kind_of_fault_on_the_real_time_clock(tmp_path: Path):
     source.write_text(SCENARIO)
     scenario = load_scenario(str(source))
     out = tmp_path / "run"
-    outcome = run_processes(RunSpec(MISSION, 4, out, "realtime", SPEED, faults=scenario,
+    outcome = run_processes(RunSpec(MISSION, 4, out, ClockMode.REALTIME, SPEED, faults=scenario,
                                     faults_source=str(source)))
     assert outcome.error == "" and outcome.done.ok
     report = analyze(read_recording(out))

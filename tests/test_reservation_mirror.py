@@ -3,8 +3,9 @@
 from zenoh_helpers import client
 
 from fleet.runtime.bus import BusConfig, Requester, open_session
-from fleet.wire.protocol import CommitRequest, ReleaseRequest, Snapshot, SnapshotRequest
-from reservation.mirror import TableMirror, follow
+from fleet.wire.protocol import CommitRequest, ReleaseRequest, SnapshotRequest, WireSnapshot
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 from reservation.store import ReservationStore
 
 
@@ -52,7 +53,7 @@ def test_a_lost_change_asks_for_a_resync_and_a_diff_repairs_it():
     mirror.load(store.snapshot(since=mirror.revision))
     assert mirror.revision == 4 and not mirror.needs_resync
     assert mirror.table.reservations() == store.table.reservations()
-    assert isinstance(store.snapshot(since=1), Snapshot)
+    assert isinstance(store.snapshot(since=1), WireSnapshot)
 
 
 def test_a_mirror_follows_the_service_over_zenoh(service):
@@ -65,7 +66,7 @@ def test_a_mirror_follows_the_service_over_zenoh(service):
             assert put.request(key, CommitRequest(put.next_id(), k % 3 + 1,
                                                   [(k, 0, 0.0, 5.0 + k)])).message.ok
         mirror = TableMirror()
-        sub = follow(reader, service.keys, mirror, Requester(reader, "reader"))
+        sub = ReservationClient(reader, service.keys, Requester(reader, "reader")).follow(mirror)
         assert mirror.revision == 10
         for k in range(10, 30):
             assert put.request(key, CommitRequest(put.next_id(), k % 3 + 1,

@@ -10,9 +10,9 @@ from fleet.runtime.bus import Requester
 from fleet.wire.protocol import (
     CommitRequest,
     Reply,
-    Snapshot,
     SnapshotRequest,
     VehicleState,
+    WireSnapshot,
     decode,
     encode,
 )
@@ -86,7 +86,7 @@ def test_restart_after_a_kill_serves_the_same_table(service):
         assert back.wait(60), "the restarted service did not come back"
         sub.undeclare()
         after = req.request(key, SnapshotRequest()).message
-        assert isinstance(after, Snapshot) and after == before
+        assert isinstance(after, WireSnapshot) and after == before
         retry = req.request(key, commit("r3", 4, [(3, 1)], t1=float("inf"))).message
         assert retry == Reply("r3", True, 4)  # applied once, answered the same
     finally:

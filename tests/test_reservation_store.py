@@ -7,19 +7,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet.planning.reservations import Change as TableChange
 from fleet.planning.reservations import ReservationTable
+from fleet.wire.convert import change_from_wire, intervals_from_wire
 from fleet.wire.protocol import (
-    Change,
     CommitRequest,
     ReleaseRequest,
     Reply,
     SnapshotRequest,
+    WireChange,
     body_of,
 )
 from fleet.wire.protocol import build_message as build
 from reservation.journal import Journal, JournalError
-from reservation.store import ReservationStore, to_intervals
+from reservation.store import ReservationStore
 
 INF = math.inf
 
@@ -61,11 +61,9 @@ def test_snapshot_and_diff_let_a_mirror_follow(tmp_path):
     diff = store.handle(SnapshotRequest(mirror_rev)).reply
     assert [c["revision"] for c in diff.changes] == [2, 3]
     mirror = ReservationTable()
-    mirror.commit(1, to_intervals([(0, 0, 0.0, 10.0)]))
+    mirror.commit(1, intervals_from_wire([(0, 0, 0.0, 10.0)]))
     for body in diff.changes:
-        change = build(Change, body)
-        mirror.apply(TableChange(change.revision, change.vehicle, change.release_from,
-                                 to_intervals(change.intervals)))
+        mirror.apply(change_from_wire(build(WireChange, body)))
     assert mirror.reservations() == store.table.reservations()
     full = store.handle(SnapshotRequest()).reply
     assert full.revision == 3 and sorted(full.reservations) == sorted(

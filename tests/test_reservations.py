@@ -74,11 +74,11 @@ class TableMatchesModel(RuleBasedStateMachine):
           release_from=st.one_of(st.none(), times))
     def commit(self, vehicle, ivs, release_from):
         before = self.table.snapshot()
-        conflict = self.table.commit(vehicle, ivs, release_from)
+        written = self.table.commit(vehicle, ivs, release_from)
         accepted = self.model.commit(vehicle, ivs, release_from)
-        assert (conflict is None) == accepted
-        if conflict is not None:
-            assert conflict.other != vehicle
+        assert written.ok == accepted
+        if not written.ok:
+            assert written.conflict_vehicle not in (None, vehicle)
             assert self.table.snapshot() == before  # all or nothing
 
     @rule(vehicle=st.sampled_from(VEHICLES), iv=intervals())
@@ -124,17 +124,19 @@ test_table_matches_model = TableMatchesModel.TestCase
 
 def test_commit_rejects_with_the_conflicting_vehicle_and_cell():
     table = ReservationTable()
-    assert table.park(1, [(2, 3)], 10.0) is None
-    conflict = table.commit(2, [Interval((0, 0), 0, 5), Interval((2, 3), 20, 25)])
-    assert conflict is not None and conflict.other == 1 and conflict.cell == (2, 3)
+    assert table.park(1, [(2, 3)], 10.0).ok
+    written = table.commit(2, [Interval((0, 0), 0, 5), Interval((2, 3), 20, 25)])
+    assert not written.ok and written.revision == 1
+    assert (written.conflict_vehicle, written.conflict_cell) == (1, (2, 3))
+    assert written.reason == "cell (2, 3) is held by vehicle 1 over [20, 25)"
     assert table.reservations(2) == []
 
 
 def test_touching_intervals_of_different_vehicles_are_allowed():
     table = ReservationTable()
-    assert table.commit(1, [Interval((0, 0), 0, 5)]) is None
-    assert table.commit(2, [Interval((0, 0), 5, 9)]) is None
-    assert table.commit(3, [Interval((0, 0), 4.75, 5.25)]) is not None
+    assert table.commit(1, [Interval((0, 0), 0, 5)]).ok
+    assert table.commit(2, [Interval((0, 0), 5, 9)]).ok
+    assert not table.commit(3, [Interval((0, 0), 4.75, 5.25)]).ok
 
 
 def test_own_intervals_merge_and_release_cuts():

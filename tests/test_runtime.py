@@ -21,22 +21,22 @@ from test_paper_missions import check_paper_mission
 from websockets.sync.client import connect
 
 from fleet.analysis.analyze import analyze
-from fleet.commands.run import engine_options
 from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import Engine, run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.inprocess import vehicle_states
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.mission_record import summary_of
+from fleet.recording.reader import read_recording
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
-    PARENT_ENV,
     BusConfig,
-    Keys,
     Requester,
     free_port,
     open_session,
     wait_alive,
 )
+from fleet.runtime.lifecycle import PARENT_ENV
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import (
     Progress,
@@ -48,8 +48,10 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
-from reservation.mirror import TableMirror, follow
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -110,7 +112,7 @@ class Intruder:
         self.subscriber = session.declare_subscriber(keys.vehicle_state("*"), self._on_state)
 
     def _on_state(self, sample) -> None:
-        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        vehicle = Keys.vehicle_in(str(sample.key_expr))
         self.states[vehicle].append(decode(sample.payload.to_bytes()).sim_time)
 
     def on_progress(self, progress: Progress) -> None:
@@ -211,10 +213,11 @@ def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
 def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
     mission = Mission("small", MissionKind.FILL, Strategy.ANN)
     intruder = Intruder(2)
-    outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock="realtime", speed=40.0))
+    outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock=ClockMode.REALTIME, speed=40.0))
     assert outcome.error == ""
     record = outcome.done.record
-    assert record_problems(record, load_layout("small")) == []
+    recording = read_recording(tmp_path / "run.mcap")
+    assert record_problems(summary_of(recording), load_layout("small")) == []
     assert len(record["stacks_done"]) == 24
     assert journal_overlaps(tmp_path / "reservation.journal") == []
     for vehicle in intruder.vehicle_ids:  # 10 Hz of wall time, but at most 0.5 s of sim time
@@ -222,7 +225,7 @@ def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
         gaps = sorted(b - a for a, b in itertools.pairwise(times))
         assert len(times) > 50 and gaps[len(gaps) // 2] == 0.5
     intruder.check(tmp_path, "realtime")
-    report = analyze(read_recording(tmp_path / "run.mcap"))
+    report = analyze(recording)
     assert report.passed, report.lines()
     assert report.stacks_done == 24 and report.messages_lost == 0
     assert report.foreign == intruder.forged == 2
@@ -241,7 +244,7 @@ def test_a_recorder_killed_mid_run_leaves_a_readable_recording(tmp_path):
         recorder.kill()
         statuses.undeclare()
 
-    outcome = run_processes(RunSpec(mission, 2, tmp_path, clock="realtime", speed=20.0),
+    outcome = run_processes(RunSpec(mission, 2, tmp_path, clock=ClockMode.REALTIME, speed=20.0),
                             on_ready=on_ready)
     assert "recorder exited with status -9" in outcome.error
     recording = read_recording(tmp_path / "run.mcap")
@@ -301,7 +304,7 @@ def test_conflicting_commits_one_wins_the_other_is_told_why_and_replans(tmp_path
         for v in agents:
             assert wait_alive(session, keys.vehicle_alive(v), 60)
         mirror = TableMirror()
-        changes = follow(session, keys, mirror, Requester(session, "test"))
+        changes = ReservationClient(session, keys, Requester(session, "test")).follow(mirror)
         assert mirror.wait_until(lambda table: table.vehicles() == [1, 2], 30)
         starts = load_layout("small").vehicle_starts
         goals = ["1,4,W", "1,3,W"]  # both forklifts prefer the same one

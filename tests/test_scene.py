@@ -20,12 +20,13 @@ from test_recording_plots import recorded, two_forklift_record
 from websockets.sync.client import connect
 
 from fleet.planning.geometry import body_corners
-from fleet.recording.mcapfile import RecordingWriter, read_recording
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.views.palette import GOODS_COLOR, forklift_color
 from fleet.views.plots import gantt, snapshot
 from fleet.views.scene import FRAME, HORIZON_S, SceneViews
-from fleet.wire.protocol import Change, Progress, StackDone, VehicleState
-from fleet.world.layout import load_layout
+from fleet.wire.protocol import Progress, StackDone, VehicleState, WireChange
+from fleet.world.layout_file import load_layout
 from recorder.live import LiveView
 
 BASE = 1_700_000_000 * 10**9
@@ -243,13 +244,13 @@ def test_a_forklift_has_one_colour_in_the_gantt_chart_a_snapshot_and_foxglove(tm
     bodies = {p.get_gid(): p for p in picture.patches if p.get_gid()}
     seen = []
     for v in (1, 2):
-        (subtask,) = [s for s in record["subtasks"] if s["vehicle"] == v]
+        (subtask,) = [s for s in record.subtasks if s.vehicle == v]
         y, label = rows[f"forklift {v}"]
         # The bar of its subtask's drive (a "deliver": the forklift's own colour), its row's
         # name, its body in the snapshot and its body in Foxglove.
         (bar,) = [p for p in chart.patches if isinstance(p, Rectangle)
-                  and p.get_x() == pytest.approx(subtask["t_i"])
-                  and p.get_width() == pytest.approx(subtask["t_end"] - subtask["t_i"])
+                  and p.get_x() == pytest.approx(subtask.t_i)
+                  and p.get_width() == pytest.approx(subtask.t_end - subtask.t_i)
                   and abs(p.get_y() + p.get_height() / 2 - y) < 1e-9]
         body = scene[f"forklift/{v}"].cubes[0].color
         colours = [to_rgb(bar.get_facecolor()), to_rgb(label.get_color()),
@@ -273,11 +274,11 @@ def reserved_cells(views, paper, vehicle, t):
 def test_reserved_cells_ahead_follow_the_table(paper):
     views = SceneViews(paper, BASE)
     inf = math.inf
-    views.on_message("k", Change(1, "commit", 2, [(8, 10, 0.0, inf), (9, 10, 0.0, inf)]), 0.0)
+    views.on_message("k", WireChange(1, "commit", 2, [(8, 10, 0.0, inf), (9, 10, 0.0, inf)]), 0.0)
     assert reserved_cells(views, paper, 2, 0.0)[0] == {(8, 10), (9, 10)}
 
     # a trajectory from 5 s: the parking is cut at 5 s, the cells beyond the horizon wait
-    views.on_message("k", Change(2, "commit", 2, [(8, 10, 5.0, 8.0), (8, 9, 6.0, 10.0),
+    views.on_message("k", WireChange(2, "commit", 2, [(8, 10, 5.0, 8.0), (8, 9, 6.0, 10.0),
                                                   (8, 8, 9.0, 14.0), (8, 7, 30.0, inf)],
                                  release_from=5.0), 5.0)
     cells, ent = reserved_cells(views, paper, 2, 4.0)
@@ -288,16 +289,16 @@ def test_reserved_cells_ahead_follow_the_table(paper):
     assert reserved_cells(views, paper, 2, 30.0 - HORIZON_S + 1.0)[0] == {(8, 8), (8, 7)}
 
     # replanned at 12 s: everything from 12 s on goes, (8, 8) is cut to [9, 12)
-    views.on_message("k", Change(3, "commit", 2, [(7, 8, 12.0, inf)], release_from=12.0), 12.0)
+    views.on_message("k", WireChange(3, "commit", 2, [(7, 8, 12.0, inf)], release_from=12.0), 12.0)
     assert reserved_cells(views, paper, 2, 11.5)[0] == {(8, 8), (7, 8)}
     assert reserved_cells(views, paper, 2, 12.0)[0] == {(7, 8)}
 
     # a release drops the rest; the entity is sent empty so it clears the previous one
-    views.on_message("k", Change(4, "release", 2, [], release_from=13.0), 13.0)
+    views.on_message("k", WireChange(4, "release", 2, [], release_from=13.0), 13.0)
     assert reserved_cells(views, paper, 2, 13.0)[0] == set()
     # other forklifts and the goods (owner 0) do not show on forklift 2's view
-    views.on_message("k", Change(5, "commit", 0, [(0, 11, 13.0, inf)]), 13.0)
-    views.on_message("k", Change(6, "commit", 3, [(5, 5, 13.0, inf)]), 13.0)
+    views.on_message("k", WireChange(5, "commit", 0, [(0, 11, 13.0, inf)]), 13.0)
+    views.on_message("k", WireChange(6, "commit", 3, [(5, 5, 13.0, inf)]), 13.0)
     assert reserved_cells(views, paper, 2, 14.0)[0] == set()
     assert reserved_cells(views, paper, 3, 14.5)[0] == {(5, 5)}
     assert 0 not in views.reserved
@@ -311,7 +312,7 @@ def test_views_write_to_mcap_as_foxglove_protobuf(paper, tmp_path):
     writer = RecordingWriter(path)
     views = SceneViews(paper, BASE)
     written = views.start()
-    views.on_message("k", Change(1, "commit", 1, [(8, 10, 0.0, math.inf)]), 0.0)
+    views.on_message("k", WireChange(1, "commit", 1, [(8, 10, 0.0, math.inf)]), 0.0)
     written += views.on_message(STATE_KEY.format(1), state(1, 1.0, 2.0, 0.5, True), 0.5)
     stack = paper.stacks[0]
     written += views.on_message("k", StackDone(stack.cluster, stack.index, 1, 9.0), 9.0)

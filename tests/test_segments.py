@@ -19,34 +19,30 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
+from fleet.analysis.analyze import analyze
+from fleet.analysis.streams import sequence_gaps, sequence_holes
 from fleet.cli import main
-from fleet.commands.run import engine_options
 from fleet.dispatching.decision import Strategy
 from fleet.mission.spec import Mission, MissionKind
+from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
-from fleet.recording.mcapfile import (
-    NS,
-    RUN_FILE,
-    RecordingWriter,
-    mission_info,
-    next_segment,
-    read_recording,
-    recording_file,
-    segment_paths,
-)
+from fleet.recording.reader import read_recording, recording_file
 from fleet.recording.rundir import claim
-from fleet.runtime.bus import BusConfig, Keys, Stream, free_port, open_session
+from fleet.recording.segments import RUN_FILE, next_segment, segment_paths
+from fleet.recording.writer import RecordingWriter, mission_info
+from fleet.runtime.args import engine_options
+from fleet.runtime.bus import BusConfig, Stream, free_port, open_session
 from fleet.wire.protocol import (
-    Change,
     MissionInfo,
     RecorderStatus,
     StackDone,
     VehicleState,
+    WireChange,
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent
@@ -262,7 +258,7 @@ def test_a_window_without_a_recorder_is_not_recorded_rather_than_lost(clean_stre
             own = [o.sim_time for o in states if o.message.vehicle == u.vehicle]
             assert u.sim_from_s < own[0] and own[-1] < u.sim_to_s
     # Table changes sent then: each forklift's reservations are unknown until it commits anew.
-    if any(isinstance(o.message, Change) for o, _, _ in items[start:end]):
+    if any(isinstance(o.message, WireChange) for o, _, _ in items[start:end]):
         assert {("reservations", 1), ("reservations", 2)} <= windows
     # Work: stacks announced then are known from the dispatcher's final record.
     unheard = sorted(f"{o.message.cluster}#{o.message.index}" for o, _, _ in items[start:end]

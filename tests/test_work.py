@@ -13,9 +13,8 @@ from fleet.mission.spec import Mission, MissionKind
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import EmptyWork, FillWork, mission_work
 from fleet.params import DispatchParams
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mission_check import mission_problems
@@ -25,7 +24,7 @@ SMALL = load_layout("small")
 
 def work_of(kind: MissionKind):
     return mission_work(kind, SMALL, DispatchParams(), ReservationTable(),
-                        PlannerCache(SMALL.grid_map, SMALL.vehicle.dims))
+                        SMALL.vehicle_kind.planners(SMALL.grid_map))
 
 
 def deliver(work, view, cluster):

@@ -1,12 +1,13 @@
-"""The vehicle agent process: one forklift (DESIGN.md section 2).
+"""The vehicle agent: one vehicle of the kind the layout names, its own OS process, talking
+to the others only over zenoh.
 
 It declares a liveliness token, parks at its start pose (a reservation to infinity), keeps a
 mirror of the reservation service's table, and answers tasks on fleet/<run>/vehicle/<id>/task:
-plan with the improved hybrid A* against the mirror, commit through the service, replan when
-the service refuses the commit (another forklift got there first), answer with the committed
-trajectory. It drives what it committed on the clock and publishes its state on a grid of
-instants every forklift shares: every 0.5 s of sim time in fast mode (then acknowledges the
-tick), at 10 Hz in real time.
+plan with its kind's planner against the mirror, commit what its kind's conflict policy says
+through the service, replan when the service refuses the commit (another vehicle got there
+first), answer with the committed trajectory. It drives what it committed on the clock and
+publishes its state on a grid of instants every vehicle shares: every 0.5 s of sim time in
+fast mode (then acknowledges the tick), at 10 Hz in real time.
 
 Zenoh callbacks only enqueue; one worker thread does everything that blocks, in arrival order.
 """
@@ -19,21 +20,23 @@ import math
 import queue
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import zenoh
 
 from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 from fleet.mission.seam import Task
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import PlannerCache
+from fleet.mission.spec import ClockMode
+from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, received, wait_alive
+from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
+from fleet.runtime.lifecycle import Stopped
+from fleet.vehicles.kind import Commitment
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
     ClockAck,
     ClockTick,
-    CommitRequest,
     HaltRequest,
     InjectFault,
     Message,
@@ -46,19 +49,17 @@ from fleet.wire.protocol import (
     TaskResult,
     VehicleFault,
     VehicleStatus,
-    decode,
     encode,
 )
+from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
-from reservation.mirror import TableMirror, follow, resync
-from reservation.store import to_wire
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
+from vehicle_agent.clock import SimClock, tick_problem
 
 log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5
 DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
-# No mission lasts 115 days of sim time or plays faster than 10 000x: a tick beyond is broken.
-SIM_TIME_LIMIT_S = 1e7
-MAX_SPEED = 1e4
 SYNC_TIMEOUT_S = 10.0
 # Real time: a forklift that has not heard the clock (ticks every 0.5 s) for this long
 # publishes no state: it may be down, and the dispatcher's word on where it stands is awaited.
@@ -68,59 +69,32 @@ CLOCK_SILENCE_S = 1.0
 COMMIT_SLACK_S = 0.05
 
 
-def tick_problem(tick: ClockTick, last: ClockTick | None) -> str:
-    """Why a tick cannot be the clock's next one ("" if it can)."""
-    if last is not None and tick.tick <= last.tick:
-        return f"not after tick {last.tick}"
-    if tick.mode not in ("fast", "realtime"):
-        return f"unknown mode {tick.mode!r}"
-    if last is not None and (tick.mode, tick.speed) != (last.mode, last.speed):
-        return f"mode {tick.mode} at speed {tick.speed} is not the clock's {last.mode} at " \
-            f"speed {last.speed}"
-    if not 0 <= tick.t <= SIM_TIME_LIMIT_S:
-        return f"sim time {tick.t} is outside [0, {SIM_TIME_LIMIT_S:g}] s"
-    if last is not None and tick.t < last.t:
-        return f"sim time {tick.t} is before the last tick's {last.t}"
-    if tick.mode == "realtime" and not (0 < tick.speed <= MAX_SPEED and
-                                         math.isfinite(tick.wall)):
-        return f"speed {tick.speed} or wall time {tick.wall} is not a real-time clock's"
-    return ""
+@dataclass(frozen=True)
+class _Task:
+    """A query on the task key: a task, or a halt, resume or status request."""
+
+    query: zenoh.Query
 
 
-class SimClock:
-    """This process's view of the one clock: the last tick heard."""
+@dataclass(frozen=True)
+class _Tick:
+    """A tick of the fast clock: the worker's, in turn with the tasks."""
 
-    def __init__(self) -> None:
-        self.tick: ClockTick | None = None
-
-    @property
-    def realtime(self) -> bool:
-        return self.tick is not None and self.tick.mode == "realtime"
-
-    def now(self) -> float:
-        tick = self.tick
-        if tick is None:
-            return 0.0
-        if tick.mode == "realtime":
-            return tick.t + tick.speed * (time.time() - tick.wall)
-        return tick.t
-
-    def wall_at(self, t: float) -> float | None:
-        """Real time: the Unix time at which sim time is t (None on the fast clock)."""
-        tick = self.tick
-        if tick is None or tick.mode != "realtime":
-            return None
-        return tick.wall + (t - tick.t) / tick.speed
+    tick: ClockTick
 
 
-class Stopped(Exception):
-    """SIGTERM or SIGINT: the agent leaves whatever it was doing."""
+@dataclass(frozen=True)
+class _Inject:
+    """A fault the injector sends (fleet run --faults)."""
+
+    query: zenoh.Query
 
 
-@dataclass
-class _Inbox:
-    kind: str  # "task", "tick", "inject" or "done"
-    item: object = None
+@dataclass(frozen=True)
+class _Done:
+    """A sample on dispatch/done: the mission's result, once decoded."""
+
+    sample: zenoh.Sample
 
 
 class Agent:
@@ -130,14 +104,16 @@ class Agent:
         self.keys = keys
         self.vehicle = vehicle
         self.layout = layout
-        self.sender = f"vehicle-{vehicle}"
-        self.requester = Requester(session, self.sender)
+        self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
-        self.planners = PlannerCache(layout.grid_map, layout.vehicle.dims)
+        self.vehicle_kind = layout.vehicle_kind
+        self.planners = self.vehicle_kind.planners(layout.grid_map)
         self.drive = Drive(vehicle, start, layout)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()
-        self.inbox: queue.Queue[_Inbox] = queue.Queue()
+        self.reservations = ReservationClient(session, keys, Requester(session, self.sender),
+                                              self.clock.now)
+        self.inbox: queue.Queue[_Task | _Tick | _Inject | _Done] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
         self.seq = itertools.count(1)  # of task replies (each stream counts its own)
         self.stopping = threading.Event()
@@ -159,54 +135,56 @@ class Agent:
         if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
             raise RuntimeError(f"no reservation service on {self.keys.root} within "
                                f"{service_timeout_s:g} s")
-        changes = follow(self.session, self.keys, self.mirror, self.requester)
-        if self.mirror.table.reservations(self.vehicle):
-            # The table holds cells of ours: this is a restart. Where the forklift stands is
-            # what the store holds and the dispatcher says; wait for its ResumeRequest.
-            self.down = True
-            log.info("vehicle %d restarted: waiting for the dispatcher", self.vehicle)
-        else:
-            self._park()
-        self.fault_pub = Stream(self.session, self.keys.vehicle_fault(self.vehicle),
-                                self.sender, reliable=True)
-        # States are reliable too: a recording must hold every one (the recorder only
-        # enqueues, so it does not hold us up); acks pace the clock.
-        state_pub = Stream(self.session, self.keys.vehicle_state(self.vehicle), self.sender,
-                           reliable=True)
-        ack_pub = Stream(self.session, self.keys.clock_ack(self.vehicle), self.sender,
-                         reliable=True)
-        queryable = self.session.declare_queryable(
-            self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
-        clock_sub = self.session.declare_subscriber(
-            self.keys.clock, lambda s: self._on_clock(s, state_pub, ack_pub))
-        injector = self.session.declare_queryable(
-            self.keys.vehicle_inject(self.vehicle), lambda q: self.inbox.put(_Inbox("inject", q)))
-        done_sub = self.session.declare_subscriber(
-            self.keys.dispatch_done, lambda s: self.inbox.put(_Inbox("done", s)))
-        token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
-        ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
-        ticker.start()
-        log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
-        try:
-            while True:
-                entry = self.inbox.get()
-                if entry.kind == "task":
-                    self._answer(entry.item)
-                elif entry.kind == "tick":
-                    self._fast_tick(entry.item, state_pub, ack_pub)
-                elif entry.kind == "inject":
-                    self._on_inject(entry.item)
-                elif exit_when_done and received(entry.item, MissionDone, log) is not None:
+        with ExitStack() as scope:
+            scope.enter_context(self.reservations.follow(self.mirror))
+            if self.mirror.table.reservations(self.vehicle):
+                # The table holds cells of ours: this is a restart. Where the forklift stands
+                # is what the store holds and the dispatcher says; wait for its ResumeRequest.
+                self.down = True
+                log.info("vehicle %d restarted: waiting for the dispatcher", self.vehicle)
+            else:
+                self._park()
+            self.fault_pub = scope.enter_context(Stream(
+                self.session, self.keys.vehicle_fault(self.vehicle), self.sender, reliable=True))
+            # States are reliable too: a recording must hold every one (the recorder only
+            # enqueues, so it does not hold us up); acks pace the clock.
+            state_pub = scope.enter_context(Stream(
+                self.session, self.keys.vehicle_state(self.vehicle), self.sender, reliable=True))
+            ack_pub = scope.enter_context(Stream(
+                self.session, self.keys.clock_ack(self.vehicle), self.sender, reliable=True))
+            session, keys, v, put = self.session, self.keys, self.vehicle, self.inbox.put
+            scope.enter_context(session.declare_queryable(keys.vehicle_task(v),
+                                                          lambda q: put(_Task(q))))
+            scope.enter_context(session.declare_subscriber(keys.clock, self._on_clock))
+            scope.enter_context(session.declare_queryable(keys.vehicle_inject(v),
+                                                          lambda q: put(_Inject(q))))
+            scope.enter_context(session.declare_subscriber(keys.dispatch_done,
+                                                           lambda s: put(_Done(s))))
+            scope.enter_context(session.liveliness().declare_token(keys.vehicle_alive(v)))
+            ticker = threading.Thread(target=self._realtime_states, args=(state_pub,),
+                                      daemon=True)
+            ticker.start()
+            scope.callback(ticker.join)
+            scope.callback(self.stopping.set)  # first: the state thread ends
+            log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
+            self._work(state_pub, ack_pub, exit_when_done)
+
+    def _work(self, state_pub: Stream, ack_pub: Stream, exit_when_done: bool) -> None:
+        """The worker: everything that blocks, in arrival order."""
+        while True:
+            match self.inbox.get():
+                case _Task(query):
+                    self._answer(query)
+                case _Tick(tick):
+                    self._fast_tick(tick, state_pub, ack_pub)
+                case _Inject(query):
+                    self._on_inject(query)
+                case _Done(sample) if exit_when_done and \
+                        received(sample, MissionDone, log) is not None:
                     log.info("vehicle %d: the mission is over", self.vehicle)
                     return
-                if self.mirror.needs_resync:
-                    resync(self.mirror, self.keys, self.requester)
-        finally:
-            self.stopping.set()
-            ticker.join()
-            for declared in (token, injector, clock_sub, queryable, ack_pub, state_pub,
-                             self.fault_pub, changes, done_sub):
-                declared.undeclare()
+            if self.mirror.needs_resync:
+                self.reservations.resync(self.mirror)
 
     def stop(self) -> None:
         """Stop now, from a signal handler (it runs in the main thread, which is the worker):
@@ -216,23 +194,21 @@ class Agent:
         raise Stopped("stopped by a signal")
 
     def _park(self) -> None:
-        cells = body_cells_at_rest(self.drive.pose.cell, self.drive.pose.heading)
-        reply = self._commit(f"{self.sender}:park", [(c[0], c[1], 0.0, float("inf"))
-                                                       for c in cells], None)
-        if not reply.ok:
+        cells = self.vehicle_kind.body_cells_at_rest(self.drive.pose)
+        written = self.reservations.commit(self.vehicle, [Interval(c, 0.0, math.inf)
+                                                          for c in cells],
+                                           request_id=f"{self.sender}:park")
+        if not written.ok:
             raise RuntimeError(f"cannot park at the start pose {self.drive.pose}: "
-                               f"{reply.reason}")
-        self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+                               f"{written.reason}")
+        self.mirror.wait_for(written.revision, SYNC_TIMEOUT_S)
 
     # -- tasks ---------------------------------------------------------------------------------
     def _answer(self, query: zenoh.Query) -> None:
         try:
-            try:
-                message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
-                                       str(query.key_expr))
-            except ProtocolError as exc:
-                query.reply_err(f"rejected: {exc}".encode())
+            message = asked(query, (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
+                            log)
+            if message is None:
                 return
             if not isinstance(message, TaskRequest):
                 if isinstance(message, HaltRequest):
@@ -263,44 +239,49 @@ class Agent:
                                 f"the task starts at {task.start} but the forklift will "
                                 f"stand at {self.drive.pose}")
         if not self.mirror.wait_for(message.revision, SYNC_TIMEOUT_S):
-            resync(self.mirror, self.keys, self.requester)
+            self.reservations.resync(self.mirror)
         rejections: list[str] = []
         for attempt in range(MAX_COMMIT_ATTEMPTS):
-            result = self._plan(task)
-            if isinstance(result, PlanFailure):
-                return result_to_wire(message.task_id, self.vehicle, result,
-                                      self.mirror.revision, rejections)
+            leg = self._plan(task)
+            if isinstance(leg, PlanFailure):
+                return result_to_wire(message.task_id, self.vehicle, leg, self.mirror.revision,
+                                      rejections)
+            result = leg.trajectory
             if self.clock.realtime and self.clock.now() > result.t_start:
                 return self._failed(message, FailureReason.LATE,
                                     f"planned for t={result.t_start:.2f} but it is already "
                                     f"t={self.clock.now():.2f}", rejections)
             log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
             start = self.clock.wall_at(result.t_start)
-            reply = self._commit(f"{self.sender}:{message.task_id}:{attempt}",
-                                 to_wire(result.intervals), result.t_start, message.revision,
-                                 None if start is None else start - COMMIT_SLACK_S)
-            if reply.ok:
+            written = self.reservations.commit(
+                self.vehicle, leg.intervals, leg.release_from, based_on=message.revision,
+                deadline=None if start is None else start - COMMIT_SLACK_S,
+                request_id=f"{self.sender}:{message.task_id}:{attempt}")
+            if written.ok:
                 with self.drive_lock:
                     self.drive.add(result, task.loaded)
                 self.last_kind = message.kind
-                return result_to_wire(message.task_id, self.vehicle, result, reply.revision,
+                return result_to_wire(message.task_id, self.vehicle, result, written.revision,
                                       rejections)
-            rejections.append(reply.reason)
-            if reply.conflict_vehicle is None:  # halted since, or too late: replanning won't do
-                return self._failed(message, FailureReason.REFUSED, reply.reason, rejections)
+            rejections.append(written.reason)
+            if written.conflict_vehicle is None:  # halted since, or too late: no replanning
+                return self._failed(message, FailureReason.REFUSED, written.reason, rejections)
             log.info("task %s: the store refused the commit (%s); replanning",
-                     message.task_id, reply.reason)
-            self.mirror.wait_for(reply.revision, SYNC_TIMEOUT_S)
+                     message.task_id, written.reason)
+            self.mirror.wait_for(written.revision, SYNC_TIMEOUT_S)
         return self._failed(message, FailureReason.REFUSED,
                             f"{len(rejections)} commits refused; last: {rejections[-1]}",
                             rejections)
 
-    def _plan(self, task: Task) -> Trajectory | PlanFailure:
+    def _plan(self, task: Task) -> Commitment | PlanFailure:
+        """Plan against the mirror, and settle what to commit against the same table."""
         planner = self.planners.get(task.filled)
         started = time.perf_counter()
         with self.mirror.frozen():
             result = planner.plan(self.vehicle, task.start, task.t_i, task.goals,
                                   self.mirror.table)
+            if isinstance(result, Trajectory):
+                result = self.vehicle_kind.conflict_policy.commitment(result, self.mirror.table)
         if self.slow > 1:  # an injected slow planner: as if the search ran on a slower CPU
             time.sleep((self.slow - 1) * (time.perf_counter() - started))
         return result
@@ -336,7 +317,7 @@ class Agent:
                 if message.step is not None else None
         except (ValueError, ProtocolError) as exc:
             return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
-        resync(self.mirror, self.keys, self.requester)
+        self.reservations.resync(self.mirror)
         with self.drive_lock:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
         with self.status_lock:  # ticks before t_resume may still list us as down
@@ -361,11 +342,8 @@ class Agent:
     def _on_inject(self, query: zenoh.Query) -> None:
         """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
         try:
-            try:
-                message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       InjectFault, str(query.key_expr))
-            except ProtocolError as exc:
-                query.reply_err(f"rejected: {exc}".encode())
+            message = asked(query, InjectFault, log)
+            if message is None:
                 return
             t = self.clock.now()
             if message.kind == "slow_planner":
@@ -391,30 +369,15 @@ class Agent:
         return result_to_wire(message.task_id, self.vehicle, PlanFailure(reason, detail, 0),
                               self.mirror.revision, rejections or [])
 
-    def _commit(self, request_id: str, intervals, release_from: float | None,
-                based_on: int | None = None, deadline: float | None = None) -> Reply:
-        """Commit through the service (the requester retries a lost reply with the same
-        request id, which the store applies once)."""
-        request = CommitRequest(request_id, self.vehicle, intervals, release_from, based_on,
-                                deadline)
-        try:
-            reply = self.requester.request(self.keys.reservation_request(self.sender), request,
-                                           self.clock.now()).message
-        except RequestFailed as exc:
-            raise RuntimeError(f"commit {request_id}: {exc}") from None
-        if not isinstance(reply, Reply):
-            raise RuntimeError(f"commit {request_id}: the service answered a {reply.TYPE}")
-        return reply
-
     # -- the clock and the state stream --------------------------------------------------------
-    def _on_clock(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
+    def _on_clock(self, sample: zenoh.Sample) -> None:
         """A fast tick is the worker's, in turn with tasks; a real-time one is taken at once,
         even while the worker plans (the state thread needs to know the clock is heard)."""
         tick = received(sample, ClockTick, log)
         if tick is None:
             return
-        if tick.mode == "fast":
-            self.inbox.put(_Inbox("tick", tick))
+        if tick.mode == ClockMode.FAST:
+            self.inbox.put(_Tick(tick))
         else:
             self._take(tick)
 
@@ -442,11 +405,11 @@ class Agent:
         while not self.stopping.wait(wait):
             wait = REALTIME_STATE_PERIOD_S
             tick = self.clock.tick
-            if tick is None or tick.mode != "realtime" or self.down:
+            if tick is None or tick.mode != ClockMode.REALTIME or self.down:
                 continue
             if time.monotonic() - self.heard > CLOCK_SILENCE_S:
                 continue  # cut off or stalled: silent until the clock is heard (and says)
-            period = state_period(tick.mode, tick.speed)
+            period = state_period(ClockMode.REALTIME, tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)
             ahead = (self.drive.next_k * period - self.clock.now()) / tick.speed
             wait = min(REALTIME_STATE_PERIOD_S, max(0.0, ahead)) + DUE_MARGIN_S
@@ -466,13 +429,3 @@ class Agent:
     # -- wire ----------------------------------------------------------------------------------
     def _encode(self, message: Message, t: float) -> bytes:
         return encode(message, self.sender, next(self.seq), t)
-
-    def _decode(self, payload: bytes, expected: type | tuple[type, ...], key: str):
-        try:
-            message = decode(payload).message
-            if not isinstance(message, expected):
-                raise ProtocolError(f"a {message.TYPE} does not belong on {key}")
-        except ProtocolError as exc:
-            log.warning("rejected a message on %s: %s", key, exc)
-            raise
-        return message

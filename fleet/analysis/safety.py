@@ -1,11 +1,12 @@
-"""The safety verifier: from what was recorded, did two forklifts ever share a cell at the same
-time, and did any forklift stand outside its own reservation?
+"""The safety verifier: from what was recorded, did two vehicles ever share a cell at the same
+time, and did any vehicle stand outside its own reservation?
 
 Deliberately independent of the code it checks: it imports neither the planner nor the
-reservation table nor the geometry they share. It replays the recorded table changes itself,
-and recomputes the cells under a forklift's body from its recorded pose (x, y, theta) and the
-vehicle's dimensions with its own separating-axis test. Forklifts publish their states on one
-grid of instants, so two forklifts are compared at the very same instants.
+reservation table nor the geometry they share, nor the vehicle kinds. It replays the recorded
+table changes itself, and recomputes the cells under a vehicle's body from its recorded pose
+(x, y, theta) and the numbers of the body's outline with its own separating-axis test.
+Vehicles publish their states on one grid of instants, so two vehicles are compared at the
+very same instants.
 """
 
 from __future__ import annotations
@@ -24,7 +25,9 @@ TOLERANCE_M = 1e-6
 
 @dataclass(frozen=True)
 class Body:
-    """A forklift's rectangle relative to its rear-axle point, and the grid it stands on."""
+    """A vehicle's rectangle about its reference point (its kind's outline: for seed 000's
+    forklift the rear-axle point; a square 1-cell body has front = rear = width / 2), and the
+    grid it stands on."""
 
     front: float
     rear: float
@@ -130,7 +133,7 @@ def _projections_overlap(axis: tuple[float, float], a: list, b: list) -> bool:
 
 
 def overlaps(samples: list[Sample], body: Body) -> list[Overlap]:
-    """Every instant at which two forklifts' bodies were on a common cell."""
+    """Every instant at which two vehicles' bodies were on a common cell."""
     by_time: dict[float, list[Sample]] = defaultdict(list)
     for s in samples:
         by_time[s.t].append(s)
@@ -146,7 +149,7 @@ def overlaps(samples: list[Sample], body: Body) -> list[Overlap]:
 
 
 def outside_reservation(samples: list[Sample], held: list[Held], body: Body) -> list[Outside]:
-    """Every recorded instant at which a forklift's body covered a cell it did not hold."""
+    """Every recorded instant at which a vehicle's body covered a cell it did not hold."""
     windows: dict[tuple[int, Cell], list[tuple[float, float]]] = defaultdict(list)
     for h in held:
         windows[h.vehicle, h.cell].append((h.t0, h.t1))

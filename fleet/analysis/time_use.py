@@ -1,15 +1,16 @@
-"""Where each forklift's time went, from a recording's dispatch events alone.
+"""Where each vehicle's time went, from a recording's dispatch events alone.
 
 Every instant of the mission span [0, T] (T: the later of the last stack done and the last
-forklift parked) is counted once per forklift, in one of these (docs/metrics.md):
+vehicle parked) is counted once per vehicle, in one of these (docs/metrics.md):
 
-- busy: driving a maneuver of a committed trajectory (any but a stop maneuver);
-- stopped: a stop maneuver inside a committed trajectory (standing where it was planned to,
-  to let another forklift pass);
+- busy: driving a step of a committed trajectory (any but a wait, which the vehicle kind
+  names: seed 000's forklift's stop maneuver);
+- stopped: a wait inside a committed trajectory (standing where it was planned to, to let
+  another vehicle pass);
 - postponed: free (its last subtask done, or the mission begun) while its next subtask starts
   later: the dispatcher postponed it, or the real-time clock held it;
 - handling: claiming goods at a station or unloading them at a stack (a fill begins with
-  every forklift claiming its first goods);
+  every vehicle claiming its first goods);
 - down: halted by a fault, from the halt until it is resumed;
 - idle: the rest, with nothing to do (after its last subtask).
 
@@ -18,14 +19,13 @@ waiting = stopped + postponed: what the dispatcher's record keeps as `wait_s`.
 
 from __future__ import annotations
 
-import functools
-import itertools
-import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from fleet.mission.record import SubtaskRecord
 from fleet.params import DispatchParams
-from fleet.planning.maneuvers import Manner, local_pose
+from fleet.vehicles.kind import VehicleKind
 from fleet.wire.protocol import Halt, Resume
 
 BUSY, STOPPED, POSTPONED, HANDLING, DOWN = "busy", "stopped", "postponed", "handling", "down"
@@ -35,7 +35,7 @@ BUSY, STOPPED, POSTPONED, HANDLING, DOWN = "busy", "stopped", "postponed", "hand
 class VehicleStats:
     vehicle: int
     subtasks: int
-    distance_m: float  # each driven maneuver's arc
+    distance_m: float  # each driven step's path
     busy_s: float
     stopped_s: float
     postponed_s: float
@@ -51,32 +51,34 @@ class _Span:
     t0: float
     t1: float
     what: str
-    label: str = ""  # the maneuver, for busy and stopped spans
-    full_s: float = 0.0  # the whole maneuver's duration (a span may be part of it)
+    label: str = ""  # the step, for busy and stopped spans
+    full_s: float = 0.0  # the whole step's duration (a span may be part of it)
 
 
 @dataclass
 class _Timeline:
-    """One forklift's spans as the dispatch events come, in sim-time order."""
+    """One vehicle's spans as the dispatch events come, in sim-time order."""
 
+    kind: VehicleKind
     free: float  # when it may start its next subtask
     spans: list[_Span]
     live: list[tuple[float, list[_Span]]]  # uncut subtasks: their t_end and their spans
     down_from: float | None = None
-    in_progress: _Span | None = None  # the maneuver a forklift that went down stood in
+    in_progress: _Span | None = None  # the step a vehicle that went down stood in
 
-    def subtask(self, s: dict[str, Any]) -> None:
-        own = [_Span(self.free, s["t_i"], POSTPONED)] if s["t_i"] > self.free else []
-        for label, _, _, t0, t1, *_ in s["steps"]:
-            own.append(_Span(t0, t1, STOPPED if label == "stop" else BUSY, label, t1 - t0))
-        own.append(_Span(s["t_end"], s["t_done"], HANDLING))
+    def subtask(self, s: SubtaskRecord) -> None:
+        own = [_Span(self.free, s.t_i, POSTPONED)] if s.t_i > self.free else []
+        for label, _, _, t0, t1, *_ in s.steps:
+            what = STOPPED if self.kind.is_wait(label) else BUSY
+            own.append(_Span(t0, t1, what, label, t1 - t0))
+        own.append(_Span(s.t_end, s.t_done, HANDLING))
         self.spans += own
-        self.live.append((s["t_end"], own))
-        self.free = s["t_done"]
+        self.live.append((s.t_end, own))
+        self.free = s.t_done
 
     def halt(self, h: Halt) -> None:
         """The plan is cut (fleet.mission.engine: Engine._freeze): a subtask not yet arrived at h.t
-        ends with the maneuver in progress (at h.t_stand), or at h.t if the forklift is down,
+        ends with the step in progress (at h.t_stand), or at h.t if the vehicle is down,
         which then stands until resumed."""
         if self.down_from is not None:
             return  # already down
@@ -98,25 +100,27 @@ class _Timeline:
         if self.down_from is None:
             return
         self.spans.append(_Span(self.down_from, r.t, DOWN))
-        if self.in_progress is not None:  # the rest of that maneuver, from where it stood
+        if self.in_progress is not None:  # the rest of that step, from where it stood
             sp = self.in_progress
             self.spans.append(_Span(r.t, r.t_stand, sp.what, sp.label, sp.full_s))
         self.free = max(self.free, r.t_stand)
         self.down_from, self.in_progress = None, None
 
 
-def time_use(subtasks: list[dict[str, Any]], halts: list[Halt], resumes: list[Resume],
-             vehicles: int, span_s: float, kind: str, cell_size: float) -> list[VehicleStats]:
-    """Each forklift's time over [0, span_s], from the subtasks (record_io.subtask_dict, as
+def time_use(subtasks: Sequence[SubtaskRecord], halts: list[Halt], resumes: list[Resume],
+             vehicles: int, span_s: float, kind: str,
+             vehicle_kind: VehicleKind) -> list[VehicleStats]:
+    """Each vehicle's time over [0, span_s], from the subtasks (as
     announced) and the halts and resumes of a recording. A subtask decided before a halt (its
     t_i earlier) is cut by it; the engine applies a fault before any decision at its instant."""
     claim = DispatchParams().t_claim if kind == "fill" else 0.0
-    events: list[tuple[float, int, Any]] = [(s["t_i"], 2, s) for s in subtasks]
+    events: list[tuple[float, int, Any]] = [(s.t_i, 2, s) for s in subtasks]
     events += [(h.t, 0, h) for h in halts] + [(r.t, 1, r) for r in resumes]
     out = []
-    for v in sorted(set(range(1, vehicles + 1)) | {s["vehicle"] for s in subtasks}):
-        line = _Timeline(claim, [_Span(0.0, claim, HANDLING)] if claim else [], [])
-        for _, _, e in sorted((e for e in events if _vehicle(e[2]) == v),
+    for v in sorted(set(range(1, vehicles + 1)) | {s.vehicle for s in subtasks}):
+        line = _Timeline(vehicle_kind, claim, [_Span(0.0, claim, HANDLING)] if claim else [],
+                         [])
+        for _, _, e in sorted((e for e in events if e[2].vehicle == v),
                               key=lambda e: (e[0], e[1])):
             if isinstance(e, Halt):
                 line.halt(e)
@@ -126,17 +130,13 @@ def time_use(subtasks: list[dict[str, Any]], halts: list[Halt], resumes: list[Re
                 line.subtask(e)
         if line.down_from is not None:
             line.spans.append(_Span(line.down_from, span_s, DOWN))
-        out.append(_stats(v, sum(s["vehicle"] == v for s in subtasks), line.spans, span_s,
-                          cell_size))
+        out.append(_stats(v, sum(s.vehicle == v for s in subtasks), line.spans, span_s,
+                          vehicle_kind))
     return out
 
 
-def _vehicle(event: Any) -> int:
-    return event["vehicle"] if isinstance(event, dict) else event.vehicle
-
-
 def _stats(vehicle: int, subtasks: int, spans: list[_Span], span_s: float,
-           cell_size: float) -> VehicleStats:
+           vehicle_kind: VehicleKind) -> VehicleStats:
     seconds = dict.fromkeys((BUSY, STOPPED, POSTPONED, HANDLING, DOWN), 0.0)
     distance = 0.0
     for sp in spans:
@@ -145,17 +145,10 @@ def _stats(vehicle: int, subtasks: int, spans: list[_Span], span_s: float,
             continue
         seconds[sp.what] += d
         if sp.what == BUSY and sp.full_s > 0:
-            distance += maneuver_length(sp.label) * cell_size * min(1.0, d / sp.full_s)
+            distance += vehicle_kind.path_length_m(sp.label) * min(1.0, d / sp.full_s)
     return VehicleStats(
         vehicle, subtasks, distance, seconds[BUSY], seconds[STOPPED], seconds[POSTPONED],
         seconds[STOPPED] + seconds[POSTPONED], seconds[HANDLING], seconds[DOWN],
         max(0.0, span_s - sum(seconds.values())),
         seconds[BUSY] / span_s if span_s > 0 else 0.0)
 
-
-@functools.cache
-def maneuver_length(label: str) -> float:
-    """Path length of a maneuver in cells (its rear-axle point's arc, finely sampled)."""
-    manner = Manner.from_label(label)
-    points = [local_pose(manner, k / 200)[:2] for k in range(201)]
-    return sum(math.dist(a, b) for a, b in itertools.pairwise(points))

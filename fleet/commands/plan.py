@@ -10,8 +10,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fleet.errors import UserError
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.argtypes import (
@@ -22,7 +20,9 @@ from fleet.runtime.argtypes import (
     sim_seconds,
     text_file,
 )
-from fleet.world.layout import Layout, load_layout
+from fleet.vehicles.kind import Planner
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
 
 
@@ -63,7 +63,8 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
     scene = Scene()
     scene.filled = filled_counts(layout, data.get("filled", {}))
     scene.start = resolve(layout, my_start, scene.filled)[0]
-    table.park(me, body_cells_at_rest(scene.start.cell, scene.start.heading), 0.0)
+    kind = layout.vehicle_kind
+    table.park(me, kind.body_cells_at_rest(scene.start), 0.0)
     planner = planner_for(scene.filled)
     vehicles = data.get("vehicle", [])
     starts = {}
@@ -73,10 +74,10 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if vid == me:
             raise UserError(f"{where}: id {vid} is the planning vehicle itself")
         starts[vid] = resolve(layout, entry["from"], scene.filled)[0]
-        conflict = table.park(vid, body_cells_at_rest(starts[vid].cell, starts[vid].heading),
-                              0.0)
-        if conflict is not None:
-            who = "the planning vehicle" if conflict.other == me else f"vehicle {conflict.other}"
+        parked = table.park(vid, kind.body_cells_at_rest(starts[vid]), 0.0)
+        if not parked.ok:
+            other = parked.conflict_vehicle
+            who = "the planning vehicle" if other == me else f"vehicle {other}"
             raise UserError(f"{where}: start {starts[vid]} overlaps {who}")
     for i, entry in enumerate(vehicles):
         if "to" not in entry:
@@ -87,13 +88,15 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if isinstance(result, PlanFailure):
             raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be planned: "
                             f"{result.reason.value}: {result.detail}")
-        table.commit(vid, result.intervals, release_from=result.t_start)
-        scene.others.append(result)
+        leg = kind.conflict_policy.commitment(result, table)
+        table.commit(vid, leg.intervals, release_from=leg.release_from)
+        scene.others.append(leg.trajectory)
     for i, entry in enumerate(data.get("reservation", [])):
         iv = Interval(entry["cell"], entry["t0"], entry.get("t1", math.inf))
-        conflict = table.commit(entry["vehicle"], [iv])
-        if conflict is not None:
-            raise UserError(f"{path}: reservation[{i}] overlaps vehicle {conflict.other}")
+        written = table.commit(entry["vehicle"], [iv])
+        if not written.ok:
+            raise UserError(f"{path}: reservation[{i}] overlaps vehicle "
+                            f"{written.conflict_vehicle}")
     return scene
 
 
@@ -205,13 +208,10 @@ def run(args: argparse.Namespace) -> int:
                         f"{forklifts}" if forklifts else
                         f"--vehicle {args.vehicle}: layout {layout.name} has no forklifts "
                         f"(no start poses)")
-    planners: dict[frozenset, HybridAStar] = {}
+    planners = layout.vehicle_kind.planners(layout.grid_map)
 
-    def planner_for(filled) -> HybridAStar:
-        key = frozenset(filled)
-        if key not in planners:
-            planners[key] = HybridAStar(layout.grid_map(key), layout.vehicle.dims)
-        return planners[key]
+    def planner_for(filled) -> Planner:
+        return planners.get(frozenset(filled))
 
     table = ReservationTable()
     scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle, args.start)

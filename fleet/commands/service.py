@@ -11,6 +11,7 @@ import socket
 import sys
 from pathlib import Path
 
+from fleet.commands.processes import serve
 from fleet.runtime.deploy import (
     ACL_FILE,
     MAX_VEHICLES,
@@ -20,7 +21,7 @@ from fleet.runtime.deploy import (
     VEHICLE_ID_FILE,
     config_from_env,
     password_file,
-    service_args,
+    service_config,
 )
 
 HEALTH_TIMEOUT_S = 3.0
@@ -43,9 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_service(args: argparse.Namespace) -> int:
     config = config_from_env(os.environ)
-    argv = service_args(args.name, config)
+    process = service_config(args.name, config)
     if args.print:
-        print(shlex.join(["fleet", *argv]))
+        print(shlex.join(["fleet", *process.argv()]))
         return 0
     if args.health:
         return 0 if healthy(args.name, config) else 1
@@ -53,13 +54,11 @@ def run_service(args: argparse.Namespace) -> int:
         import json
 
         from fleet.runtime.access import router_acl
-        from fleet.runtime.bus import Keys
+        from fleet.wire.topics import Keys
 
         Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
         Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
-    from fleet.cli import main
-
-    return main(argv)
+    return serve(process)
 
 
 def healthy(name: str, config) -> bool:
@@ -71,8 +70,9 @@ def healthy(name: str, config) -> bool:
                 return True
         except OSError:
             return False
-    from fleet.runtime.access import read_dictionary, vehicle_user
-    from fleet.runtime.bus import BusConfig, Keys, open_session, wait_alive
+    from fleet.runtime.access import read_dictionary
+    from fleet.runtime.bus import BusConfig, open_session, wait_alive
+    from fleet.wire.topics import Keys, vehicle_sender
 
     keys = Keys(config.run)
     user, password = "", ""
@@ -83,7 +83,7 @@ def healthy(name: str, config) -> bool:
             return False  # no id claimed yet
         token = keys.vehicle_alive(vehicle)
         if config.secure:
-            user = vehicle_user(vehicle)
+            user = vehicle_sender(vehicle)
             password = read_dictionary(Path(SECRETS / "fleet_vehicle_logins"))[user]
     else:
         token = {"reservation": keys.reservation_alive, "dispatcher": keys.dispatcher_alive,

@@ -1,13 +1,12 @@
-"""Where a forklift is at a sim time, from the trajectories it committed (pure; no I/O).
+"""Where a vehicle is at a sim time, from the trajectories it committed (pure; no I/O).
 
-A forklift stands at rest at its pose until its next trajectory starts, then follows the
-trajectory maneuver by maneuver, and stands at the goal after it ends. Within a maneuver the
-progress is linear in time; the cells a maneuver sweeps are reserved for its whole window, so
-any progress profile stays inside the reservation.
+A vehicle stands at rest at its pose until its next trajectory starts, then follows the
+trajectory step by step, and stands at the goal after it ends; where it is within a step is
+its kind's motion model (fleet.vehicles).
 
-States are published at the instants k * period of one grid shared by every forklift (0.5 s
+States are published at the instants k * period of one grid shared by every vehicle (0.5 s
 of sim time in fast mode, 0.1 s of wall time in real time), so a verifier can compare the
-forklifts' poses at the very same instants. In fast mode a tick at t publishes the instants
+vehicles' poses at the very same instants. In fast mode a tick at t publishes the instants
 before t only: a subtask decided at t may still start at t.
 """
 
@@ -16,8 +15,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from fleet.planning.maneuvers import Manner, world_pose
+from fleet.mission.spec import ClockMode
 from fleet.planning.trajectory import Pose, Step, Trajectory
+from fleet.vehicles.kind import Placement
 from fleet.wire.protocol import VehicleState
 from fleet.world.layout import Layout
 
@@ -27,8 +27,9 @@ REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (1
 
 def state_period(mode: str, speed: float) -> float:
     """Sim seconds between two states: the fast grid, or 10 Hz of wall time but never coarser
-    than the fast grid, so the recording's safety check sees as much at any speed."""
-    if mode != "realtime":
+    than the fast grid, so the recording's safety check sees as much at any speed. `mode` is a
+    ClockMode, or a recording's clock ("inprocess" runs on the fast grid)."""
+    if mode != ClockMode.REALTIME:
         return FAST_STATE_PERIOD_S
     return min(speed * REALTIME_STATE_PERIOD_S, FAST_STATE_PERIOD_S)
 
@@ -37,8 +38,8 @@ def state_period(mode: str, speed: float) -> float:
 class Leg:
     trajectory: Trajectory
     loaded: bool
-    # A forklift that went down stands still over [pause_from, pause_to) part-way through
-    # its maneuver, then completes it: the leg runs that much later.
+    # A vehicle that went down stands still over [pause_from, pause_to) part-way through
+    # its step, then completes it: the leg runs that much later.
     pause_from: float = math.inf
     pause_to: float = math.inf
 
@@ -59,22 +60,23 @@ class Drive:
     def __init__(self, vehicle: int, pose: Pose, layout: Layout) -> None:
         self.vehicle = vehicle
         self.layout = layout
-        self.rest_pose = pose  # where the forklift stands when no leg covers t
+        self.vehicle_kind = layout.vehicle_kind
+        self.rest_pose = pose  # where the vehicle stands when no leg covers t
         self.legs: list[Leg] = []
         self.loaded = False
         self.next_k = 0  # grid index of the next state to publish
 
     @property
     def pose(self) -> Pose:
-        """Where the forklift will stand once every committed leg is driven."""
+        """Where the vehicle will stand once every committed leg is driven."""
         return self.legs[-1].trajectory.goal if self.legs else self.rest_pose
 
     def add(self, trajectory: Trajectory, loaded: bool) -> None:
         self.legs.append(Leg(trajectory, loaded))
 
     def cut(self, t: float) -> None:
-        """Drive nothing committed after the maneuver in progress at t (legs not started by
-        t go; the one in progress ends with that maneuver)."""
+        """Drive nothing committed after the step in progress at t (legs not started by t go;
+        the one in progress ends with that step)."""
         kept = []
         for leg in self.legs:
             if leg.trajectory.t_start >= t:
@@ -89,13 +91,13 @@ class Drive:
         self.legs = kept
 
     def stop(self, t: float) -> None:
-        """Stand still from t where the forklift is (it is down), until `resume`."""
+        """Stand still from t where the vehicle is (it is down), until `resume`."""
         self.cut(t)
         if self.legs and self.legs[-1].t_end > t:
             self.legs[-1].pause_from, self.legs[-1].pause_to = t, math.inf
 
     def resume(self, t: float) -> None:
-        """Move again from t: the maneuver stopped part-way is completed first."""
+        """Move again from t: the step stopped part-way is completed first."""
         for leg in self.legs:
             if leg.pause_to == math.inf and leg.pause_from <= t:
                 leg.pause_to = t
@@ -113,7 +115,7 @@ class Drive:
             self.legs = [Leg(traj, loaded, t_stop, t_resume)]
 
     def skip_to(self, t: float, period: float) -> None:
-        """Publish no state for instants before t (the forklift was down: nothing was said)."""
+        """Publish no state for instants before t (the vehicle was down: nothing was said)."""
         self.next_k = max(self.next_k, math.ceil(t / period - 1e-9))
 
     def forget_before(self, t: float) -> None:
@@ -136,11 +138,8 @@ class Drive:
             tau = leg.local(t)
             for step in traj.steps:
                 if step.t0 <= tau < step.t1:
-                    s = (tau - step.t0) / (step.t1 - step.t0)
-                    speed = int(max(step.v0, step.v1)) if step.manner is not Manner.STOP else 0
-                    return self._state(step.start, step.manner, s, speed, loaded,
-                                       step.manner.label)
-        return self._state(pose, Manner.STOP, 0.0, 0, loaded, "")
+                    return self._state(self.vehicle_kind.on_step(step, tau), loaded)
+        return self._state(self.vehicle_kind.at_rest(pose), loaded)
 
     def due(self, until: float, period: float, before: bool = False) -> list[float]:
         """The grid instants k * period up to `until` (with `before`, only those before it)
@@ -156,9 +155,7 @@ class Drive:
         self.next_k = max(self.next_k, last + 1)
         return out
 
-    def _state(self, start: Pose, manner: Manner, s: float, speed: int, loaded: bool,
-               label: str) -> VehicleState:
-        x, y, theta = world_pose(start.cell, start.heading, manner, s, self.layout.cell_size)
+    def _state(self, at: Placement, loaded: bool) -> VehicleState:
         ox, oy = self.layout.origin
-        return VehicleState(self.vehicle, str(start), speed, label, loaded, x + ox, y + oy,
-                            theta)
+        return VehicleState(self.vehicle, str(at.pose), at.speed, at.step, loaded, at.x + ox,
+                            at.y + oy, at.theta)

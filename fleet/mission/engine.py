@@ -36,11 +36,11 @@ from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
-from fleet.planning.planner import HybridAStar, PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Trajectory
 from fleet.wire.protocol import DecisionFailure, Message, StackDone
-from fleet.world.layout import Layout, LayoutError, load_layout
+from fleet.world.layout import Layout, LayoutError
+from fleet.world.layout_file import load_layout
 
 
 class MissionStuck(UserError):
@@ -111,8 +111,9 @@ class Engine:
         self.mission = mission
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
-        self.planners = PlannerCache(self.layout.grid_map, self.layout.vehicle.dims)
-        self.executor = executor or LocalExecutor(self.planners)
+        self.vehicle_kind = self.layout.vehicle_kind
+        self.planners = self.vehicle_kind.planners(self.layout.grid_map)
+        self.executor = executor or LocalExecutor(self.vehicle_kind, self.planners)
         self.pacer = pacer or NoPacer()
         starts = list(mission.starts or self.layout.vehicle_starts)
         n = mission.vehicles if mission.vehicles is not None else len(starts)
@@ -286,7 +287,9 @@ class Engine:
             self._emit(StackDone(served.cluster, served.index, v.vehicle, t_done), t_done)
             self.record.end_time = max(self.record.end_time, t_done)
         self.faults.committed(dataclasses.replace(v), traj)
-        v.drive(decision.kind, target.name, traj, t_done)
+        waited = sum(s.t1 - s.t0 for s in traj.steps
+                     if self.vehicle_kind.is_wait(s.manner.label))
+        v.drive(decision.kind, target.name, traj, t_done, waited)
         self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(decision.kind)))
         subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,
                           target.stack_cell, decision.t_i, traj.t_end, t_done, traj,
@@ -315,10 +318,10 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
     order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
     empty = ReservationTable()
-    planners: dict[frozenset[Cell], HybridAStar] = {}
+    planners = layout.vehicle_kind.planners(layout.grid_map)
     for stack in order:
         key = frozenset(present - {stack.cell})
-        planner = planners.setdefault(key, HybridAStar(layout.grid_map(key), layout.vehicle.dims))
+        planner = planners.get(key)
         goals = layout.unload_poses(stack.cell, key)
         best = math.inf
         for st in layout.stations:

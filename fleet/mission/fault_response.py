@@ -28,7 +28,6 @@ from fleet.mission.seam import Executor
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import MissionWork
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import Manner, world_pose
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.protocol import Halt, Message, Resume, StackReopened, ZoneClosed
 from fleet.world.layout import Layout
@@ -164,16 +163,12 @@ class FaultResponse:
 
 def halt_message(freeze: Freeze, cause: str, moving: bool, layout: Layout) -> Halt:
     """The dispatcher's word that a forklift stops, with where it stands in the world."""
-    step = freeze.step
-    if step is None:
-        at, heading, manner, s = freeze.pose.cell, freeze.pose.heading, Manner.STOP, 0.0
-    else:
-        at, heading, manner, s = step.start.cell, step.start.heading, step.manner, \
-            freeze.fraction
-    x, y, theta = world_pose(at, heading, manner, s, layout.cell_size)
+    kind = layout.vehicle_kind
+    at = kind.at_rest(freeze.pose) if freeze.step is None else kind.on_step(freeze.step,
+                                                                             freeze.t)
     ox, oy = layout.origin
     return Halt(freeze.vehicle, freeze.t, cause, moving, str(freeze.pose), freeze.t_stand,
-                sorted(freeze.cells), x + ox, y + oy, theta)
+                sorted(freeze.cells), at.x + ox, at.y + oy, at.theta)
 
 
 def _truncated(traj: Trajectory, freeze: Freeze) -> Trajectory | None:

@@ -44,13 +44,6 @@ class Freeze:
     pose: Pose  # where it stands once that maneuver is over
     t_stand: float  # when it stands there, if it can move
 
-    @property
-    def fraction(self) -> float:
-        """How much of the maneuver in progress was driven at t."""
-        if self.step is None:
-            return 1.0
-        return (self.t - self.step.t0) / (self.step.t1 - self.step.t0)
-
 
 def freeze_of(motion: Motion, t: float) -> Freeze:
     pose = motion.rest

@@ -1,8 +1,8 @@
-"""The seam between the dispatching loop and the forklifts (DESIGN.md section 7, the one
-store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
+"""The seam between the dispatching loop and the forklifts (one interface, whatever holds
+the reservations): the engine decides subtasks; an `Executor` plans and commits them, and a
 `Pacer` holds the loop to a clock.
 
-In one process, `LocalExecutor` plans with the improved hybrid A* against a
+In one process, `LocalExecutor` plans with the vehicle kind's planner against a
 `ReservationTable` it owns and `NoPacer` lets the loop run flat out. The distributed runtime
 implements the same two interfaces over zenoh (`dispatcher.remote`): a task goes to the
 forklift's agent process, which plans against its mirror of the reservation service and
@@ -22,11 +22,10 @@ from fleet.dispatching.decision import TaskKind
 from fleet.errors import UserError
 from fleet.mission.freeze import Disruption, Freeze
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import body_cells_at_rest
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
-from fleet.wire.protocol import Change
+from fleet.vehicles.kind import Planners, VehicleKind
+from fleet.wire.protocol import GOODS, ZONE
 
 
 class VehicleLost(UserError):
@@ -98,64 +97,48 @@ class Pacer(Protocol):
         effect (a freeze every forklift must hear of before it)."""
 
 
-GOODS = 0  # owner id of stacks with goods on them, in the reservation table
-ZONE = -1  # owner id of closed zones
-
-
 class LocalExecutor:
-    """Plans in this process against a table this process owns."""
+    """Plans in this process against a table this process owns, and writes it directly (the
+    table is a `ReservationWriter`, as the reservation service's client is across processes).
+    The table's change log is what a reservation service would have published."""
 
-    def __init__(self, planners: PlannerCache) -> None:
+    def __init__(self, vehicle_kind: VehicleKind, planners: Planners) -> None:
+        self.vehicle_kind = vehicle_kind
         self.planners = planners
         self.table = ReservationTable()
-        self.changes: list[Change] = []  # what a reservation service would have published
-
-    def _log(self, vehicle: int, intervals: Sequence[Interval],
-             release_from: float | None, cells: Sequence[Cell] | None = None) -> None:
-        op = "commit" if intervals else "release"
-        self.changes.append(Change(self.table.revision, op, vehicle,
-                                   [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals],
-                                   release_from,
-                                   release_cells=None if cells is None else list(cells)))
 
     @property
     def store(self) -> ReservationTable:
         return self.table
 
     def park(self, vehicle: int, pose: Pose) -> None:
-        cells = body_cells_at_rest(pose.cell, pose.heading)
-        conflict = self.table.park(vehicle, cells, 0.0)
-        if conflict is not None:
+        written = self.table.park(vehicle, self.vehicle_kind.body_cells_at_rest(pose), 0.0)
+        if not written.ok:
             raise ValueError(f"start pose {pose} of vehicle {vehicle} overlaps vehicle "
-                             f"{conflict.other}")
-        self._log(vehicle, [Interval(c, 0.0, math.inf) for c in cells], None)
+                             f"{written.conflict_vehicle}")
 
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         result = self.planners.get(task.filled).plan(task.vehicle, task.start, task.t_i,
                                                      task.goals, self.table)
-        if isinstance(result, Trajectory):
-            conflict = self.table.commit(task.vehicle, result.intervals,
-                                         release_from=result.t_start)
-            if conflict is not None:  # the planner checked against this very table
-                raise AssertionError(f"planned trajectory conflicts: {conflict}")
-            self._log(task.vehicle, result.intervals, result.t_start)
-        return result
+        if isinstance(result, PlanFailure):
+            return result
+        leg = self.vehicle_kind.conflict_policy.commitment(result, self.table)
+        written = self.table.commit(task.vehicle, leg.intervals, leg.release_from)
+        if not written.ok:  # the policy settled against this very table
+            raise AssertionError(f"planned trajectory conflicts: {written.reason}")
+        return leg.trajectory
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
-        if self.table.commit(GOODS, intervals) is None:
-            self._log(GOODS, intervals, None)
+        self.table.commit(GOODS, intervals)  # refused where a vehicle holds the cell
 
     def freeze(self, t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
                zone_until: float, moving: list[int], standing: list[int]) -> None:
-        for change in freeze_changes(t, freezes, goods, zone, zone_until):
-            owner, intervals, release_from, cells = change
-            if intervals:
-                conflict = self.table.commit(owner, intervals)
-                if conflict is not None:  # the cascade left nothing in the way
-                    raise AssertionError(f"freeze at t={t} conflicts: {conflict}")
-            else:
+        for owner, intervals, release_from, cells in freeze_changes(t, freezes, goods, zone,
+                                                                    zone_until):
+            written = self.table.commit(owner, intervals) if intervals else \
                 self.table.release(owner, release_from, cells)
-            self._log(owner, intervals, release_from, cells)
+            if not written.ok:  # the cascade left nothing in the way
+                raise AssertionError(f"freeze at t={t} conflicts: {written.reason}")
 
     def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
         pass  # the table already holds the forklift's cells to infinity

@@ -1,9 +1,10 @@
-"""Missions as data: what the fleet must do, on which layout, with which strategy and seed."""
+"""Missions as data: what the fleet must do, on which layout, with which strategy and seed;
+and the clock a run of them keeps."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import Enum, StrEnum
 
 from fleet.dispatching.decision import Strategy
 from fleet.planning.trajectory import Pose
@@ -12,6 +13,13 @@ from fleet.planning.trajectory import Pose
 class MissionKind(Enum):
     FILL = "fill"  # goods picked at stations, delivered to stacks in fill order
     EMPTY = "empty"  # goods fetched from stacks in reverse fill order, dropped at stations
+
+
+class ClockMode(StrEnum):
+    """How sim time runs in a run of processes; the wire and the recordings carry the value."""
+
+    FAST = "fast"  # discrete events: the clock jumps to each decision, deterministic
+    REALTIME = "realtime"  # sim time = speed x wall time since the start
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from fleet.dispatching.decision import TaskKind, VehicleView
-from fleet.planning.maneuvers import Manner
 from fleet.planning.trajectory import Pose, Trajectory
 
 
@@ -30,12 +29,12 @@ class VehicleSlot:
         self.wait_s += t - self.t_free
         self.t_free = t
 
-    def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float) -> None:
-        """A subtask committed: it stands at the goal from t_done on, and does the other
-        kind of subtask next."""
-        stops = sum(s.t1 - s.t0 for s in traj.steps if s.manner is Manner.STOP)
-        self.busy_s += traj.t_end - traj.t_start - stops
-        self.wait_s += stops
+    def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float,
+              waited: float) -> None:
+        """A subtask committed (`waited`: the seconds of its steps that wait in place): it
+        stands at the goal from t_done on, and does the other kind of subtask next."""
+        self.busy_s += traj.t_end - traj.t_start - waited
+        self.wait_s += waited
         self.pose = traj.goal
         self.t_free = t_done
         deliver = kind is TaskKind.DELIVER

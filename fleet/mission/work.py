@@ -20,9 +20,9 @@ from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.mission.spec import MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
-from fleet.planning.planner import PlannerCache
 from fleet.planning.reservations import Interval, ReservationView
 from fleet.planning.trajectory import Pose
+from fleet.vehicles.kind import Planners
 from fleet.world.layout import Layout, Stack
 
 
@@ -98,7 +98,7 @@ class StackWork(ABC):
     say which way the goods go."""
 
     def __init__(self, layout: Layout, params: DispatchParams, store: ReservationView,
-                 planners: PlannerCache) -> None:
+                 planners: Planners) -> None:
         self.layout = layout
         self.params = params
         self.store = store
@@ -274,5 +274,5 @@ WORK_KINDS: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,
 
 
 def mission_work(kind: MissionKind, layout: Layout, params: DispatchParams,
-                 store: ReservationView, planners: PlannerCache) -> MissionWork:
+                 store: ReservationView, planners: Planners) -> MissionWork:
     return WORK_KINDS[kind](layout, params, store, planners)

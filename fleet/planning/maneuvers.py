@@ -14,6 +14,7 @@ rectangles, for every manner and heading.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from enum import Enum
@@ -89,6 +90,13 @@ def local_pose(manner: Manner, s: float) -> tuple[float, float, float]:
         ahead = 2 - LANE_RADIUS * math.sin(phi)
         left = 1 - LANE_RADIUS * (1 - math.cos(phi))
     return d * ahead, side * left, d * side * phi
+
+
+@cache
+def arc_length(manner: Manner) -> float:
+    """Path length of a manner in cells (the rear-axle point's arc, finely sampled)."""
+    points = [local_pose(manner, k / 200)[:2] for k in range(201)]
+    return sum(math.dist(a, b) for a, b in itertools.pairwise(points))
 
 
 def end_offset(manner: Manner) -> tuple[Cell, int]:

@@ -1,8 +1,10 @@
 """Space-time reservation table: per grid cell, sorted non-overlapping [t0, t1) intervals, each
 owned by one vehicle.
 
-This is the data structure the reservation service holds; planners talk to it through the
-`ReservationView` protocol, so an in-process table and a remote store are interchangeable.
+This is the data structure the reservation service holds; planners read it through the
+`ReservationView` protocol and participants change it through the `ReservationWriter` protocol
+(rmf_traffic's Viewer and Writer), so an in-process table and the remote service
+(reservation/client.py) are interchangeable.
 Intervals of one vehicle that touch or overlap in a cell are merged, so a cell's intervals never
 overlap at all; intervals of different vehicles may touch (one leaves at t, the other enters at
 t) but never overlap. Every change bumps the revision and is kept as a `Change`, from which a
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -44,6 +46,24 @@ class Conflict:
     t0: float
     t1: float
     other: int
+
+    @property
+    def reason(self) -> str:
+        return f"cell {self.cell} is held by vehicle {self.other} over [{self.t0}, {self.t1})"
+
+
+@dataclass(frozen=True)
+class WriteResult:
+    """A writer's answer to a commit or release: made (`ok`), the table at `revision`; or
+    refused, the table unchanged at `revision`, with the reason."""
+
+    ok: bool
+    revision: int
+    reason: str = ""
+    # The vehicle holding a cell the commit wanted, and that cell. None on a refusal for
+    # another reason (halted since, too late), which replanning cannot cure.
+    conflict_vehicle: int | None = None
+    conflict_cell: Cell | None = None
 
 
 @dataclass(frozen=True)
@@ -82,6 +102,24 @@ class ReservationView(Protocol):
         ...
 
 
+class ReservationWriter(Protocol):
+    """How a participant changes a store: the table itself in one process, the reservation
+    service's client (reservation/client.py) across processes."""
+
+    def commit(self, vehicle: int, intervals: Sequence[Interval],
+               release_from: float | None = None) -> WriteResult:
+        """All or nothing: if no interval conflicts with another vehicle, release this
+        vehicle's reservations from `release_from` on (when given) and add the intervals;
+        otherwise change nothing and name the first conflict."""
+        ...
+
+    def release(self, vehicle: int, from_t: float = -INF,
+                cells: Collection[Cell] | None = None) -> WriteResult:
+        """Drop what the vehicle holds from `from_t` on (intervals straddling it are cut), on
+        `cells` only when given (ValueError for an empty collection)."""
+        ...
+
+
 @dataclass
 class _CellLine:
     starts: list[float] = field(default_factory=list)
@@ -90,7 +128,8 @@ class _CellLine:
 
 
 class ReservationTable:
-    """The table itself. Not thread-safe; the service serialises access."""
+    """The table itself, a `ReservationView` and a `ReservationWriter`. Not thread-safe; the
+    service serialises access."""
 
     def __init__(self) -> None:
         self._cells: dict[Cell, _CellLine] = {}
@@ -142,25 +181,29 @@ class ReservationTable:
 
     # -- changes -------------------------------------------------------------------------------
     def commit(self, vehicle: int, intervals: Iterable[Interval],
-               release_from: float | None = None) -> Conflict | None:
+               release_from: float | None = None) -> WriteResult:
         """All or nothing: if no interval conflicts with another vehicle, release this
-        vehicle's reservations from `release_from` on (when given) and add the intervals.
-        Returns the first conflict (and changes nothing) otherwise."""
+        vehicle's reservations from `release_from` on (when given) and add the intervals;
+        otherwise change nothing and name the first conflict."""
         intervals = tuple(intervals)
         conflict = self.first_conflict(vehicle, intervals)
         if conflict is not None:
-            return conflict
+            return WriteResult(False, self.revision, conflict.reason, conflict.other,
+                               conflict.cell)
         self._apply(Change(self.revision + 1, vehicle, release_from, intervals))
-        return None
+        return WriteResult(True, self.revision)
 
     def release(self, vehicle: int, from_t: float = -INF,
-                cells: Iterable[Cell] | None = None) -> None:
+                cells: Iterable[Cell] | None = None) -> WriteResult:
         """Drop what the vehicle holds from `from_t` on (intervals straddling it are cut), on
-        `cells` only when given."""
-        self._apply(Change(self.revision + 1, vehicle, from_t, (),
-                           None if cells is None else frozenset(cells)))
+        `cells` only when given (never none: on the wire, no cells means all)."""
+        only = None if cells is None else frozenset(cells)
+        if only is not None and not only:
+            raise ValueError("a release of no cells releases nothing; give None for all")
+        self._apply(Change(self.revision + 1, vehicle, from_t, (), only))
+        return WriteResult(True, self.revision)
 
-    def park(self, vehicle: int, cells: Iterable[Cell], t0: float) -> Conflict | None:
+    def park(self, vehicle: int, cells: Iterable[Cell], t0: float) -> WriteResult:
         """Reserve cells from t0 to infinity."""
         return self.commit(vehicle, [Interval(c, t0, INF) for c in cells])
 

@@ -22,13 +22,15 @@ from dataclasses import dataclass, field
 import zenoh
 
 from fleet.mission.faults import Fault, FaultKind, Scenario
-from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, received, wait_gone
+from fleet.mission.spec import ClockMode
+from fleet.runtime.bus import Requester, RequestFailed, Stream, received, wait_gone
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.linkproxy import LinkProxy
 from fleet.wire.protocol import ClockAck, ClockTick, InjectFault, Reply
+from fleet.wire.topics import INJECTOR, Keys
 
 log = logging.getLogger("fleet.runtime.injector")
-SENDER = "injector"
+SENDER = INJECTOR
 INJECTOR_ID = 0  # its ClockAck's vehicle field
 ACK_WAIT_S = 10.0
 SERVICE_GONE_S = 10.0
@@ -71,7 +73,7 @@ class Injector:
                               key=lambda pair: pair[0].t)
         self.requester = Requester(self.session, SENDER, timeout_s=10.0, retry_s=10.0)
         self.inbox: queue.Queue[zenoh.Sample | None] = queue.Queue()
-        self.ack = Stream(self.session, self.keys.clock_ack("injector"), SENDER, reliable=True)
+        self.ack = Stream(self.session, self.keys.injector_ack, SENDER, reliable=True)
         self.acked: dict[int, int] = {}  # forklift -> last tick it acknowledged
         self.acks = threading.Condition()
         self.subscribers = [
@@ -108,7 +110,7 @@ class Injector:
                 last = tick
             if last is None:
                 continue
-            fast = last.mode == "fast"
+            fast = last.mode == ClockMode.FAST
             now = last.t if fast else last.t + last.speed * (time.time() - last.wall)
             while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
@@ -127,7 +129,7 @@ class Injector:
 
     def _until_due(self, last: ClockTick | None) -> float | None:
         """Wall seconds to the next action on a real-time clock (None: wait for a tick)."""
-        if last is None or last.mode == "fast" or not self.actions:
+        if last is None or last.mode == ClockMode.FAST or not self.actions:
             return None
         due = last.wall + (self.actions[0][0].t - last.t) / last.speed
         return max(0.0, due - time.time())

@@ -38,10 +38,9 @@ from foxglove.messages import (
     Vector3,
 )
 
-from fleet.mission.seam import GOODS
 from fleet.planning.geometry import Cell
 from fleet.views.palette import GOODS_COLOR, RACK_COLOR, STATION_COLOR, forklift_color
-from fleet.wire.protocol import Change, Message, StackDone, VehicleState
+from fleet.wire.protocol import GOODS, Message, StackDone, VehicleState, WireChange
 from fleet.world.layout import Layout
 
 FRAME = "warehouse"
@@ -159,7 +158,7 @@ class SceneViews:
         that change nothing. The kind is told by the message's type, so `key` is unused."""
         if isinstance(message, VehicleState):
             return self._on_state(message, sim_time)
-        if isinstance(message, Change):
+        if isinstance(message, WireChange):
             self._on_change(message)
             return []  # shown with the forklift's next state, at most 0.5 s later
         if isinstance(message, StackDone):
@@ -204,7 +203,7 @@ class SceneViews:
             entities=[self._reserved_ahead(v, t, ns) for v in vehicles]), ns))
         return views
 
-    def _on_change(self, change: Change) -> None:
+    def _on_change(self, change: WireChange) -> None:
         if change.vehicle == GOODS:
             return  # goods are drawn from StackDone, on their own topic
         if change.op == "release":

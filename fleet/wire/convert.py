@@ -1,16 +1,27 @@
-"""Paired conversions between core objects and wire messages (fleet/wire/protocol.py). Every
-`*_from_wire` validates what `decode` does not (pose syntax of the free-text fields, enum
-values, time order) and raises ProtocolError naming the field."""
+"""Paired conversions between core objects and wire messages (fleet/wire/protocol.py), each
+written once. Every `*_from_wire` validates what `decode` does not (pose syntax of the
+free-text fields, enum values, time order) and raises ProtocolError naming the field; the
+interval and change conversions raise the interval's own ValueError (their callers know the
+field, and the reservation store answers with that text as it is)."""
 
 from __future__ import annotations
+
+from collections.abc import Iterable
 
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.seam import Task
 from fleet.planning.maneuvers import Manner
-from fleet.planning.reservations import Interval
+from fleet.planning.reservations import Change, Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Step, Trajectory
 from fleet.planning.velocity import Speed
-from fleet.wire.protocol import ProtocolError, TaskRequest, TaskResult, WireStep
+from fleet.wire.protocol import (
+    ProtocolError,
+    TaskRequest,
+    TaskResult,
+    WireChange,
+    WireInterval,
+    WireStep,
+)
 
 
 def _pose(text: str, where: str) -> Pose:
@@ -44,10 +55,9 @@ def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure,
         return TaskResult(task_id, vehicle, False, revision, failure=result.reason.value,
                           detail=result.detail, expansions=result.expansions,
                           rejections=rejections)
-    steps = [step_to_wire(s) for s in result.steps]
-    intervals = [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in result.intervals]
     return TaskResult(task_id, vehicle, True, revision, str(result.start), str(result.goal),
-                      result.t_start, steps, intervals, result.expansions,
+                      result.t_start, [step_to_wire(s) for s in result.steps],
+                      intervals_to_wire(result.intervals), result.expansions,
                       rejections=rejections)
 
 
@@ -62,7 +72,7 @@ def result_from_wire(message: TaskResult) -> Trajectory | PlanFailure:
     steps = [step_from_wire(step, f"{where}.steps[{i}]")
              for i, step in enumerate(message.steps)]
     try:
-        intervals = tuple(Interval((c, r), t0, t1) for c, r, t0, t1 in message.intervals)
+        intervals = intervals_from_wire(message.intervals)
     except ValueError as exc:
         raise ProtocolError(f"{where}.intervals: {exc}") from None
     return Trajectory(message.vehicle, _pose(message.start, f"{where}.start"),
@@ -85,3 +95,37 @@ def step_from_wire(step: WireStep, where: str) -> Step:
         raise ProtocolError(f"{where}: a maneuver must end after it starts, not [{t0}, {t1})")
     return Step(manner, _pose(start, where), _pose(end, where), t0, t1, s0, s1,
                 frozenset((c, r) for c, r in cells))
+
+
+def intervals_to_wire(intervals: Iterable[Interval]) -> list[WireInterval]:
+    return [(iv.cell[0], iv.cell[1], iv.t0, iv.t1) for iv in intervals]
+
+
+def intervals_from_wire(wire: Iterable[WireInterval]) -> tuple[Interval, ...]:
+    """ValueError for an interval that does not end after it starts."""
+    return tuple(Interval((c, r), t0, t1) for c, r, t0, t1 in wire)
+
+
+def change_to_wire(change: Change) -> WireChange:
+    """A table change as the reservation service publishes it (no request id: made in this
+    process). Release cells go in sorted order."""
+    cells = None if change.release_cells is None else sorted(change.release_cells)
+    return WireChange(change.revision, "commit" if change.intervals else "release",
+                      change.vehicle, intervals_to_wire(change.intervals), change.release_from,
+                      release_cells=cells)
+
+
+def change_from_wire(change: WireChange) -> Change:
+    """A published change as the table applies it (ValueError for a bad interval)."""
+    cells = None if change.release_cells is None else \
+        frozenset((c, r) for c, r in change.release_cells)
+    return Change(change.revision, change.vehicle, change.release_from,
+                  intervals_from_wire(change.intervals), cells)
+
+
+def change_time(change: WireChange) -> float:
+    """The sim time a change is about (its publish time in a recording): where it releases
+    from, else where its first interval starts."""
+    if change.release_from is not None:
+        return change.release_from
+    return min((iv[2] for iv in change.intervals), default=0.0)

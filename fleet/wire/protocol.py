@@ -46,6 +46,10 @@ ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
 
+# Reservation owners that are no forklift (forklifts are 1..N), in every commit and change.
+GOODS = 0  # the goods on the stacks
+ZONE = -1  # closed zones
+
 
 @dataclass(frozen=True)
 class Message:
@@ -109,8 +113,9 @@ class SnapshotRequest(Message):
 
 
 @dataclass(frozen=True)
-class Change(Message):
-    """One accepted change of the table, published and journaled."""
+class WireChange(Message):
+    """One accepted change of the table, published and journaled (the table's own `Change`
+    in fleet/planning/reservations.py, on the wire; fleet/wire/convert.py converts)."""
 
     TYPE: ClassVar[str] = "reservation.change"
     revision: int
@@ -123,11 +128,13 @@ class Change(Message):
 
 
 @dataclass(frozen=True)
-class Snapshot(Message):
+class WireSnapshot(Message):
+    """The table, or the changes since a revision (the reply to a `SnapshotRequest`)."""
+
     TYPE: ClassVar[str] = "reservation.snapshot"
     revision: int
     reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
-    changes: list[dict] = field(default_factory=list)  # encoded Change bodies, for diffs
+    changes: list[dict] = field(default_factory=list)  # encoded WireChange bodies, for diffs
     diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
 
 
@@ -207,7 +214,8 @@ class Progress(Message):
 
 @dataclass(frozen=True)
 class MissionDone(Message):
-    """The dispatcher's last word: the mission record (record_io.record_to_dict) or an error."""
+    """The dispatcher's last word: the mission record (fleet.mission.record:
+    MissionSummary.to_dict) or an error."""
 
     TYPE: ClassVar[str] = "dispatch.done"
     ok: bool
@@ -447,7 +455,7 @@ class Envelope:
 
 TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
-                              SnapshotRequest, Change, Snapshot, TaskRequest, TaskResult,
+                              SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
                               SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
                               HaltRequest, ResumeRequest, Halt, Resume, StackReopened,

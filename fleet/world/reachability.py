@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from fleet.planning.planner import HybridAStar
 from fleet.world.layout import Layout, LayoutError
 
 
@@ -49,8 +48,8 @@ def reachability_problems(layout: Layout,
     """Every stack, dock and start that cannot be served, with why (empty list: all good);
     a layout without start poses is a problem too (no run could use it)."""
     problems: list[Problem] = [] if layout.vehicle_starts else [NO_STARTS]
-    dims = layout.vehicle.dims
-    empty = HybridAStar(layout.grid_map(), dims)
+    kind = layout.vehicle_kind
+    empty = kind.planner(layout.grid_map())
     docks = {s.name: empty.component(s.dock) for s in layout.stations}
     for i, start in enumerate(layout.vehicle_starts, start=1):
         if empty.component(start) not in docks.values():
@@ -68,7 +67,7 @@ def reachability_problems(layout: Layout,
                                         "once the stacks before it are filled"))
             else:
                 # Connected with the stack already filled: the forklift must also get out.
-                planner = HybridAStar(layout.grid_map(filled | {stack.cell}), dims)
+                planner = kind.planner(layout.grid_map(filled | {stack.cell}))
                 reached = {planner.component(p) for p in poses}
                 cut_off = [name for name, station in zip(
                     docks, layout.stations, strict=True)

@@ -1,0 +1,131 @@
+"""What a vehicle kind is: the interface the rest of the fleet sees.
+
+A kind answers three questions for the vehicles of a layout:
+
+- its motion model: which cells its body covers at rest, where it works a cell from, and where
+  it is (world pose, speed, the step in progress) at an instant of a step it committed;
+- its planner: a search per static map (one per fill state of the warehouse);
+- its conflict policy: what a planned leg commits to the shared reservation store.
+
+Seed 000's forklift (`fleet.vehicles.forklift`) plans against everyone's space-time
+reservations and commits the whole trajectory at once. The next kinds fit the same interface:
+seed 002's 1-cell AGV with 8-direction moves plans on space only and then delays conflicting
+steps (its policy inserts waits into the trajectory it commits, and may later amend another
+vehicle's); seed 004's lifting AGV, which passes under shelves, keys its planners by load as
+well as fill state, and tracks reactively, locking cells while it drives, which needs a
+step-level executor beside today's whole-leg one.
+
+Steps are named by their labels (what the wire and the records carry), so the analysis asks a
+kind about a label without knowing its manners.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+from fleet.planning.geometry import Cell
+from fleet.planning.gridmap import GridMap
+from fleet.planning.reservations import Interval, ReservationView
+from fleet.planning.trajectory import PlanFailure, Pose, Step, Trajectory
+
+
+@dataclass(frozen=True)
+class Outline:
+    """The body's rectangle about the vehicle's reference point, in metres: what the safety
+    verifier re-derives covered cells from, with its own geometry."""
+
+    front: float
+    rear: float
+    width: float
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a vehicle is at one instant, as its state stream says it."""
+
+    pose: Pose  # at rest: its pose; moving: the pose the step in progress started from
+    x: float  # metres, in the grid's frame (cell (0, 0) centred at the origin)
+    y: float
+    theta: float  # radians
+    speed: int  # the speed level driven (0 at rest and while waiting)
+    step: str  # the label of the step in progress ("" at rest)
+
+
+@dataclass(frozen=True)
+class Commitment:
+    """What one planned leg asks of the reservation store, all or nothing: the vehicle's
+    holdings from `release_from` on become `intervals`; it then drives `trajectory`."""
+
+    trajectory: Trajectory
+    intervals: tuple[Interval, ...]
+    release_from: float
+
+
+class Planner(Protocol):
+    """A search on one static map."""
+
+    def plan(self, vehicle: int, start: Pose, t_start: float, goals: Sequence[Pose],
+             store: ReservationView) -> Trajectory | PlanFailure:
+        """From `start` at rest at `t_start` to any of `goals`, at rest."""
+        ...
+
+    def component(self, pose: Pose) -> int | None:
+        """The pose's connected component on the static map (None: on a blocked cell)."""
+        ...
+
+
+class Planners(Protocol):
+    """Planners by fill state (the stacks holding goods), built on demand."""
+
+    def get(self, filled: frozenset[Cell]) -> Planner: ...
+
+
+class ConflictPolicy(Protocol):
+    """How a kind keeps its vehicles apart: what a planned leg commits, given the table as
+    the planner saw it."""
+
+    def commitment(self, trajectory: Trajectory, view: ReservationView) -> Commitment: ...
+
+
+class VehicleKind(Protocol):
+    name: ClassVar[str]  # what a layout's [vehicle] kind says
+    conflict_policy: ConflictPolicy
+
+    @property
+    def outline(self) -> Outline: ...
+
+    # -- the motion model ----------------------------------------------------------------------
+    def body_cells_at_rest(self, pose: Pose) -> tuple[Cell, ...]:
+        """The cells the body covers standing at `pose` (what parking reserves)."""
+        ...
+
+    def handling_poses(self, cell: Cell) -> tuple[Pose, ...]:
+        """The poses from which the vehicle loads or unloads at `cell`, whatever is free."""
+        ...
+
+    def handled_cell(self, pose: Pose) -> Cell:
+        """The cell a vehicle standing at `pose` loads or unloads."""
+        ...
+
+    def at_rest(self, pose: Pose) -> Placement: ...
+
+    def on_step(self, step: Step, t: float) -> Placement:
+        """Where the vehicle is at t in [step.t0, step.t1) of a step it committed."""
+        ...
+
+    def is_wait(self, step: str) -> bool:
+        """Whether the step so labelled stands still (waiting for another vehicle)."""
+        ...
+
+    def path_length_m(self, step: str) -> float:
+        """How far the step so labelled drives its reference point, in metres."""
+        ...
+
+    # -- the planner ---------------------------------------------------------------------------
+    def planner(self, grid: GridMap) -> Planner: ...
+
+    def planners(self, grid_for: Callable[[frozenset[Cell]], GridMap]) -> Planners:
+        """Planners for the fill states of one warehouse (`grid_for`: its static map)."""
+        ...
