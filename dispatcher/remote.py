@@ -19,8 +19,9 @@ from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, RequestFailed
+from fleet.runtime.tasks import result_from_wire, task_to_wire
 from fleet.vehicles.kind import VehicleKind
-from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
+from fleet.wire.convert import step_to_wire
 from fleet.wire.protocol import (
     GOODS,
     HaltRequest,

@@ -37,7 +37,7 @@ from fleet.recording.inprocess import recorded_run
 from fleet.recording.reader import RecordingError, read_recording
 from fleet.recording.writer import RecordingWriter
 from fleet.runtime.args import engine_options
-from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.runtime.tasks import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,

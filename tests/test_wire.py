@@ -9,7 +9,7 @@ from fleet.mission.seam import Task
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
+from fleet.runtime.tasks import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import ProtocolError, TaskRequest, decode, encode
 from fleet.world.layout_file import load_layout
 

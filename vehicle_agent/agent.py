@@ -32,8 +32,9 @@ from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
 from fleet.runtime.lifecycle import Stopped
+from fleet.runtime.tasks import result_to_wire, task_from_wire
 from fleet.vehicles.kind import Commitment
-from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
+from fleet.wire.convert import step_from_wire, step_to_wire
 from fleet.wire.protocol import (
     ClockAck,
     ClockTick,

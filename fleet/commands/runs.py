@@ -21,15 +21,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.reader import make_reader
-
 from fleet.errors import UserError
-from fleet.recording.format import MCAP_MAGIC
-from fleet.recording.reader import RecordingError, read_description
+from fleet.recording.reader import RecordingError, read_description, result_recorded
 from fleet.recording.rundir import MARKER, RUNS, marker_of, run_id_of
 from fleet.recording.segments import RUN_FILE, segment_paths
-from fleet.wire.protocol import MissionDone
-from fleet.wire.topics import message_type
 
 SUMMARY = "summary.json"
 VERDICTS = ("safety", "work", "messages")
@@ -176,25 +171,6 @@ def describe(run_dir: Path) -> RunEntry:
         entry.problem = "its recording ends before the mission's result: interrupted, or a " \
             "process died"
     return entry
-
-
-def result_recorded(segment: Path) -> bool | None:
-    """Whether a recording holds the dispatcher's result (dispatch/done), from the summary
-    section at its end alone; None when it has none (a torn file: its recorder killed)."""
-    try:
-        with open(segment, "rb") as stream:
-            stream.seek(-len(MCAP_MAGIC), os.SEEK_END)
-            if stream.read() != MCAP_MAGIC:
-                return None
-            stream.seek(0)
-            summary = make_reader(stream).get_summary()
-    except Exception:  # OSError, and mcap's own, struct and decompression errors
-        return None
-    if summary is None or summary.statistics is None:
-        return None
-    counts = summary.statistics.channel_message_counts
-    return any(message_type(channel.topic) is MissionDone and counts.get(number, 0) > 0
-               for number, channel in summary.channels.items())
 
 
 def _summary(run_dir: Path) -> dict | None:

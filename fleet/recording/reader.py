@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Footer, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
@@ -33,8 +34,8 @@ from fleet.recording.format import (
 )
 from fleet.recording.rundir import MARKER, run_id_of
 from fleet.recording.segments import RUN_FILE, run_dir_of, segment_paths
-from fleet.wire.protocol import Envelope, Message, MissionInfo, ProtocolError, decode
-from fleet.wire.topics import genuine
+from fleet.wire.protocol import Envelope, Message, MissionDone, MissionInfo, ProtocolError, decode
+from fleet.wire.topics import genuine, message_type
 from fleet.world.layout import Layout
 from fleet.world.layout_file import parse_layout
 
@@ -401,3 +402,22 @@ def _add_message(recording: Recording, channels: dict[int, Channel],
     recording.messages.append(Recorded(channel.topic, record.log_time, record.publish_time,
                                        envelope, error))
     return True
+
+
+def result_recorded(segment: Path) -> bool | None:
+    """Whether a recording holds the dispatcher's result (dispatch/done), from the summary
+    section at its end alone; None when it has none (a torn file: its recorder killed)."""
+    try:
+        with open(segment, "rb") as stream:
+            stream.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            if stream.read() != MCAP_MAGIC:
+                return None
+            stream.seek(0)
+            summary = make_reader(stream).get_summary()
+    except Exception:  # OSError, and mcap's own, struct and decompression errors
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    counts = summary.statistics.channel_message_counts
+    return any(message_type(channel.topic) is MissionDone and counts.get(number, 0) > 0
+               for number, channel in summary.channels.items())

@@ -8,76 +8,23 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from fleet.dispatching.decision import TaskKind
-from fleet.mission.seam import Task
 from fleet.planning.maneuvers import Manner
 from fleet.planning.reservations import Change, Interval
-from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Step, Trajectory
+from fleet.planning.trajectory import Pose, Step
 from fleet.planning.velocity import Speed
 from fleet.wire.protocol import (
     ProtocolError,
-    TaskRequest,
-    TaskResult,
     WireChange,
     WireInterval,
     WireStep,
 )
 
 
-def _pose(text: str, where: str) -> Pose:
+def pose_from_wire(text: str, where: str) -> Pose:
     try:
         return Pose.parse(text)
     except ValueError as exc:
         raise ProtocolError(f"{where}: {exc}") from None
-
-
-def task_to_wire(task: Task, task_id: str, revision: int) -> TaskRequest:
-    return TaskRequest(task_id, task.vehicle, task.kind.value, str(task.start), task.t_i,
-                       [str(g) for g in task.goals], sorted(task.filled), task.loaded,
-                       revision)
-
-
-def task_from_wire(message: TaskRequest) -> Task:
-    try:
-        kind = TaskKind(message.kind)
-    except ValueError:
-        raise ProtocolError(f"dispatch.task.kind: unknown task kind {message.kind!r}") from None
-    if not message.goals:
-        raise ProtocolError("dispatch.task.goals: no goal pose")
-    return Task(message.vehicle, kind, _pose(message.start, "dispatch.task.start"),
-                message.t_i, tuple(_pose(g, "dispatch.task.goals") for g in message.goals),
-                frozenset(message.filled), message.loaded)
-
-
-def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure, revision: int,
-                   rejections: list[str]) -> TaskResult:
-    if isinstance(result, PlanFailure):
-        return TaskResult(task_id, vehicle, False, revision, failure=result.reason.value,
-                          detail=result.detail, expansions=result.expansions,
-                          rejections=rejections)
-    return TaskResult(task_id, vehicle, True, revision, str(result.start), str(result.goal),
-                      result.t_start, [step_to_wire(s) for s in result.steps],
-                      intervals_to_wire(result.intervals), result.expansions,
-                      rejections=rejections)
-
-
-def result_from_wire(message: TaskResult) -> Trajectory | PlanFailure:
-    where = "dispatch.task_result"
-    if not message.ok:
-        try:
-            reason = FailureReason(message.failure)
-        except ValueError:
-            raise ProtocolError(f"{where}.failure: unknown reason {message.failure!r}") from None
-        return PlanFailure(reason, message.detail, message.expansions)
-    steps = [step_from_wire(step, f"{where}.steps[{i}]")
-             for i, step in enumerate(message.steps)]
-    try:
-        intervals = intervals_from_wire(message.intervals)
-    except ValueError as exc:
-        raise ProtocolError(f"{where}.intervals: {exc}") from None
-    return Trajectory(message.vehicle, _pose(message.start, f"{where}.start"),
-                      _pose(message.goal, f"{where}.goal"), message.t_start, tuple(steps),
-                      intervals, message.expansions)
 
 
 def step_to_wire(s: Step) -> WireStep:
@@ -93,7 +40,7 @@ def step_from_wire(step: WireStep, where: str) -> Step:
         raise ProtocolError(f"{where}: {exc}") from None
     if not t0 < t1:
         raise ProtocolError(f"{where}: a maneuver must end after it starts, not [{t0}, {t1})")
-    return Step(manner, _pose(start, where), _pose(end, where), t0, t1, s0, s1,
+    return Step(manner, pose_from_wire(start, where), pose_from_wire(end, where), t0, t1, s0, s1,
                 frozenset((c, r) for c, r in cells))
 
 
