@@ -21,7 +21,7 @@ from dispatcher.clock import DETECT_TIMEOUT_S
 from fleet.analysis.analyze import analyze
 from fleet.mission.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import Recording, read_recording
+from fleet.recording.reader import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume
 

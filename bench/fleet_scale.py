@@ -16,9 +16,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.stats import percentile
-from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.runtime.launcher import Launcher
 from fleet.wire.protocol import ClockTick, ProtocolError, decode
+from fleet.wire.topics import Keys
 from fleet.world.generator import Shape, generate_toml
 
 STATE_HZ = 10.0

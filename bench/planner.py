@@ -22,7 +22,8 @@ from bench.stats import percentile
 from fleet.errors import UserError
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose, Trajectory
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,8 @@ def _publisher_main(argv: list[str]) -> int:
     by closing it."""
     import threading
 
-    from fleet.runtime.bus import BusConfig, Keys, Stream, open_session
+    from fleet.runtime.bus import BusConfig, Stream, open_session
+    from fleet.wire.topics import Keys, vehicle_sender
 
     p = argparse.ArgumentParser(prog="python -m bench.recorder")
     p.add_argument("--connect", required=True)
@@ -93,7 +94,7 @@ def _publisher_main(argv: list[str]) -> int:
     try:
         keys = Keys(args.run)
         # reliable=False: congestion drops, so an overloaded path shows as lost messages
-        streams = [Stream(session, keys.vehicle_state(v), f"vehicle-{v}", reliable=False)
+        streams = [Stream(session, keys.vehicle_state(v), vehicle_sender(v), reliable=False)
                    for v in range(1, args.publishers + 1)]
         for stream in streams:  # the router must have heard of the recorder's subscriber
             matched = threading.Event()
@@ -151,10 +152,11 @@ def _wait_drained(session, keys, sent: int) -> tuple[int | None, float]:
 def measure_rate(endpoint: str, launcher, tmp: Path, rate: int, publishers: int,
                  seconds: float, session) -> dict:
     """One target rate against a fresh recorder."""
-    from fleet.analysis.analyze import sequence_gaps
-    from fleet.recording.mcapfile import read_recording
-    from fleet.runtime.bus import Keys, wait_alive
+    from fleet.analysis.streams import sequence_gaps
+    from fleet.recording.reader import read_recording
+    from fleet.runtime.bus import wait_alive
     from fleet.wire.protocol import VehicleState
+    from fleet.wire.topics import Keys
 
     keys = Keys(f"benchrec{rate}")
     out = tmp / f"rate-{rate}.mcap"
@@ -250,7 +252,7 @@ def wall_cost(layout: str = "paper", repeats: int = 3, vehicles: int = 4,
     `vehicles` forklifts or as many as the layout has start poses."""
     from fleet.mission.spec import Mission, MissionKind, Strategy
     from fleet.runtime.local_run import RunSpec, run_processes
-    from fleet.world.layout import load_layout
+    from fleet.world.layout_file import load_layout
 
     vehicles = min(vehicles, len(load_layout(layout).vehicle_starts))
     mission = Mission(layout=layout, kind=MissionKind.FILL, strategy=Strategy.ANN,

@@ -18,8 +18,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.stats import percentile
-from fleet.runtime.bus import BusConfig, Keys, Requester, free_port, open_session, wait_alive
+from fleet.runtime.bus import BusConfig, Requester, free_port, open_session, wait_alive
 from fleet.wire.protocol import CommitRequest
+from fleet.wire.topics import Keys
 
 ROOT = Path(__file__).resolve().parent.parent
 

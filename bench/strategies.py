@@ -13,7 +13,7 @@ from pathlib import Path
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, lower_bound, run_mission
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 ORDER = (Strategy.ANN, Strategy.COMPREHENSIVE, Strategy.GREEDY, Strategy.TRAFFIC,
          Strategy.BALANCE)

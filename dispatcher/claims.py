@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-from fleet.runtime.bus import Keys
 from fleet.wire.protocol import ClaimReply, ProtocolError, VehicleClaim, decode, encode
+from fleet.wire.topics import DISPATCHER, Keys
 
 log = logging.getLogger("fleet.dispatcher")
-SENDER = "dispatcher"
+SENDER = DISPATCHER
 
 
 @dataclass

@@ -33,10 +33,11 @@ from fleet.mission.freeze import (
     ZoneClosure,
     scheduled_at,
 )
-from fleet.runtime.bus import RELIABLE, Keys, received
+from fleet.runtime.bus import RELIABLE, received
 from fleet.wire.protocol import ClockAck, ClockTick, VehicleFault, encode
+from fleet.wire.topics import CLOCK, Keys
 
-SENDER = "clock"
+SENDER = CLOCK
 ACK_TIMEOUT_S = 60.0
 INJECTOR = 0  # the fault injector acknowledges ticks as "vehicle" 0
 DETECT_TIMEOUT_S = 20.0  # a fault not seen by then was not detected: the run fails

@@ -7,7 +7,7 @@ import threading
 import zenoh
 
 from fleet.errors import UserError
-from fleet.runtime.bus import Keys
+from fleet.wire.topics import Keys
 
 
 class ParticipantLost(UserError):
@@ -30,7 +30,7 @@ class Liveness:
             keys.recorder_alive, self._on_recorder, history=True)
 
     def _on_vehicle(self, sample: zenoh.Sample) -> None:
-        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        vehicle = Keys.vehicle_in(str(sample.key_expr))
         if vehicle is None:
             return
         with self.changed:

@@ -11,11 +11,10 @@ import math
 from dispatcher.liveness import ParticipantLost
 from dispatcher.remote import RemoteExecutor
 from fleet.mission.freeze import Held, Recovered, recovered_state
-from fleet.mission.seam import GOODS
 from fleet.params import DispatchParams
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.convert import step_from_wire
-from fleet.wire.protocol import ProtocolError
+from fleet.wire.protocol import GOODS, ProtocolError
 from fleet.world.layout import Layout
 
 

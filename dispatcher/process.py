@@ -27,12 +27,10 @@ from fleet.commands.run import add_mission_args, engine_options, mission_from_ar
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import load_scenario
-from fleet.mission.record import digest_of, record_to_dict
-from fleet.mission.seam import ZONE
-from fleet.recording.mcapfile import mission_info
+from fleet.mission.record import MissionSummary, digest_of
+from fleet.recording.writer import mission_info
 from fleet.runtime.argtypes import positive_float, scenario_arg
 from fleet.runtime.bus import (
-    Keys,
     Requester,
     RequestFailed,
     Stream,
@@ -43,19 +41,15 @@ from fleet.runtime.bus import (
     stop_on_signals,
 )
 from fleet.wire.protocol import (
-    DecisionFailure,
-    Halt,
+    ZONE,
     MissionDone,
+    MissionInfo,
     Progress,
     ProtocolError,
-    Resume,
-    StackDone,
-    StackReopened,
-    SubtaskEvent,
-    ZoneClosed,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.wire.topics import DISPATCHER, Keys, published_by
+from fleet.world.layout_file import load_layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
@@ -145,20 +139,13 @@ def serve(args: argparse.Namespace) -> int:
         vehicles = list(range(1, n + 1))
         token = session.liveliness().declare_token(keys.dispatcher_alive)
         info = mission_info(mission, layout, n, args.clock, args.speed, args.command)
-        info_pub = Stream(session, keys.dispatch_mission, SENDER, reliable=True)
+        # Each of the dispatcher's topics, by the message it carries (every event must reach
+        # the recorder: its publishers wait rather than drop).
+        streams = {cls: Stream(session, topic.key(keys.run), topic.sender, topic.reliable)
+                   for cls, topic in published_by(DISPATCHER).items()}
+        info_pub, done_pub = streams[MissionInfo], streams[MissionDone]
         info_answer = session.declare_queryable(  # for a recorder that joins late
             keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0)))
-        # Every event must reach the recorder: publishers wait rather than drop.
-        streams = {kind: Stream(session, key, SENDER, reliable=True)
-                   for kind, key in ((Progress.TYPE, keys.dispatch_progress),
-                                     (SubtaskEvent.TYPE, keys.dispatch_subtask),
-                                     (StackDone.TYPE, keys.dispatch_stack),
-                                     (DecisionFailure.TYPE, keys.dispatch_failure),
-                                     (Halt.TYPE, keys.dispatch_halt),
-                                     (Resume.TYPE, keys.dispatch_resume),
-                                     (StackReopened.TYPE, keys.dispatch_reopen),
-                                     (ZoneClosed.TYPE, keys.dispatch_zone))}
-        done_pub = Stream(session, keys.dispatch_done, SENDER, reliable=True)
         liveness = Liveness(session, keys)
         recorded = threading.Event()
         status = follow_recorded(session, keys, recorded, log)
@@ -166,7 +153,7 @@ def serve(args: argparse.Namespace) -> int:
             in_mission.set()
             info_pub.put(info, 0.0)
             done = run_mission(session, keys, args, mission, layout, options, vehicles,
-                               liveness, lambda message, t: streams[message.TYPE].put(
+                               liveness, lambda message, t: streams[type(message)].put(
                                    message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
@@ -180,7 +167,7 @@ def serve(args: argparse.Namespace) -> int:
             log.warning("the recorder had not recorded the result within %g s",
                         RECORDED_WAIT_S)
         liveness.close()
-        for declared in (done_pub, info_pub, info_answer, *streams.values(), token, status):
+        for declared in (info_answer, *streams.values(), token, status):
             declared.undeclare()
     finally:
         if claims is not None:
@@ -242,7 +229,7 @@ def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: l
         options.events = publish
         record = Engine(mission, options, layout, executor, clock, recovered).run()
         changes.undeclare()
-        as_dict = record_to_dict(record)
+        as_dict = MissionSummary.of_record(record).to_dict()
         return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                            wall_s=time.perf_counter() - t0, rejections=executor.rejections,
                            detections=getattr(clock, "detected", []))

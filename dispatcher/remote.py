@@ -14,14 +14,15 @@ import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
 from fleet.mission.freeze import Freeze
-from fleet.mission.seam import GOODS, Task, VehicleLost, freeze_changes
+from fleet.mission.seam import Task, VehicleLost, freeze_changes
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, RequestFailed
+from fleet.runtime.bus import Requester, RequestFailed
 from fleet.vehicles.kind import VehicleKind
 from fleet.wire.convert import result_from_wire, step_to_wire, task_to_wire
 from fleet.wire.protocol import (
+    GOODS,
     HaltRequest,
     Message,
     Reply,
@@ -30,11 +31,12 @@ from fleet.wire.protocol import (
     TaskResult,
     VehicleStatus,
 )
+from fleet.wire.topics import DISPATCHER, Keys
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
-SENDER = "dispatcher"
+SENDER = DISPATCHER
 TASK_TIMEOUT_S = 120.0  # a search is capped far below this; the agent may first resync
 SYNC_TIMEOUT_S = 30.0
 

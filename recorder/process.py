@@ -7,7 +7,7 @@ the file about once a second, so a killed recorder loses at most about a second.
 its status on fleet/<run>/recorder/status at every flush and once the mission's result is in
 the file (and answers queries there), so `fleet run` knows when it may stop the recorder.
 A recorder started mid-run (a restarted one writes the run's next segment, run-N.mcap:
-fleet.recording.mcapfile.next_segment) asks the dispatcher what the run is, so its file is described
+fleet.recording.segments.next_segment) asks the dispatcher what the run is, so its file is described
 too. Every segment carries the run id of the run directory it is written in (its marker,
 fleet/recording/rundir.py), so a restarted recorder's segments are of the same run.
 """
@@ -26,11 +26,12 @@ from pathlib import Path
 import zenoh
 
 from fleet.errors import UserError
-from fleet.recording.mcapfile import RUN_FILE, Recorded, RecordingWriter, next_segment
+from fleet.recording.reader import Recorded
 from fleet.recording.rundir import claim_new
+from fleet.recording.segments import RUN_FILE, next_segment
+from fleet.recording.writer import RecordingWriter
 from fleet.runtime.argtypes import port, port_problem, writable_dir, writable_file
 from fleet.runtime.bus import (
-    Keys,
     Stream,
     add_bus_arguments,
     bus_config,
@@ -45,10 +46,12 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import LayoutError, parse_layout
+from fleet.wire.topics import RECORDER, Keys
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import parse_layout
 
 log = logging.getLogger("fleet.recorder")
-SENDER = "recorder"
+SENDER = RECORDER
 FLUSH_PERIOD_S = 1.0
 
 

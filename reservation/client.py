@@ -16,7 +16,7 @@ import zenoh
 
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Interval, WriteResult
-from fleet.runtime.bus import Keys, Requester, RequestFailed, received
+from fleet.runtime.bus import Requester, RequestFailed, received
 from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
     CommitRequest,
@@ -27,6 +27,7 @@ from fleet.wire.protocol import (
     WireChange,
     WireSnapshot,
 )
+from fleet.wire.topics import Keys
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.mirror")

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
-import re
 import socket
 import threading
 import time
@@ -21,7 +20,6 @@ from pathlib import Path
 import zenoh
 
 from fleet.runtime.bus import (
-    Keys,
     Stream,
     add_bus_arguments,
     bus_config,
@@ -40,10 +38,11 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
+from fleet.wire.topics import RESERVATION, Keys, vehicle_of
 from reservation.store import ReservationStore
 
 log = logging.getLogger("fleet.reservation")
-SENDER = "reservation"
+SENDER = RESERVATION
 
 
 class ReservationService:
@@ -57,10 +56,10 @@ class ReservationService:
 
     def run(self) -> None:
         publisher = Stream(self.session, self.keys.reservation_change, SENDER, reliable=True)
-        queryable = self.session.declare_queryable(self.keys.reservation_requests,
+        queryable = self.session.declare_queryable(self.keys.reservation_request("*"),
                                                    self.inbox.put)
         token = self.session.liveliness().declare_token(self.keys.reservation_alive)
-        log.info("serving %s at revision %d", self.keys.reservation_requests,
+        log.info("serving %s at revision %d", self.keys.reservation_request("*"),
                  self.store.revision)
         try:
             while (query := self.inbox.get()) is not None:
@@ -110,10 +109,10 @@ class ReservationService:
 def not_theirs(key: str, message) -> str:
     """Why the principal the key names may not make this request ("" if it may): a forklift
     commits and releases only its own reservations (access control keeps it to its key)."""
-    who = key.rsplit("/", 1)[-1]
-    match = re.fullmatch(r"vehicle-(\d+)", who)
-    if match and isinstance(message, CommitRequest | ReleaseRequest) and \
-            message.vehicle != int(match.group(1)):
+    who = Keys.reservation_request.sender_on(key)
+    vehicle = vehicle_of(who) if who is not None else None
+    if vehicle is not None and isinstance(message, CommitRequest | ReleaseRequest) and \
+            message.vehicle != vehicle:
         return f"{who} may change only its own reservations, not vehicle {message.vehicle}'s"
     return ""
 

@@ -8,7 +8,7 @@ from collections import Counter, defaultdict
 
 from brute_force import check_trajectory
 
-from fleet.mission.record import held_intervals, record_to_dict
+from fleet.mission.record import MissionSummary, held_intervals
 
 
 def mission_problems(rec, layout) -> list[str]:
@@ -16,7 +16,7 @@ def mission_problems(rec, layout) -> list[str]:
     for s in rec.subtasks:
         problems += [f"vehicle {s.vehicle} {s.kind.value} to {s.target}: {p}"
                      for p in check_trajectory(s.trajectory, [])]
-    problems += record_problems(record_to_dict(rec), layout)
+    problems += record_problems(MissionSummary.of_record(rec), layout)
     last = {}
     for s in rec.subtasks:
         last[s.vehicle] = s.trajectory
@@ -26,10 +26,10 @@ def mission_problems(rec, layout) -> list[str]:
     return problems
 
 
-def record_problems(record: dict, layout) -> list[str]:
-    """The checks above that need only a record as JSON (a distributed run's result)."""
+def record_problems(record: MissionSummary, layout) -> list[str]:
+    """The checks above that need only the mission record (a distributed run's recording)."""
     problems = overlaps(held_intervals(record))
-    counts = Counter((c, i) for c, i, _ in record["stacks_done"])
+    counts = Counter((s.cluster, s.index) for s in record.stacks_done)
     expected = {(s.cluster, s.index) for s in layout.stacks}
     problems += [f"stack {k} done {n} times" for k, n in counts.items() if n != 1]
     problems += [f"stack {k} never done" for k in expected - set(counts)]

@@ -20,18 +20,15 @@ import pytest
 import zenoh
 
 from fleet.runtime.access import (
-    DISPATCHER,
     OPERATOR,
-    RECORDER,
-    RESERVATION,
     configure_client,
     generate_credentials,
     principals,
     router_acl,
-    vehicle_user,
     write_dictionary,
 )
-from fleet.runtime.bus import RELIABLE, BusConfig, Keys, free_port, wait_alive
+from fleet.runtime.bus import RELIABLE, BusConfig, free_port, wait_alive
+from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, Keys, vehicle_sender
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = 3
@@ -126,9 +123,9 @@ class Fleet:
         self.serve(RESERVATION, f"{keys.root}/reservation/request/*")
         self.declared.append(self[RESERVATION].liveliness().declare_token(
             keys.reservation_alive))
-        self.serve(vehicle_user(2), keys.vehicle_task(2))
-        self.serve(vehicle_user(2), keys.vehicle_inject(2))
-        self.declared.append(self[vehicle_user(2)].liveliness().declare_token(
+        self.serve(vehicle_sender(2), keys.vehicle_task(2))
+        self.serve(vehicle_sender(2), keys.vehicle_inject(2))
+        self.declared.append(self[vehicle_sender(2)].liveliness().declare_token(
             keys.vehicle_alive(2)))
         self.serve(DISPATCHER, keys.dispatch_mission)
         self.declared.append(self[DISPATCHER].liveliness().declare_token(
@@ -183,7 +180,7 @@ def fleet(tmp_path_factory):
         fleet.start()
         yield fleet
     finally:
-        if fleet.runtime.router.poll() is None:
+        if fleet.router.poll() is None:
             fleet.stop()
 
 
@@ -213,12 +210,12 @@ def test_no_or_wrong_credentials_cannot_connect(fleet):
     with pytest.raises(zenoh.ZError):
         fleet.open(None, timeout_ms=1000)
     with pytest.raises(zenoh.ZError):  # a user with another's password
-        fleet.open(vehicle_user(1), fleet.credentials.vehicle(2).password, timeout_ms=1000)
-    fleet.open(vehicle_user(1), timeout_ms=1000).close()  # the control: the right one does
+        fleet.open(vehicle_sender(1), fleet.credentials.vehicle(2).password, timeout_ms=1000)
+    fleet.open(vehicle_sender(1), timeout_ms=1000).close()  # the control: the right one does
 
 
 def test_vehicle_publishes_only_its_own_state(fleet):
-    keys, v1, v2 = fleet.keys, fleet[vehicle_user(1)], fleet[vehicle_user(2)]
+    keys, v1, v2 = fleet.keys, fleet[vehicle_sender(1)], fleet[vehicle_sender(2)]
     inbox = Inbox()
     subscriber = fleet[DISPATCHER].declare_subscriber(keys.vehicle_state("*"), inbox)
     try:
@@ -236,25 +233,25 @@ def test_vehicle_publishes_only_its_own_state(fleet):
 
 
 def test_vehicle_commits_only_under_its_own_name(fleet):
-    keys, v1 = fleet.keys, fleet[vehicle_user(1)]
+    keys, v1 = fleet.keys, fleet[vehicle_sender(1)]
     asked = fleet.asked[RESERVATION]
     asked.clear()
-    assert ask(v1, request_key(keys, vehicle_user(2)), "forged") == []
+    assert ask(v1, request_key(keys, vehicle_sender(2)), "forged") == []
     assert ask(v1, f"{keys.root}/reservation/request/*", "forged") == []
-    assert ask(v1, request_key(keys, vehicle_user(1)), "commit") == [
+    assert ask(v1, request_key(keys, vehicle_sender(1)), "commit") == [
         "reservation answers commit"]
     # The forged gets went first on the same path: the service would have seen them first.
-    assert asked == [(request_key(keys, vehicle_user(1)), "commit")]
+    assert asked == [(request_key(keys, vehicle_sender(1)), "commit")]
 
 
 def test_only_the_dispatcher_assigns_tasks_and_only_the_operator_injects(fleet):
     keys = fleet.keys
-    asked = fleet.asked[vehicle_user(2)]
+    asked = fleet.asked[vehicle_sender(2)]
     asked.clear()
-    assert ask(fleet[vehicle_user(1)], keys.vehicle_task(2), "forged") == []
+    assert ask(fleet[vehicle_sender(1)], keys.vehicle_task(2), "forged") == []
     assert ask(fleet[OPERATOR], keys.vehicle_task(2), "forged") == []
     assert ask(fleet[DISPATCHER], keys.vehicle_inject(2), "forged") == []
-    assert ask(fleet[vehicle_user(1)], keys.vehicle_inject(2), "forged") == []
+    assert ask(fleet[vehicle_sender(1)], keys.vehicle_inject(2), "forged") == []
     assert ask(fleet[DISPATCHER], keys.vehicle_task(2), "task") == ["vehicle-2 answers task"]
     assert ask(fleet[OPERATOR], keys.vehicle_inject(2), "fault") == ["vehicle-2 answers fault"]
     # Each forged get ended (no reply) before the next get was sent.
@@ -264,7 +261,7 @@ def test_only_the_dispatcher_assigns_tasks_and_only_the_operator_injects(fleet):
 def test_vehicle_cannot_pose_as_another(fleet):
     """Forklift 1 serves forklift 3's task key, declares its token and answers as it: none of
     it reaches the dispatcher, while forklift 1's own queryable, token and reply do."""
-    keys, v1 = fleet.keys, fleet[vehicle_user(1)]
+    keys, v1 = fleet.keys, fleet[vehicle_sender(1)]
 
     def answer(query: zenoh.Query) -> None:
         if str(query.key_expr) == keys.vehicle_task("*"):  # may answer on any vehicle's key
@@ -294,7 +291,7 @@ def test_vehicle_cannot_pose_as_another(fleet):
         # reply is checked on its own key: forklift 2 answers on the query's key (as the
         # agents do), vehicle/*/task, which it may not, so its reply is dropped too.
         assert ask(dispatcher, keys.vehicle_task("*"), "all") == ["vehicle 1 answers"]
-        assert fleet.asked[vehicle_user(2)][-1] == (keys.vehicle_task("*"), "all")
+        assert fleet.asked[vehicle_sender(2)][-1] == (keys.vehicle_task("*"), "all")
     finally:
         watch.undeclare()
         for d in declared:
@@ -329,7 +326,7 @@ def test_clock_and_acks(fleet):
     """Only the dispatcher ticks the clock; the operator acks only as the injector; and a
     forklift hears the clock but not the dispatcher's other streams."""
     keys = fleet.keys
-    v1 = fleet[vehicle_user(1)]
+    v1 = fleet[vehicle_sender(1)]
     heard = Inbox()
     # Declared first, refused: forklift 1 may not read the dispatcher's streams.
     subscribers = [v1.declare_subscriber(f"{keys.root}/dispatch/**", heard),
@@ -337,12 +334,12 @@ def test_clock_and_acks(fleet):
     acks = Inbox()
     subscribers.append(fleet[DISPATCHER].declare_subscriber(keys.clock_ack("*"), acks))
     try:
-        fleet.sync(vehicle_user(1))
+        fleet.sync(vehicle_sender(1))
         fleet.sync(DISPATCHER)
         operator = fleet[OPERATOR]
         operator.put(keys.clock, "forged tick", congestion_control=RELIABLE)
         operator.put(keys.clock_ack(2), "forged ack", congestion_control=RELIABLE)
-        operator.put(keys.clock_ack("injector"), "injector ack", congestion_control=RELIABLE)
+        operator.put(keys.injector_ack, "injector ack", congestion_control=RELIABLE)
         assert acks.wait_for("injector ack")
         assert "forged ack" not in acks.payloads()
         dispatcher = fleet[DISPATCHER]

@@ -22,10 +22,11 @@ from fleet.commands.run import engine_options
 from fleet.errors import UserError
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
-from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
-from fleet.runtime.bus import Keys
+from fleet.recording.reader import RecordingError, read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.wire.protocol import StackDone, VehicleState, WireChange, encode
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 

@@ -28,7 +28,7 @@ from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.runtime.argtypes import endpoint, finite_float, port, positive_float, sim_seconds
 from fleet.runtime.bus import free_port
 from fleet.runtime.local_run import ROUTER_TIMEOUT_MS, RunSpec, run_processes
-from fleet.world.layout import layout_source
+from fleet.world.layout_file import layout_source
 from fleet.world.reachability import NO_STARTS
 
 ROOT = Path(__file__).resolve().parent.parent

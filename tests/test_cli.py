@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fleet.cli import main
-from fleet.world.layout import parse_layout
+from fleet.world.layout_file import parse_layout
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 

@@ -21,10 +21,11 @@ from fleet.commands.run import engine_options
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import read_recording
-from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.recording.reader import read_recording
+from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"

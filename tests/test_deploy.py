@@ -19,12 +19,13 @@ from fleet.errors import UserError
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.runtime.access import generate_credentials, read_dictionary
-from fleet.runtime.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
 from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_args
 from fleet.wire.protocol import MissionDone
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 from vehicle_agent.process import claim
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,7 +9,7 @@ from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
 from fleet.wire.protocol import ClockTick
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from vehicle_agent.agent import tick_problem
 
 

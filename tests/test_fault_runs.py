@@ -15,10 +15,10 @@ from fleet.mission.faults import builtin_scenarios, load_scenario
 from fleet.mission.freeze import ScheduledPacer
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume, StackReopened, VehicleFault, ZoneClosed
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from reservation.journal import Journal
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

@@ -17,7 +17,7 @@ from fleet.mission.faults import (
     parse_scenario,
 )
 from fleet.mission.freeze import VehicleDown, VehicleUp, ZoneClosure, scheduled_at
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 
 def test_every_shipped_scenario_loads_and_fits_paper_with_four_forklifts():

@@ -23,6 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fleet.commands.layout import summary
 from fleet.commands.run import engine_options
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError
 from fleet.dispatching.scorer import load_scorer
@@ -33,7 +34,8 @@ from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import recorded_run
-from fleet.recording.mcapfile import RecordingError, RecordingWriter, read_recording
+from fleet.recording.reader import RecordingError, read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,
@@ -52,7 +54,8 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import Layout, LayoutError, load_layout, parse_layout
+from fleet.world.layout import Layout, LayoutError
+from fleet.world.layout_file import load_layout, parse_layout
 from reservation.journal import Journal, JournalError
 from reservation.store import ReservationStore
 
@@ -378,7 +381,7 @@ def test_a_hostile_result_becomes_a_trajectory_or_is_refused_naming_the_field(pl
         assert result.reason.value == message.failure
 
 
-# -- fleet.world.layout.parse_layout ---------------------------------------------------------------
+# -- fleet.world.layout_file.parse_layout ----------------------------------------------------------
 
 PAPER = (ROOT / "fleet" / "world" / "layouts" / "paper.toml").read_text()
 PAPER_LINES = PAPER.split("\n")
@@ -438,7 +441,7 @@ def test_a_damaged_layout_loads_or_is_refused_naming_the_problem(text):
     assert all(0 <= s.cell[0] < layout.cols and 0 <= s.cell[1] < layout.rows
                for s in layout.stacks)
     assert all(math.isfinite(v) and v > 0 for v in dataclasses.astuple(layout.vehicle.dims))
-    assert layout.summary()
+    assert summary(layout)
 
 
 def test_the_shipped_layout_itself_loads():
@@ -727,7 +730,7 @@ def test_any_message_handed_to_the_store_is_answered_and_a_refusal_changes_nothi
         assert table_state(store) == before and outcome.published == []
 
 
-# -- fleet.recording.mcapfile.read_recording --------------------------------------------------
+# -- fleet.recording.reader.read_recording ---------------------------------------------------
 
 @pytest.fixture(scope="module")
 def recording_bytes(tmp_path_factory) -> tuple[bytes, list, int]:

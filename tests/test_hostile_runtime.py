@@ -7,7 +7,6 @@ hold every hostile message, counted as malformed or foreign, with its verdicts p
 
 from __future__ import annotations
 
-import inspect
 import math
 import queue
 import random
@@ -26,8 +25,7 @@ from fleet.commands.run import engine_options
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import KEY_TYPES, expected_sender, message_type, read_recording
-from fleet.runtime.bus import Keys
+from fleet.recording.reader import read_recording
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Message as WireMessage
@@ -40,7 +38,15 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.wire.topics import (
+    PUBLICATIONS,
+    TOPICS,
+    Keys,
+    Kind,
+    expected_sender,
+    message_type,
+)
+from fleet.world.layout_file import load_layout
 
 MISSION = Mission("small", MissionKind.FILL, Strategy.ANN)
 VEHICLES = 2
@@ -51,23 +57,22 @@ PROGRESS_WAIT_S = 120.0
 # Valid messages that travel on some key of a run: a wrong one on a key is another key's.
 # (Requests and commands, which travel as queries, are not among them: sending a valid one
 # is a forged command, which is not what this test is about.)
-PUBLISHED = sorted({cls for _, cls, _ in KEY_TYPES}, key=lambda cls: cls.TYPE)
+PUBLISHED = sorted({topic.message for topic in PUBLICATIONS}, key=lambda cls: cls.TYPE)
 
 
 def run_keys(keys: Keys, vehicles: int) -> list[str]:
-    """Every key of the run a message can be put on: each key of fleet.runtime.bus.Keys (per vehicle
-    for the per-vehicle ones), but liveliness tokens, the run's root and its wildcard."""
+    """Every key of the run a message can be put on: each topic's (per vehicle for the
+    per-vehicle ones; one principal's request key), but liveliness tokens."""
     out = []
-    for name, attr in sorted(vars(Keys).items()):
-        if name.endswith("_alive") or name in ("root", "everything"):
+    for topic in TOPICS:
+        if Kind.TOKEN in topic.kind:
             continue
-        if name == "reservation_requests":  # a wildcard: one principal's key of it
-            out.append(keys.reservation_request("test"))
-        elif isinstance(attr, property):
-            out.append(getattr(keys, name))
-        elif inspect.isfunction(attr) and list(inspect.signature(attr).parameters) == [
-                "self", "vehicle"]:
-            out += [getattr(keys, name)(v) for v in range(1, vehicles + 1)]
+        if topic.fields == ("principal",):
+            out.append(topic.key(keys.run, "test"))
+        elif topic.fields == ("vehicle",):
+            out += [topic.key(keys.run, v) for v in range(1, vehicles + 1)]
+        else:
+            out.append(topic.key(keys.run))
     assert all(k.startswith(keys.root + "/") for k in out)
     return out
 

@@ -6,7 +6,8 @@ import pytest
 
 from fleet.planning.maneuvers import fork_target
 from fleet.world.generator import Shape, generate_layout, generate_toml
-from fleet.world.layout import LayoutError, load_layout, parse_layout
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import load_layout, parse_layout
 from fleet.world.reachability import check_layout, reachability_problems
 
 SMALL = load_layout("small")

@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.runtime.bus import BusConfig, Keys, free_port, open_session
+from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.runtime.linkproxy import LinkProxy
+from fleet.wire.topics import Keys
 
 ROOT = Path(__file__).resolve().parent.parent
 QUIET_S = 0.3  # how long a silent connection must stay silent to pass

@@ -11,7 +11,7 @@ from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, run_mission
 from fleet.mission.spec import Mission, Strategy
 from fleet.mission.training import train
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 
 def test_lm_step_decreases_the_loss_on_a_fixed_problem():

@@ -11,15 +11,18 @@ from pathlib import Path
 
 import pytest
 
-from fleet.analysis.analyze import Report, analyze
+from fleet.analysis.analyze import analyze
+from fleet.analysis.report import Report
 from fleet.analysis.time_use import time_use
 from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN, engine_options
-from fleet.mission.record import subtask_dict
+from fleet.mission.record import SubtaskRecord
 from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
-from fleet.recording.mcapfile import NS, RecordingWriter, read_recording
 from fleet.recording.mission_record import dispatcher_restarts
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.vehicles.forklift import Forklift
 from fleet.wire.protocol import (
     DecisionFailure,
@@ -32,7 +35,7 @@ from fleet.wire.protocol import (
     SubtaskEvent,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 PER_FORKLIFT = ("busy_s", "stopped_s", "postponed_s", "handling_s", "down_s", "idle_s")
 
@@ -146,11 +149,11 @@ def test_a_forklift_down_is_counted_down_not_waiting(tmp_path, capsys):
 
 
 def subtask(vehicle: int, t_i: float, steps: list[tuple[str, float, float]],
-            handling: float = 5.0) -> dict:
+            handling: float = 5.0) -> SubtaskRecord:
     t_end = steps[-1][2]
-    return {"vehicle": vehicle, "kind": "deliver", "t_i": t_i, "t_end": t_end,
-            "t_done": t_end + handling,
-            "steps": [[label, "0,0,E", "1,0,E", t0, t1, 1, 1] for label, t0, t1 in steps]}
+    return SubtaskRecord(vehicle, "deliver", "a", 1, t_i, t_end, t_end + handling, False,
+                         tuple((label, "0,0,E", "1,0,E", t0, t1, 1, 1)
+                               for label, t0, t1 in steps), ())
 
 
 def halt(t: float, t_stand: float, moving: bool) -> Halt:
@@ -288,7 +291,7 @@ def restarted(items: list[Item], at: int) -> tuple[list[Item], int]:
         new.append((o, seq, log_ns))
     announced = [o.message for o, _, _ in new[1:] if o.sender == "dispatcher"]
     done = announced[-1]
-    record = dict(done.record, subtasks=[subtask_dict(m) for m in announced
+    record = dict(done.record, subtasks=[SubtaskRecord.of_event(m).to_dict() for m in announced
                                          if isinstance(m, SubtaskEvent)],
                   failures=[{"t": m.t, "vehicle": m.vehicle, "stage": m.stage,
                              "reason": m.reason} for m in announced

@@ -13,7 +13,7 @@ import pytest
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, lower_bound, run_mission
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mission_check import mission_problems

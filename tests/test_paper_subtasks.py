@@ -11,7 +11,7 @@ from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Trajectory
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
 from brute_force import check_trajectory

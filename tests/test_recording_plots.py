@@ -1,11 +1,11 @@
 """Plots, the animation and the comparison of recorded runs (MCAP), on small synthetic
 recordings written with RecordingWriter."""
 
+import dataclasses
 import json
 import math
 import tomllib
 from collections import Counter
-from dataclasses import fields
 from importlib import resources
 from pathlib import Path
 
@@ -17,10 +17,11 @@ from PIL import Image
 from fleet.cli import main
 from fleet.commands.plot import read_run
 from fleet.errors import UserError
+from fleet.mission.record import MissionHeader, MissionSummary, StackRecord, SubtaskRecord
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Trajectory
-from fleet.recording.mcapfile import RecordingWriter, expected_sender
+from fleet.recording.writer import RecordingWriter
 from fleet.views.drawing import draw_layout, map_figure, plan_figure
 from fleet.views.palette import forklift_color
 from fleet.views.plots import (
@@ -33,7 +34,9 @@ from fleet.views.plots import (
     snapshot,
 )
 from fleet.wire.protocol import MissionInfo, StackDone, SubtaskEvent, VehicleState, encode
-from fleet.world.layout import Layout, load_layout, parse_layout
+from fleet.wire.topics import expected_sender
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout, parse_layout
 from fleet.world.places import resolve
 
 STATE_PERIOD_S = 0.5  # the fast clock's state grid (fleet/mission/driving.py)
@@ -43,58 +46,52 @@ def layout_source(name: str) -> str:
     return resources.files("fleet.world.layouts").joinpath(f"{name}.toml").read_text()
 
 
-def small_record(end: float = 40.0, kind: str = "fill", strategy: str = "ann") -> dict:
-    """A record on `small` (record_io.record_to_dict format): forklift 1 drives two cells
-    west, waits, fills stack a#1 at `end`; forklift 2 never moves."""
-    steps = [["turn-right", "4,6,S", "3,5,W", 5.0, 10.0, 0, 1],
-             ["forward", "3,5,W", "2,5,W", 10.0, 11.25, 1, 1],
-             ["stop", "2,5,W", "2,5,W", 11.25, end - 5.0, 0, 0]]
-    intervals = [[2, 5, 10.0, math.inf], [3, 5, 5.0, 11.25], [4, 6, 5.0, 10.0]]
-    subtask = {"vehicle": 1, "kind": "deliver", "target": "a", "stack": 1, "t_i": 5.0,
-               "t_end": end - 5.0, "t_done": end, "postponed": False, "steps": steps,
-               "intervals": intervals}
-    return {"mission": {"layout": "small", "kind": kind, "strategy": strategy, "vehicles": 2,
-                        "seed": 0},
-            "starts": ["4,6,S", "5,6,S"], "stacks_done": [["a", 1, end]],
-            "subtasks": [subtask]}
+def small_record(end: float = 40.0, kind: str = "fill", strategy: str = "ann") -> MissionSummary:
+    """A record on `small`: forklift 1 drives two cells west, waits, fills stack a#1 at
+    `end`; forklift 2 never moves."""
+    steps = (("turn-right", "4,6,S", "3,5,W", 5.0, 10.0, 0, 1),
+             ("forward", "3,5,W", "2,5,W", 10.0, 11.25, 1, 1),
+             ("stop", "2,5,W", "2,5,W", 11.25, end - 5.0, 0, 0))
+    intervals = ((2, 5, 10.0, math.inf), (3, 5, 5.0, 11.25), (4, 6, 5.0, 10.0))
+    subtask = SubtaskRecord(1, "deliver", "a", 1, 5.0, end - 5.0, end, False, steps, intervals)
+    return MissionSummary(MissionHeader("small", kind, strategy, 2, 0), ("4,6,S", "5,6,S"),
+                          end_time_s=end, all_parked_s=end - 5.0, decision_failures=0,
+                          wait_s={}, busy_s={}, stacks_done=(StackRecord("a", 1, end),),
+                          failures=(), subtasks=(subtask,))
 
 
-def two_forklift_record(end: float = 40.0, kind: str = "fill") -> dict:
+def two_forklift_record(end: float = 40.0, kind: str = "fill") -> MissionSummary:
     """small_record, and forklift 2 has a subtask for stack a#2 from 10 s until the end, in
     which it waits at its start: both forklifts have a row of bars up to the end."""
     record = small_record(end, kind)
-    record["subtasks"].append(
-        {"vehicle": 2, "kind": "deliver", "target": "a", "stack": 2, "t_i": 10.0,
-         "t_end": end - 2.0, "t_done": end, "postponed": False,
-         "steps": [["stop", "5,6,S", "5,6,S", 10.0, end - 10.0, 0, 0]],
-         "intervals": [[5, 6, 10.0, math.inf], [5, 5, 10.0, math.inf]]})
-    record["stacks_done"].insert(0, ["a", 2, end - 1.0])
-    return record
+    second = SubtaskRecord(2, "deliver", "a", 2, 10.0, end - 2.0, end, False,
+                           (("stop", "5,6,S", "5,6,S", 10.0, end - 10.0, 0, 0),),
+                           ((5, 6, 10.0, math.inf), (5, 5, 10.0, math.inf)))
+    return dataclasses.replace(record, subtasks=(*record.subtasks, second),
+                               stacks_done=(StackRecord("a", 2, end - 1.0),
+                                            *record.stacks_done))
 
 
-def write_recording(path: Path, record: dict, clock: str = "fast") -> Path:
+def write_recording(path: Path, record: MissionSummary, clock: str = "fast") -> Path:
     """A recording of `record` as a run would leave it: the mission message, every subtask
     and stack, and each forklift's state on the shared grid of sim times."""
-    m = record["mission"]
-    source = layout_source(m["layout"])
-    layout = parse_layout(source, m["layout"])
-    info = MissionInfo(layout=m["layout"], layout_toml=source, kind=m["kind"],
-                       strategy=m["strategy"], vehicles=m["vehicles"], seed=m["seed"],
-                       clock=clock, speed=1.0, starts=list(record["starts"]))
+    m = record.mission
+    source = layout_source(m.layout)
+    layout = parse_layout(source, m.layout)
+    info = MissionInfo(layout=m.layout, layout_toml=source, kind=m.kind, strategy=m.strategy,
+                       vehicles=m.vehicles, seed=m.seed, clock=clock, speed=1.0,
+                       starts=list(record.starts))
     events: list[tuple[float, str, object]] = [(0.0, "dispatch/mission", info)]
-    names = {f.name for f in fields(SubtaskEvent)}
-    for s in record["subtasks"]:
-        body = {k: v for k, v in s.items() if k in names}
-        body["steps"] = [tuple(st) for st in s["steps"]]
-        body["intervals"] = [(c, r, t0, math.inf if t1 == "inf" else t1)
-                             for c, r, t0, t1 in s["intervals"]]
-        events.append((s["t_i"], "dispatch/subtask", SubtaskEvent(**body)))
-    for cluster, index, t in record["stacks_done"]:
-        events.append((t, "dispatch/stack", StackDone(cluster, index, 0, t)))
-    end = max([t for _, _, t in record["stacks_done"]] + [s["t_done"] for s in record["subtasks"]])
+    for s in record.subtasks:
+        body = dataclasses.asdict(s) | {"steps": list(s.steps), "intervals": list(s.intervals)}
+        events.append((s.t_i, "dispatch/subtask", SubtaskEvent(**body)))
+    for stack in record.stacks_done:
+        events.append((stack.t, "dispatch/stack", StackDone(stack.cluster, stack.index, 0,
+                                                            stack.t)))
+    end = max([s.t for s in record.stacks_done] + [s.t_done for s in record.subtasks])
     for k in range(int(end / STATE_PERIOD_S) + 1):
         t = k * STATE_PERIOD_S
-        for v in range(1, m["vehicles"] + 1):
+        for v in range(1, m.vehicles + 1):
             x, y, th = pose_at(record, v, t, layout)
             state = VehicleState(v, "0,0,E", 0, "", False, x, y, th)
             events.append((t, f"vehicle/{v}/state", state))
@@ -232,7 +229,7 @@ def test_plot_mp4_needs_ffmpeg_and_says_so(tmp_path, capsys, monkeypatch):
 # ------------------------------------------------------------------ what a reader relies on
 
 
-def recorded(tmp_path: Path, record: dict) -> tuple[Layout, dict, list]:
+def recorded(tmp_path: Path, record: MissionSummary) -> tuple[Layout, MissionSummary, list]:
     """The layout, the mission record and the vehicle states of `record` after a trip
     through a recording, as `fleet plot` reads them."""
     recording, rebuilt = read_run(write_recording(tmp_path / "run.mcap", record))

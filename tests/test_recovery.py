@@ -11,15 +11,16 @@ from fleet.analysis.safety import double_bookings, replay
 from fleet.mission.engine import Engine, MissionStuck
 from fleet.mission.faults import Fault, FaultKind, Scenario
 from fleet.mission.freeze import Motion, ScheduledPacer, cascade, freeze_of
-from fleet.mission.seam import GOODS, ZONE, freeze_changes
+from fleet.mission.seam import freeze_changes
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.planning.maneuvers import Manner
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.planning.velocity import Speed
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.mcapfile import read_recording
-from fleet.world.layout import load_layout
+from fleet.recording.reader import read_recording
+from fleet.wire.protocol import GOODS, ZONE
+from fleet.world.layout_file import load_layout
 
 
 def drive_east(vehicle: int, row: int, cols: range, t0: float, dt: float = 1.0) -> Trajectory:

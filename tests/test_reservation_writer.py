@@ -18,8 +18,9 @@ from fleet.planning.reservations import (
     ReservationWriter,
     WriteResult,
 )
-from fleet.runtime.bus import Keys, Requester, RequestFailed
+from fleet.runtime.bus import Requester, RequestFailed
 from fleet.wire.protocol import VehicleState, encode
+from fleet.wire.topics import Keys
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 

@@ -26,18 +26,13 @@ from fleet.commands.runs import SUMMARY, write_summary
 from fleet.errors import UserError
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
-from fleet.recording.mcapfile import (
-    RUN_FILE,
-    RecordingWriter,
-    mission_info,
-    read_description,
-    read_recording,
-    segment_paths,
-)
+from fleet.recording.reader import read_description, read_recording
 from fleet.recording.rundir import MARKER, claim, claim_new, default_name, run_id_of
+from fleet.recording.segments import RUN_FILE, segment_paths
+from fleet.recording.writer import RecordingWriter, mission_info
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import MissionInfo, VehicleState, encode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from recorder.process import output_in
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -26,11 +26,11 @@ from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import vehicle_states
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.mission_record import summary_of
+from fleet.recording.reader import read_recording
 from fleet.runtime.bus import (
     PARENT_ENV,
     BusConfig,
-    Keys,
     Requester,
     free_port,
     open_session,
@@ -47,7 +47,8 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
@@ -109,7 +110,7 @@ class Intruder:
         self.subscriber = session.declare_subscriber(keys.vehicle_state("*"), self._on_state)
 
     def _on_state(self, sample) -> None:
-        vehicle = Keys.vehicle_of(str(sample.key_expr))
+        vehicle = Keys.vehicle_in(str(sample.key_expr))
         self.states[vehicle].append(decode(sample.payload.to_bytes()).sim_time)
 
     def on_progress(self, progress: Progress) -> None:
@@ -213,7 +214,8 @@ def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
     outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock="realtime", speed=40.0))
     assert outcome.error == ""
     record = outcome.done.record
-    assert record_problems(record, load_layout("small")) == []
+    recording = read_recording(tmp_path / "run.mcap")
+    assert record_problems(summary_of(recording), load_layout("small")) == []
     assert len(record["stacks_done"]) == 24
     assert journal_overlaps(tmp_path / "reservation.journal") == []
     for vehicle in intruder.vehicle_ids:  # 10 Hz of wall time, but at most 0.5 s of sim time
@@ -221,7 +223,7 @@ def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
         gaps = sorted(b - a for a, b in itertools.pairwise(times))
         assert len(times) > 50 and gaps[len(gaps) // 2] == 0.5
     intruder.check(tmp_path, "realtime")
-    report = analyze(read_recording(tmp_path / "run.mcap"))
+    report = analyze(recording)
     assert report.passed, report.lines()
     assert report.stacks_done == 24 and report.messages_lost == 0
     assert report.foreign == intruder.forged == 2

@@ -20,12 +20,13 @@ from test_recording_plots import recorded, two_forklift_record
 from websockets.sync.client import connect
 
 from fleet.planning.geometry import body_corners
-from fleet.recording.mcapfile import RecordingWriter, read_recording
+from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter
 from fleet.views.palette import GOODS_COLOR, forklift_color
 from fleet.views.plots import gantt, snapshot
 from fleet.views.scene import FRAME, HORIZON_S, SceneViews
 from fleet.wire.protocol import Progress, StackDone, VehicleState, WireChange
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from recorder.live import LiveView
 
 BASE = 1_700_000_000 * 10**9
@@ -243,13 +244,13 @@ def test_a_forklift_has_one_colour_in_the_gantt_chart_a_snapshot_and_foxglove(tm
     bodies = {p.get_gid(): p for p in picture.patches if p.get_gid()}
     seen = []
     for v in (1, 2):
-        (subtask,) = [s for s in record["subtasks"] if s["vehicle"] == v]
+        (subtask,) = [s for s in record.subtasks if s.vehicle == v]
         y, label = rows[f"forklift {v}"]
         # The bar of its subtask's drive (a "deliver": the forklift's own colour), its row's
         # name, its body in the snapshot and its body in Foxglove.
         (bar,) = [p for p in chart.patches if isinstance(p, Rectangle)
-                  and p.get_x() == pytest.approx(subtask["t_i"])
-                  and p.get_width() == pytest.approx(subtask["t_end"] - subtask["t_i"])
+                  and p.get_x() == pytest.approx(subtask.t_i)
+                  and p.get_width() == pytest.approx(subtask.t_end - subtask.t_i)
                   and abs(p.get_y() + p.get_height() / 2 - y) < 1e-9]
         body = scene[f"forklift/{v}"].cubes[0].color
         colours = [to_rgb(bar.get_facecolor()), to_rgb(label.get_color()),

@@ -8,7 +8,7 @@ import zenoh
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.runtime.bus import BusConfig, Requester, free_port, open_session
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import (

@@ -19,23 +19,18 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from fleet.analysis.analyze import analyze, sequence_gaps, sequence_holes
+from fleet.analysis.analyze import analyze
+from fleet.analysis.streams import sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.commands.run import engine_options
 from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
-from fleet.recording.mcapfile import (
-    NS,
-    RUN_FILE,
-    RecordingWriter,
-    mission_info,
-    next_segment,
-    read_recording,
-    recording_file,
-    segment_paths,
-)
+from fleet.recording.reader import read_recording, recording_file
 from fleet.recording.rundir import claim
-from fleet.runtime.bus import BusConfig, Keys, Stream, free_port, open_session
+from fleet.recording.segments import RUN_FILE, next_segment, segment_paths
+from fleet.recording.writer import RecordingWriter, mission_info
+from fleet.runtime.bus import BusConfig, Stream, free_port, open_session
 from fleet.wire.protocol import (
     MissionInfo,
     RecorderStatus,
@@ -45,7 +40,8 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys
+from fleet.world.layout_file import load_layout
 
 LAYOUT = "small"
 ROOT = Path(__file__).resolve().parent.parent

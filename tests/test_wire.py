@@ -11,7 +11,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import ProtocolError, TaskRequest, decode, encode
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 
 def through_the_wire(message):

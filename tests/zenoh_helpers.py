@@ -9,7 +9,8 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.runtime.bus import BusConfig, Keys, free_port, open_session, wait_alive
+from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
+from fleet.wire.topics import Keys
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -27,7 +27,7 @@ from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, 
 from fleet.mission.seam import Task
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Keys, Requester, Stream, received, wait_alive
+from fleet.runtime.bus import Requester, Stream, received, wait_alive
 from fleet.vehicles.kind import Commitment
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
@@ -48,6 +48,7 @@ from fleet.wire.protocol import (
     decode,
     encode,
 )
+from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
@@ -129,7 +130,7 @@ class Agent:
         self.keys = keys
         self.vehicle = vehicle
         self.layout = layout
-        self.sender = f"vehicle-{vehicle}"
+        self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
         self.vehicle_kind = layout.vehicle_kind
         self.planners = self.vehicle_kind.planners(layout.grid_map)

@@ -11,10 +11,9 @@ from pathlib import Path
 import zenoh
 
 from fleet.errors import UserError
-from fleet.runtime.access import read_dictionary, vehicle_user
+from fleet.runtime.access import read_dictionary
 from fleet.runtime.argtypes import layout_arg, pose, positive_float
 from fleet.runtime.bus import (
-    Keys,
     Requester,
     RequestFailed,
     add_bus_arguments,
@@ -23,7 +22,8 @@ from fleet.runtime.bus import (
     stop_on_signals,
 )
 from fleet.wire.protocol import ClaimReply, VehicleClaim
-from fleet.world.layout import load_layout
+from fleet.wire.topics import Keys, vehicle_sender
+from fleet.world.layout_file import load_layout
 from vehicle_agent.agent import Agent, Stopped
 
 log = logging.getLogger("fleet.agent")
@@ -83,7 +83,7 @@ def serve(args: argparse.Namespace) -> int:
         finally:
             claiming.close()
     if logins:
-        user = vehicle_user(vehicle)
+        user = vehicle_sender(vehicle)
         if user not in logins:
             raise UserError(f"--logins {args.logins} has no login for {user}")
         config = dataclasses.replace(config, user=user, password=logins[user])

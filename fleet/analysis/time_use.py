@@ -19,9 +19,11 @@ waiting = stopped + postponed: what the dispatcher's record keeps as `wait_s`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from fleet.mission.record import SubtaskRecord
 from fleet.params import DispatchParams
 from fleet.vehicles.kind import VehicleKind
 from fleet.wire.protocol import Halt, Resume
@@ -64,15 +66,15 @@ class _Timeline:
     down_from: float | None = None
     in_progress: _Span | None = None  # the step a vehicle that went down stood in
 
-    def subtask(self, s: dict[str, Any]) -> None:
-        own = [_Span(self.free, s["t_i"], POSTPONED)] if s["t_i"] > self.free else []
-        for label, _, _, t0, t1, *_ in s["steps"]:
+    def subtask(self, s: SubtaskRecord) -> None:
+        own = [_Span(self.free, s.t_i, POSTPONED)] if s.t_i > self.free else []
+        for label, _, _, t0, t1, *_ in s.steps:
             what = STOPPED if self.kind.is_wait(label) else BUSY
             own.append(_Span(t0, t1, what, label, t1 - t0))
-        own.append(_Span(s["t_end"], s["t_done"], HANDLING))
+        own.append(_Span(s.t_end, s.t_done, HANDLING))
         self.spans += own
-        self.live.append((s["t_end"], own))
-        self.free = s["t_done"]
+        self.live.append((s.t_end, own))
+        self.free = s.t_done
 
     def halt(self, h: Halt) -> None:
         """The plan is cut (fleet.mission.engine: Engine._freeze): a subtask not yet arrived at h.t
@@ -105,20 +107,20 @@ class _Timeline:
         self.down_from, self.in_progress = None, None
 
 
-def time_use(subtasks: list[dict[str, Any]], halts: list[Halt], resumes: list[Resume],
+def time_use(subtasks: Sequence[SubtaskRecord], halts: list[Halt], resumes: list[Resume],
              vehicles: int, span_s: float, kind: str,
              vehicle_kind: VehicleKind) -> list[VehicleStats]:
-    """Each vehicle's time over [0, span_s], from the subtasks (record_io.subtask_dict, as
-    announced) and the halts and resumes of a recording. A subtask decided before a halt (its
+    """Each vehicle's time over [0, span_s], from the subtasks (as announced) and the halts
+    and resumes of a recording. A subtask decided before a halt (its
     t_i earlier) is cut by it; the engine applies a fault before any decision at its instant."""
     claim = DispatchParams().t_claim if kind == "fill" else 0.0
-    events: list[tuple[float, int, Any]] = [(s["t_i"], 2, s) for s in subtasks]
+    events: list[tuple[float, int, Any]] = [(s.t_i, 2, s) for s in subtasks]
     events += [(h.t, 0, h) for h in halts] + [(r.t, 1, r) for r in resumes]
     out = []
-    for v in sorted(set(range(1, vehicles + 1)) | {s["vehicle"] for s in subtasks}):
+    for v in sorted(set(range(1, vehicles + 1)) | {s.vehicle for s in subtasks}):
         line = _Timeline(vehicle_kind, claim, [_Span(0.0, claim, HANDLING)] if claim else [],
                          [])
-        for _, _, e in sorted((e for e in events if _vehicle(e[2]) == v),
+        for _, _, e in sorted((e for e in events if e[2].vehicle == v),
                               key=lambda e: (e[0], e[1])):
             if isinstance(e, Halt):
                 line.halt(e)
@@ -128,13 +130,9 @@ def time_use(subtasks: list[dict[str, Any]], halts: list[Halt], resumes: list[Re
                 line.subtask(e)
         if line.down_from is not None:
             line.spans.append(_Span(line.down_from, span_s, DOWN))
-        out.append(_stats(v, sum(s["vehicle"] == v for s in subtasks), line.spans, span_s,
+        out.append(_stats(v, sum(s.vehicle == v for s in subtasks), line.spans, span_s,
                           vehicle_kind))
     return out
-
-
-def _vehicle(event: Any) -> int:
-    return event["vehicle"] if isinstance(event, dict) else event.vehicle
 
 
 def _stats(vehicle: int, subtasks: int, spans: list[_Span], span_s: float,

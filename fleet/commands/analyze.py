@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fleet.analysis.analyze import analyze
     from fleet.commands.runs import write_summary
-    from fleet.recording.mcapfile import RUN_FILE, read_recording, recording_file
+    from fleet.recording.reader import read_recording, recording_file
+    from fleet.recording.segments import RUN_FILE
 
     first = recording_file(args.recording)  # refuses what is no recording, saying why
     report = analyze(read_recording(args.recording))

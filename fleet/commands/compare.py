@@ -1,10 +1,9 @@
 """`fleet compare A B`: two recorded runs side by side, and how B differs from A.
 
-Everything comes from each recording's mission record (fleet.recording.mission_record.record_of) and
-its analysis (fleet.analysis.analyze: the verdicts), summarised by `summarize`; a row of the
-table is
-a `Field` naming a key of that summary, so a new comparison is one more summary key and one
-more Field.
+Everything comes from each recording's mission record (fleet.recording.mission_record.
+summary_of) and its analysis (fleet.analysis.analyze: the verdicts), summarised by
+`summarize`; a row of the table is a `Field` naming a key of that summary, so a new
+comparison is one more summary key and one more Field.
 """
 
 from __future__ import annotations
@@ -18,7 +17,9 @@ from typing import Any
 
 from fleet.analysis.analyze import analyze
 from fleet.commands.plot import read_run
-from fleet.recording.mcapfile import RUN_FILE, Recording
+from fleet.mission.record import MissionSummary
+from fleet.recording.reader import Recording
+from fleet.recording.segments import RUN_FILE
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -79,10 +80,10 @@ FIELDS: tuple[Field, ...] = (
 )
 
 
-def summarize(recording: Recording, record: dict) -> dict[str, Any]:
+def summarize(recording: Recording, record: MissionSummary) -> dict[str, Any]:
     """What is compared of one run, as JSON-able data: the numbers as `fleet analyze` has
     them (docs/metrics.md)."""
-    m = record["mission"]
+    m = record.mission
     info = recording.info
     report = analyze(recording)
     vehicles = report.vehicles
@@ -90,10 +91,10 @@ def summarize(recording: Recording, record: dict) -> dict[str, Any]:
         "path": str(recording.path),
         "complete": recording.complete,
         "segments": len(recording.segments),
-        "mission": m["kind"],
-        "strategy": m["strategy"],
-        "layout": m["layout"],
-        "vehicles": m["vehicles"],
+        "mission": m.kind,
+        "strategy": m.strategy,
+        "layout": m.layout,
+        "vehicles": m.vehicles,
         "clock": info.clock if info is not None else "",
         "end_time_s": report.end_time_s,
         "all_parked_s": report.all_parked_s,

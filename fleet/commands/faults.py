@@ -8,7 +8,7 @@ from importlib import resources
 
 from fleet.mission.faults import KINDS, builtin_scenarios, check_against, load_scenario
 from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
 
 

@@ -9,7 +9,8 @@ from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, positive_int, writable_file
 from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
-from fleet.world.layout import MAX_MAP_CELLS, builtin_names, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import MAX_MAP_CELLS, builtin_names, load_layout
 from fleet.world.reachability import reachability_problems
 
 
@@ -72,8 +73,34 @@ def run_show(args: argparse.Namespace) -> int:
     layout = load_layout(args.name)
     print(layout.render_drawing())
     print()
-    print(layout.summary())
+    print(summary(layout))
     return 0
+
+
+def summary(layout: Layout) -> str:
+    """What `fleet layout show` prints under the drawing: the map's size and extent, the
+    clusters, stations, vehicles, obstacles and passages."""
+    x0 = layout.origin[0] - layout.cell_size / 2
+    y0 = layout.origin[1] - layout.cell_size / 2
+    lines = [
+        f"layout {layout.name}: {layout.description}".rstrip(": "),
+        f"  map      {layout.cols} x {layout.rows} cells of {layout.cell_size:g} m, "
+        f"x [{x0:g}, {x0 + layout.cols * layout.cell_size:g}] m, "
+        f"y [{y0:g}, {y0 + layout.rows * layout.cell_size:g}] m",
+        f"  stacks   {len(layout.stacks)} in {len(layout.clusters)} clusters: "
+        + ", ".join(f"{c.name} {len(layout.cluster_stacks(c.name))}" for c in layout.clusters),
+        f"  stations {len(layout.stations)}: "
+        + ", ".join(f"{s.name} dock {s.dock}" for s in layout.stations),
+        f"  vehicles {len(layout.vehicle_starts)} {layout.vehicle.kind}s starting at "
+        + ", ".join(str(p) for p in layout.vehicle_starts),
+    ]
+    if layout.obstacles:
+        lines.append("  obstacles " + ", ".join(
+            f"{o.name} ({o.kind}, {len(o.cells)} cells)" for o in layout.obstacles))
+    if layout.passages:
+        lines.append("  passages " + ", ".join(
+            f"{p.name} ({p.kind}, {len(p.cells)} cells)" for p in layout.passages))
+    return "\n".join(lines)
 
 
 def run_check(args: argparse.Namespace) -> int:

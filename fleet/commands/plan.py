@@ -21,7 +21,8 @@ from fleet.runtime.argtypes import (
     text_file,
 )
 from fleet.vehicles.kind import Planner
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
 
 

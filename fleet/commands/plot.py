@@ -6,11 +6,16 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
-from fleet.recording.mcapfile import RUN_FILE, Recording, read_recording, recording_file
+from fleet.recording.reader import Recording, read_recording, recording_file
+from fleet.recording.segments import RUN_FILE
 from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
+
+if TYPE_CHECKING:
+    from fleet.mission.record import MissionSummary
 
 FRAMES = 150
 FPS = 10
@@ -45,15 +50,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
-def read_run(path: Path) -> tuple[Recording, dict]:
+def read_run(path: Path) -> tuple[Recording, MissionSummary]:
     """A run's recording (every segment of it) and its mission record
-    (fleet.recording.mission_record.record_of). A truncated recording (a killed recorder) is read as
-    far as it goes, and windows without a recorder are skipped, each with a note."""
-    from fleet.recording.mission_record import record_of
+    (fleet.recording.mission_record.summary_of). A truncated recording (a killed recorder) is
+    read as far as it goes, and windows without a recorder are skipped, each with a note."""
+    from fleet.recording.mission_record import summary_of
 
     file = recording_file(path)
     recording = read_recording(path)
-    record = record_of(recording)
+    record = summary_of(recording)
     if not recording.complete:
         print(f"note: {file if len(recording.segments) < 2 else path} is incomplete "
               f"({recording.problem}); using what it holds", file=sys.stderr)
@@ -64,13 +69,13 @@ def read_run(path: Path) -> tuple[Recording, dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fleet.views import plots as mission_plots
+    from fleet.views import plots
     from fleet.views.drawing import save_figure
     from fleet.wire.protocol import VehicleState
 
     recording, record = read_run(args.recording)
     layout = recording.layout()
-    end = record["end_time_s"]
+    end = record.end_time_s
     late = [t for t in args.at if t > end]
     if late:  # a snapshot after the end would show the end under another time's name
         raise UserError(f"--at {late[0]:.10g}: the run ended at {end:.2f} s; snapshots are drawn "
@@ -78,28 +83,28 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)
     written = [out / "filling.png", out / "gantt.png"]
-    save_figure(mission_plots.filling_sequence(layout, record), str(written[0]))
-    save_figure(mission_plots.gantt(record), str(written[1]))
+    save_figure(plots.filling_sequence(layout, record), str(written[0]))
+    save_figure(plots.gantt(record), str(written[1]))
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
     if states:
         written.append(out / "heatmap.png")
-        save_figure(mission_plots.heat_map(layout, record, states), str(written[-1]))
+        save_figure(plots.heat_map(layout, record, states), str(written[-1]))
     else:
         print(f"note: {recording.path} holds no vehicle states: no heat map", file=sys.stderr)
     for t in args.at or [end / 4, end / 2, 3 * end / 4]:
         path = out / f"snapshot_{t:08.2f}.png"
-        save_figure(mission_plots.snapshot(layout, record, t), str(path))
+        save_figure(plots.snapshot(layout, record, t), str(path))
         written.append(path)
     if args.gif or args.mp4:
         written.append(out / ("run.mp4" if args.mp4 else "run.gif"))
         bar = ProgressBar(args.frames, written[-1].name, unit="frames")
         try:
-            mission_plots.animate(str(written[-1]), layout, record, fps=args.fps,
+            plots.animate(str(written[-1]), layout, record, fps=args.fps,
                                   frames=args.frames,
                                   progress=lambda done, _: bar.update(done))
         finally:
             bar.close()
-    print(f"stacks per quarter of the end time: {mission_plots.quarters(record)}")
+    print(f"stacks per quarter of the end time: {plots.quarters(record)}")
     for path in written:
         print(f"wrote {path}")
     return 0

@@ -80,7 +80,8 @@ def _serve(module):
 
 
 def run_table(args: argparse.Namespace) -> int:
-    from fleet.runtime.bus import Keys, Requester, bus_config, open_session, wait_alive
+    from fleet.runtime.bus import Requester, bus_config, open_session, wait_alive
+    from fleet.wire.topics import Keys
     from reservation.client import ReservationClient
     from reservation.mirror import TableMirror
 
@@ -120,7 +121,7 @@ def run_table(args: argparse.Namespace) -> int:
 def no_service(session, run: str, endpoints: tuple[str, ...]) -> str:
     """Why `fleet table` has nothing to show: no service for that run, and which runs have
     one on this bus (a mistyped --run is the usual cause)."""
-    from fleet.runtime.bus import Keys
+    from fleet.wire.topics import Keys
 
     replies = session.liveliness().get(Keys("*").reservation_alive, timeout=1.0)
     runs = sorted({str(r.ok.key_expr).split("/")[1] for r in replies if r.ok is not None})

@@ -22,7 +22,7 @@ from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.mcapfile import read_recording
+from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.argtypes import (
     integer,
@@ -37,11 +37,12 @@ from fleet.runtime.argtypes import (
 )
 from fleet.runtime.bus import free_port
 from fleet.runtime.local_run import RunSpec, run_processes
-from fleet.world.layout import Layout, load_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
 
 if TYPE_CHECKING:
-    from fleet.analysis.analyze import Report
+    from fleet.analysis.report import Report
 
 
 def register(sub: argparse._SubParsersAction) -> None:

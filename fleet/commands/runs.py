@@ -24,16 +24,12 @@ from typing import Any
 from mcap.reader import make_reader
 
 from fleet.errors import UserError
-from fleet.recording.mcapfile import (
-    MCAP_MAGIC,
-    RUN_FILE,
-    RecordingError,
-    message_type,
-    read_description,
-    segment_paths,
-)
+from fleet.recording.format import MCAP_MAGIC
+from fleet.recording.reader import RecordingError, read_description
 from fleet.recording.rundir import MARKER, RUNS, marker_of, run_id_of
+from fleet.recording.segments import RUN_FILE, segment_paths
 from fleet.wire.protocol import MissionDone
+from fleet.wire.topics import message_type
 
 SUMMARY = "summary.json"
 VERDICTS = ("safety", "work", "messages")
@@ -84,7 +80,7 @@ class RunEntry:
 
 
 def summary_of(report, run_id: str | None, segments: dict[str, int]) -> dict[str, Any]:
-    """What `fleet runs` keeps of a judged run (a fleet.analysis.analyze.Report)."""
+    """What `fleet runs` keeps of a judged run (a fleet.analysis.report.Report)."""
     verdicts = {"safety": report.safe, "work": report.work_done,
                 "messages": report.messages_lost == 0}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,

@@ -53,7 +53,7 @@ def run_service(args: argparse.Namespace) -> int:
         import json
 
         from fleet.runtime.access import router_acl
-        from fleet.runtime.bus import Keys
+        from fleet.wire.topics import Keys
 
         Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
         Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
@@ -71,8 +71,9 @@ def healthy(name: str, config) -> bool:
                 return True
         except OSError:
             return False
-    from fleet.runtime.access import read_dictionary, vehicle_user
-    from fleet.runtime.bus import BusConfig, Keys, open_session, wait_alive
+    from fleet.runtime.access import read_dictionary
+    from fleet.runtime.bus import BusConfig, open_session, wait_alive
+    from fleet.wire.topics import Keys, vehicle_sender
 
     keys = Keys(config.run)
     user, password = "", ""
@@ -83,7 +84,7 @@ def healthy(name: str, config) -> bool:
             return False  # no id claimed yet
         token = keys.vehicle_alive(vehicle)
         if config.secure:
-            user = vehicle_user(vehicle)
+            user = vehicle_sender(vehicle)
             password = read_dictionary(Path(SECRETS / "fleet_vehicle_logins"))[user]
     else:
         token = {"reservation": keys.reservation_alive, "dispatcher": keys.dispatcher_alive,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from fleet.commands.progress import ProgressBar
 from fleet.runtime.argtypes import integer, layout_arg, positive_int, writable_file
-from fleet.world.layout import load_layout
+from fleet.world.layout_file import load_layout
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -47,7 +47,8 @@ from fleet.wire.protocol import (
     SubtaskEvent,
     ZoneClosed,
 )
-from fleet.world.layout import Layout, LayoutError, load_layout
+from fleet.world.layout import Layout, LayoutError
+from fleet.world.layout_file import load_layout
 
 
 class MissionStuck(UserError):

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from fleet.errors import UserError
 from fleet.planning.geometry import Cell
-from fleet.world.layout import Layout, parse_cells
+from fleet.world.layout import Layout
+from fleet.world.layout_file import parse_cells
 
 
 class ScenarioError(UserError):
@@ -103,9 +104,6 @@ class Scenario:
         """Every sim time at which a fault starts or ends: the fast clock stops there."""
         times = {f.at for f in self.faults} | {f.until for f in self.faults}
         return sorted(t for t in times if math.isfinite(t))
-
-    def vehicle_faults(self) -> list[Fault]:
-        return [f for f in self.faults if f.kind in VEHICLE_KINDS]
 
 
 def builtin_scenarios() -> list[str]:

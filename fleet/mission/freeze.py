@@ -1,4 +1,4 @@
-"""Who stops, and where, when a forklift cannot follow its schedule (DESIGN.md section 4).
+"""Who stops, and where, when a forklift cannot follow its schedule (docs/faults.md).
 
 Pure functions over the reservation table and what each forklift has committed.
 

@@ -1,59 +1,193 @@
-"""Mission records as plain JSON-able data (the interim record format until the MCAP
-recorder lands), and a digest that proves two runs identical."""
+"""The mission record: what a mission did, as one frozen value (MissionSummary).
+
+The engine's record gives it at the end of a run (`MissionSummary.of_record`); a recording
+gives it back, also for a run that never ended (fleet.recording.mission_record.summary_of).
+Its JSON form (`to_dict`) is the dispatcher's result (dispatch/done), and the digest of that
+form proves two runs identical, bit for bit.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import json
 import math
+from dataclasses import dataclass
 from typing import Any
 
 from fleet.mission.engine import MissionRecord, subtask_event
-from fleet.wire.protocol import SubtaskEvent, body_of
+from fleet.wire.protocol import (
+    DecisionFailure,
+    RecordStep,
+    SubtaskEvent,
+    WireInterval,
+    body_of,
+    build_message,
+)
+
+
+@dataclass(frozen=True)
+class MissionHeader:
+    """Which mission ran."""
+
+    layout: str  # the layout's name
+    kind: str  # "fill" or "empty"
+    strategy: str
+    vehicles: int
+    seed: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"layout": self.layout, "kind": self.kind, "strategy": self.strategy,
+                "vehicles": self.vehicles, "seed": self.seed}
+
+
+@dataclass(frozen=True)
+class SubtaskRecord:
+    """A subtask the dispatcher decided and a forklift committed, as announced
+    (dispatch/subtask): its whole trajectory, step by step, and the cells it reserved."""
+
+    vehicle: int
+    kind: str  # "deliver" or "return"
+    target: str  # cluster or station
+    stack: int | None  # stack index in the cluster, for deliveries
+    t_i: float
+    t_end: float
+    t_done: float  # after claiming / unloading
+    postponed: bool
+    steps: tuple[RecordStep, ...]
+    intervals: tuple[WireInterval, ...]  # (col, row, t0, t1); t1 inf: parked for good
+
+    @classmethod
+    def of_event(cls, event: SubtaskEvent) -> SubtaskRecord:
+        return cls(event.vehicle, event.kind, event.target, event.stack, event.t_i,
+                   event.t_end, event.t_done, event.postponed,
+                   tuple(tuple(st) for st in event.steps),
+                   tuple(tuple(iv) for iv in event.intervals))
+
+    @classmethod
+    def from_dict(cls, data: dict) -> SubtaskRecord:
+        """From its JSON form (`to_dict`), checked as its message is (ProtocolError)."""
+        return cls.of_event(build_message(SubtaskEvent, _as_sent(data)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """As JSON-able data (an infinite end written "inf")."""
+        return {"vehicle": self.vehicle, "kind": self.kind, "target": self.target,
+                "stack": self.stack, "t_i": self.t_i, "t_end": self.t_end,
+                "t_done": self.t_done, "postponed": self.postponed,
+                "steps": [list(st) for st in self.steps],
+                "intervals": [[c, r, t0, _time(t1)] for c, r, t0, t1 in self.intervals]}
+
+    @property
+    def leaves_at(self) -> float:
+        """When the forklift leaves where it stood before: its first maneuver's start."""
+        return self.steps[0][3] if self.steps else self.t_end
 
 
 def _time(t: float) -> float | str:
     return "inf" if t == math.inf else t
 
 
-def record_to_dict(rec: MissionRecord) -> dict[str, Any]:
-    return {
-        "mission": {"layout": rec.mission.layout, "kind": rec.mission.kind.value,
-                    "strategy": rec.mission.strategy.value, "vehicles": len(rec.vehicles),
-                    "seed": rec.mission.seed},
-        "starts": [str(p) for p in rec.starts],
-        "end_time_s": rec.end_time,
-        "all_parked_s": rec.all_parked_time,
-        "decision_failures": rec.decision_failures,
-        "wait_s": {str(k): v for k, v in rec.wait_s.items()},
-        "busy_s": {str(k): v for k, v in rec.busy_s.items()},
-        "stacks_done": [list(s) for s in rec.stacks_done],
-        "failures": [{"t": f.t, "vehicle": f.vehicle, "stage": f.stage, "reason": f.reason}
-                     for f in rec.failures],
-        "subtasks": [subtask_dict(subtask_event(s)) for s in rec.subtasks],
-        **_faults(rec),
-    }
+def _as_sent(subtask: dict) -> dict:
+    """A record's subtask as its message carried it (an infinite end is "inf" in records)."""
+    intervals = subtask.get("intervals")
+    if not isinstance(intervals, list):
+        return subtask
+    return dict(subtask, intervals=[
+        [*iv[:3], math.inf] if isinstance(iv, list) and len(iv) == 4 and iv[3] == "inf"
+        else iv for iv in intervals])
 
 
-def _faults(rec: MissionRecord) -> dict[str, Any]:
-    """What faults did to the mission (nothing at all in a run without faults, so its record
-    and digest are those of a run before faults existed)."""
-    if not (rec.halts or rec.resumes):
-        return {}
-    return {"halts": [list(h) for h in rec.halts], "resumes": [list(r) for r in rec.resumes],
-            "cut_subtasks": list(rec.cut_subtasks)}
+def failure_from_dict(data: dict) -> DecisionFailure:
+    """A decision failure of a record, from its JSON form (ProtocolError if it is none)."""
+    return build_message(DecisionFailure, data)
 
 
-def subtask_dict(event: SubtaskEvent) -> dict[str, Any]:
-    """A subtask as JSON-able data (an infinite end written "inf")."""
-    body = body_of(event)
-    body["steps"] = [list(st) for st in event.steps]
-    body["intervals"] = [[c, r, t0, _time(t1)] for c, r, t0, t1 in event.intervals]
-    return body
+@dataclass(frozen=True)
+class StackRecord:
+    """A stack filled (or emptied) at t."""
+
+    cluster: str
+    index: int
+    t: float
+
+
+@dataclass(frozen=True)
+class HaltRecord:
+    """A forklift frozen by a fault at t (docs/faults.md)."""
+
+    vehicle: int
+    t: float
+    cause: str
+
+
+@dataclass(frozen=True)
+class ResumeRecord:
+    vehicle: int
+    t: float
+
+
+@dataclass(frozen=True)
+class MissionSummary:
+    """What a mission did (docs/metrics.md has each number's definition)."""
+
+    mission: MissionHeader
+    starts: tuple[str, ...]  # start pose of forklift 1..N
+    end_time_s: float  # the last stack done
+    all_parked_s: float  # every forklift at rest for good
+    decision_failures: int  # the dispatcher's count, announced or not
+    wait_s: dict[int, float]  # per forklift: stop maneuvers and postponements
+    busy_s: dict[int, float]  # per forklift: driving
+    stacks_done: tuple[StackRecord, ...]  # in the order done
+    failures: tuple[DecisionFailure, ...]  # those announced (dispatch/failure)
+    subtasks: tuple[SubtaskRecord, ...]  # in the order decided
+    # What faults did (nothing at all in a run without faults, so its record and digest are
+    # those of a run before faults existed).
+    halts: tuple[HaltRecord, ...] = ()
+    resumes: tuple[ResumeRecord, ...] = ()
+    cut_subtasks: tuple[int, ...] = ()  # indices into `subtasks` of those cut short
+    # Rebuilt from a recording: what its figures miss (fleet.recording.mission_record);
+    # empty when they are whole (always, in a dispatcher's own record).
+    incomplete: tuple[str, ...] = ()
+
+    @classmethod
+    def of_record(cls, rec: MissionRecord) -> MissionSummary:
+        """The engine's record of a finished mission."""
+        m = rec.mission
+        return cls(
+            MissionHeader(m.layout, m.kind.value, m.strategy.value, len(rec.vehicles), m.seed),
+            tuple(str(p) for p in rec.starts), rec.end_time, rec.all_parked_time,
+            rec.decision_failures, dict(rec.wait_s), dict(rec.busy_s),
+            tuple(StackRecord(*s) for s in rec.stacks_done),
+            tuple(DecisionFailure(f.t, f.vehicle, f.stage, f.reason) for f in rec.failures),
+            tuple(SubtaskRecord.of_event(subtask_event(s)) for s in rec.subtasks),
+            tuple(HaltRecord(*h) for h in rec.halts),
+            tuple(ResumeRecord(*r) for r in rec.resumes), tuple(rec.cut_subtasks))
+
+    def to_dict(self) -> dict[str, Any]:
+        """As JSON-able data: the dispatcher's result, which the digest is taken over."""
+        out = {
+            "mission": self.mission.to_dict(),
+            "starts": list(self.starts),
+            "end_time_s": self.end_time_s,
+            "all_parked_s": self.all_parked_s,
+            "decision_failures": self.decision_failures,
+            "wait_s": {str(k): v for k, v in self.wait_s.items()},
+            "busy_s": {str(k): v for k, v in self.busy_s.items()},
+            "stacks_done": [[s.cluster, s.index, s.t] for s in self.stacks_done],
+            "failures": [body_of(f) for f in self.failures],
+            "subtasks": [s.to_dict() for s in self.subtasks],
+        }
+        if self.halts or self.resumes:
+            out |= {"halts": [[h.vehicle, h.t, h.cause] for h in self.halts],
+                    "resumes": [[r.vehicle, r.t] for r in self.resumes],
+                    "cut_subtasks": list(self.cut_subtasks)}
+        if self.incomplete:
+            out["incomplete"] = list(self.incomplete)
+        return out
 
 
 def digest(rec: MissionRecord) -> str:
-    return digest_of(record_to_dict(rec))
+    """The digest of the engine's record of a mission."""
+    return digest_of(MissionSummary.of_record(rec).to_dict())
 
 
 def digest_of(record: dict[str, Any]) -> str:
@@ -62,21 +196,17 @@ def digest_of(record: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def held_intervals(record: dict) -> list[tuple[int, tuple[int, int], float, float]]:
+def held_intervals(summary: MissionSummary) -> list[tuple[int, tuple[int, int], float, float]]:
     """(vehicle, cell, t0, t1) as the table held them: a trajectory's parking to infinity
     ends where the same vehicle's next trajectory starts (it is released from there)."""
     held = []
-    by_vehicle: dict[int, list[dict]] = {}
-    for s in record["subtasks"]:
-        by_vehicle.setdefault(s["vehicle"], []).append(s)
+    by_vehicle: dict[int, list[SubtaskRecord]] = {}
+    for s in summary.subtasks:
+        by_vehicle.setdefault(s.vehicle, []).append(s)
     for vehicle, subtasks in by_vehicle.items():
         for k, s in enumerate(subtasks):
-            nxt = subtasks[k + 1] if k + 1 < len(subtasks) else None
-            release = math.inf
-            if nxt is not None:
-                release = nxt["steps"][0][3] if nxt["steps"] else nxt["t_end"]
-            for c, r, t0, t1 in s["intervals"]:
-                t1 = math.inf if t1 == "inf" else t1
+            release = subtasks[k + 1].leaves_at if k + 1 < len(subtasks) else math.inf
+            for c, r, t0, t1 in s.intervals:
                 if t0 < release:
                     held.append((vehicle, (c, r), t0, min(t1, release)))
     return held

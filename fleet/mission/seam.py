@@ -1,5 +1,5 @@
-"""The seam between the dispatching loop and the forklifts (DESIGN.md section 7, the one
-store interface): the engine decides subtasks; an `Executor` plans and commits them, and a
+"""The seam between the dispatching loop and the forklifts (one interface, whatever holds
+the reservations): the engine decides subtasks; an `Executor` plans and commits them, and a
 `Pacer` holds the loop to a clock.
 
 In one process, `LocalExecutor` plans with the vehicle kind's planner against a
@@ -25,6 +25,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planners, VehicleKind
+from fleet.wire.protocol import GOODS, ZONE
 
 
 class VehicleLost(UserError):
@@ -94,10 +95,6 @@ class Pacer(Protocol):
     def instant(self, t: float) -> float:
         """The first sim instant, not before t, at which a change decided now can still take
         effect (a freeze every forklift must hear of before it)."""
-
-
-GOODS = 0  # owner id of stacks with goods on them, in the reservation table
-ZONE = -1  # owner id of closed zones
 
 
 class LocalExecutor:

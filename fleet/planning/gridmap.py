@@ -20,9 +20,3 @@ class GridMap:
 
     def all_free(self, cells: Iterable[Cell]) -> bool:
         return all(self.free(c) for c in cells)
-
-    def with_blocked(self, extra: Iterable[Cell]) -> GridMap:
-        return GridMap(self.cols, self.rows, self.blocked | frozenset(extra), self.cell_size)
-
-    def without_blocked(self, cells: Iterable[Cell]) -> GridMap:
-        return GridMap(self.cols, self.rows, self.blocked - frozenset(cells), self.cell_size)

@@ -345,12 +345,6 @@ class HybridAStar:
         # Someone parked there for good can never be waited out.
         return all(store.conflict(vehicle, c, 1e300, INF) is None for c in cells)
 
-    @staticmethod
-    def _collides(vehicle: int, x: int, y: int, offsets: frozenset[Cell], t0: float, t1: float,
-                  store: ReservationView) -> bool:
-        return any(store.conflict(vehicle, (x + a, y + b), t0, t1) is not None
-                   for a, b in offsets)
-
     def _build(self, vehicle: int, start: Pose, goal_node: _Node,
                expansions: int) -> Trajectory:
         chain = []

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
@@ -107,7 +106,3 @@ def merge_intervals(pieces: Iterable[tuple[Cell, float, float]]) -> tuple[Interv
                 cur0, cur1 = t0, t1
         out.append(Interval(cell, cur0, cur1))
     return tuple(out)
-
-
-def parked_intervals(cells: Iterable[Cell], t0: float) -> tuple[Interval, ...]:
-    return tuple(Interval(c, t0, math.inf) for c in sorted(cells))

@@ -1,2 +1,3 @@
-"""Recordings as MCAP files (docs/recording.md): the format, run directories, the in-process run
-written as a recording, and the mission record rebuilt from one."""
+"""Recordings as MCAP files (docs/recording.md): the format and its schemas, the writer, the
+reader, a run's segments, run directories, the in-process run written as a recording, and the
+mission record rebuilt from one."""

@@ -19,12 +19,12 @@ from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
 from fleet.mission.engine import Engine, EngineOptions, MissionRecord
 from fleet.mission.faults import Scenario
 from fleet.mission.freeze import ScheduledPacer
-from fleet.mission.record import digest_of, record_to_dict
+from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import Mission, MissionKind
-from fleet.recording.mcapfile import RecordingWriter, mission_info
-from fleet.runtime.bus import Keys
+from fleet.recording.writer import RecordingWriter, mission_info
 from fleet.wire.convert import change_time, change_to_wire
 from fleet.wire.protocol import Message, MissionDone, MissionInfo, Progress, WireChange, encode
+from fleet.wire.topics import DISPATCHER, Keys, Topic, expected_sender, published_by
 from fleet.world.layout import Layout
 
 
@@ -34,6 +34,14 @@ class Outgoing:
     message: Message
     sender: str
     sim_time: float
+
+
+def outgoing(keys: Keys, topic: Topic, message: Message, sim_time: float,
+             *values: int) -> Outgoing:
+    """A message on the run's key of a topic (its placeholders `values`), in the name of that
+    key's one sender."""
+    key = topic.key(keys.run, *values)
+    return Outgoing(key, message, expected_sender(key), sim_time)
 
 
 def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
@@ -61,8 +69,8 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys,
             elif op == "resume":
                 drive.resume(args[0])
                 silent[-1] = (silent[-1][0], args[0])
-        out += [Outgoing(keys.vehicle_state(vehicle), drive.state_at(t), f"vehicle-{vehicle}",
-                         t) for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
+        out += [outgoing(keys, Keys.vehicle_state, drive.state_at(t), t, vehicle)
+                for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
                 if not any(t0 <= t < t1 for t0, t1 in silent)]
     return out
 
@@ -73,18 +81,13 @@ def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
                      keys: Keys | None = None) -> list[Outgoing]:
     """Everything a run of processes would have published, in sim-time order."""
     keys = keys or Keys()
-    key_of = {"dispatch.subtask": keys.dispatch_subtask, "dispatch.stack": keys.dispatch_stack,
-              "dispatch.failure": keys.dispatch_failure,
-              "dispatch.progress": keys.dispatch_progress, "dispatch.halt": keys.dispatch_halt,
-              "dispatch.resume": keys.dispatch_resume, "dispatch.reopen": keys.dispatch_reopen,
-              "dispatch.zone": keys.dispatch_zone}
-    stream = [Outgoing(keys.dispatch_mission, info, "dispatcher", 0.0)]
-    stream += [Outgoing(keys.reservation_change, c, "reservation", change_time(c))
-               for c in changes]
-    stream += [Outgoing(key_of[m.TYPE], m, "dispatcher", t) for m, t in events]
+    dispatcher = published_by(DISPATCHER)  # the topic of each of the dispatcher's messages
+    stream = [outgoing(keys, Keys.dispatch_mission, info, 0.0)]
+    stream += [outgoing(keys, Keys.reservation_change, c, change_time(c)) for c in changes]
+    stream += [outgoing(keys, dispatcher[type(m)], m, t) for m, t in events]
     stream += vehicle_states(record, layout, keys, drive_log)
     stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
-    stream.append(Outgoing(keys.dispatch_done, done, "dispatcher", record.end_time))
+    stream.append(outgoing(keys, Keys.dispatch_done, done, record.end_time))
     return stream
 
 
@@ -108,7 +111,7 @@ def recorded_run(mission: Mission, layout: Layout, options: EngineOptions,
     pacer = ScheduledPacer(scenario) if scenario is not None else None
     engine = Engine(mission, options, layout, pacer=pacer)
     record = engine.run()
-    as_dict = record_to_dict(record)
+    as_dict = MissionSummary.of_record(record).to_dict()
     done = MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                        wall_s=time.perf_counter() - t0)
     info = mission_info(mission, layout, len(record.vehicles), "inprocess", command=command)

@@ -1,11 +1,12 @@
-"""The mission record (the dict of fleet.mission.record) rebuilt from a recording's dispatch
-events, so plots and summaries read recordings, including those of runs that never ended.
+"""The mission record (fleet.mission.record.MissionSummary) rebuilt from a recording's
+dispatch events, so plots and summaries read recordings, including those of runs that never
+ended.
 
 A run recorded in segments has windows in which no recorder ran (docs/recording.md). What a
 dispatcher announced then is in its final record (dispatch/done: every subtask, failure and
 stack of that dispatcher), so it is taken from there. A dispatcher that died and was replaced
 (docs/faults.md) left no record: what it announced while no recorder ran is known nowhere,
-and the rebuilt record's `incomplete` says so (an empty list: the figures are whole).
+and the rebuilt record's `incomplete` says so (empty: the figures are whole).
 """
 
 from __future__ import annotations
@@ -16,8 +17,14 @@ from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any
 
-from fleet.mission.record import subtask_dict
-from fleet.recording.mcapfile import Recorded, Recording, RecordingError
+from fleet.mission.record import (
+    MissionHeader,
+    MissionSummary,
+    StackRecord,
+    SubtaskRecord,
+    failure_from_dict,
+)
+from fleet.recording.reader import Recorded, Recording, RecordingError
 from fleet.wire.protocol import (
     DecisionFailure,
     Halt,
@@ -30,7 +37,6 @@ from fleet.wire.protocol import (
     StackReopened,
     SubtaskEvent,
     ZoneClosed,
-    build_message,
 )
 
 # A stream whose numbers fall this far below the highest seen is a restarted sender whose
@@ -59,17 +65,28 @@ class Restart:
 
 
 @dataclass(frozen=True)
+class Account:
+    """The dispatcher's own figures: busy and waiting seconds per forklift (waiting counts
+    postponements too) and its count of decision failures."""
+
+    busy_s: dict[int, float]
+    wait_s: dict[int, float]
+    decision_failures: int
+
+
+@dataclass(frozen=True)
 class Final:
     """The last dispatcher's record (its result, dispatch/done), checked: all it announced."""
 
-    record: dict
     since_ns: int  # where that dispatcher's messages begin (receive time)
-    subtasks: list[dict]  # as the recording's are read (subtask_dict)
-    failures: list[dict]
-    stacks: list[list]  # [cluster, index, t]
+    subtasks: tuple[SubtaskRecord, ...]
+    failures: tuple[DecisionFailure, ...]
+    stacks: tuple[StackRecord, ...]
+    account: Account | None  # None: not in the record in the expected shape
 
 
-def record_of(recording: Recording) -> dict[str, Any]:
+def summary_of(recording: Recording) -> MissionSummary:
+    """The mission record of a recording (RecordingError if it holds no mission message)."""
     info = recording.info
     if info is None:
         raise RecordingError(f"{recording.path}: no mission message (dispatch/mission) was "
@@ -78,43 +95,37 @@ def record_of(recording: Recording) -> dict[str, Any]:
     final = final_record(recording, restarts)
     incomplete = unknown(recording, restarts, final is not None)
     heard = recording.of(SubtaskEvent)
-    subtasks = [subtask_dict(m) for _, m in heard]
-    stacks = [[m.cluster, m.index, m.t] for _, m in recording.of(StackDone)]
-    failures = [_failure(m) for _, m in recording.of(DecisionFailure)]
+    subtasks = [SubtaskRecord.of_event(m) for _, m in heard]
+    stacks = [StackRecord(m.cluster, m.index, m.t) for _, m in recording.of(StackDone)]
+    failures = [m for _, m in recording.of(DecisionFailure)]
     if final is not None:
         # Those of the dispatchers before it as recorded, then all it announced.
-        own = {_frozen(s) for s in final.subtasks}
-        if any(r.log_ns >= final.since_ns and _frozen(s) not in own
+        own = set(final.subtasks)
+        if any(r.log_ns >= final.since_ns and s not in own
                for (r, _), s in zip(heard, subtasks, strict=True)):
             incomplete.append("the dispatcher's record lacks subtasks it announced")
-        subtasks = [s for s in subtasks if _frozen(s) not in own] + final.subtasks
-        own = {_frozen(f) for f in final.failures}
-        failures = [f for f in failures if _frozen(f) not in own] + final.failures
-        seen = {(c, i) for c, i, _ in stacks}
-        stacks += [s for s in final.stacks if (s[0], s[1]) not in seen]
-    busy: dict[str, float] = {str(v): 0.0 for v in range(1, info.vehicles + 1)}
+        subtasks = [s for s in subtasks if s not in own] + list(final.subtasks)
+        announced = set(final.failures)
+        failures = [f for f in failures if f not in announced] + list(final.failures)
+        seen = {(s.cluster, s.index) for s in stacks}
+        stacks += [s for s in final.stacks if (s.cluster, s.index) not in seen]
+    busy: dict[int, float] = {v: 0.0 for v in range(1, info.vehicles + 1)}
     wait = dict(busy)
     for s in subtasks:
-        for label, _, _, t0, t1, *_ in s["steps"]:
-            (wait if label == "stop" else busy)[str(s["vehicle"])] += t1 - t0
-    account = _dispatcher_account(final.record) if final is not None else None
+        for label, _, _, t0, t1, *_ in s.steps:
+            (wait if label == "stop" else busy)[s.vehicle] += t1 - t0
+    account = final.account if final is not None else None
     if account:  # the dispatcher's own, which also counts postponements as waiting
-        busy, wait, _ = account
-    return {
-        "mission": {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
-                    "vehicles": info.vehicles, "seed": info.seed},
-        "starts": list(info.starts),
-        "end_time_s": max((t for _, _, t in stacks), default=0.0),
-        "all_parked_s": max((s["t_end"] for s in subtasks), default=0.0),
-        "decision_failures": decision_failures(
-            recording, restarts, account[2] if account else None, failures),
-        "wait_s": wait,
-        "busy_s": busy,
-        "stacks_done": stacks,
-        "failures": failures,
-        "subtasks": subtasks,
-        "incomplete": incomplete,
-    }
+        busy, wait = account.busy_s, account.wait_s
+    return MissionSummary(
+        MissionHeader(info.layout, info.kind, info.strategy, info.vehicles, info.seed),
+        tuple(info.starts),
+        end_time_s=max((s.t for s in stacks), default=0.0),
+        all_parked_s=max((s.t_end for s in subtasks), default=0.0),
+        decision_failures=decision_failures(
+            recording, restarts, account.decision_failures if account else None, failures),
+        wait_s=wait, busy_s=busy, stacks_done=tuple(stacks), failures=tuple(failures),
+        subtasks=tuple(subtasks), incomplete=tuple(incomplete))
 
 
 def dispatcher_restarts(recording: Recording) -> list[Restart]:
@@ -183,7 +194,7 @@ def _counted(n: int, noun: str) -> str:
 
 
 def decision_failures(recording: Recording, restarts: list[Restart], final: int | None,
-                      failures: list[dict]) -> int:
+                      failures: list[DecisionFailure]) -> int:
     """The dispatcher's count of decision failures (docs/metrics.md). Failures inside a
     decision are counted, not announced one by one: each progress report has the count so
     far, the dispatcher's result (`final`) the last one. A restarted dispatcher counts from 0
@@ -195,7 +206,7 @@ def decision_failures(recording: Recording, restarts: list[Restart], final: int 
         counts[life] = max(counts[life], m.failures)
     if final is not None:
         counts[-1] = max(counts[-1], final)
-    return max(sum(counts), sum(f["stage"] == "plan" for f in failures))
+    return max(sum(counts), sum(f.stage == "plan" for f in failures))
 
 
 def _events(recording: Recording) -> list[tuple[Recorded, Any]]:
@@ -206,7 +217,8 @@ def _events(recording: Recording) -> list[tuple[Recorded, Any]]:
 
 def final_record(recording: Recording, restarts: list[Restart]) -> Final | None:
     """The last dispatcher's record, if its result is in the recording and the record has
-    the shape record_io gives it (else None: the recording alone says what happened)."""
+    the shape MissionSummary.to_dict gives it (else None: the recording alone says what
+    happened)."""
     done = [(r, m) for r, m in recording.of(MissionDone)
             if m.ok and isinstance(m.record, dict) and m.record]
     since = restarts[-1].at_ns if restarts else 0
@@ -214,13 +226,11 @@ def final_record(recording: Recording, restarts: list[Restart]) -> Final | None:
         return None
     record = done[-1][1].record
     try:
-        subtasks = [subtask_dict(build_message(SubtaskEvent, _as_sent(entry)))
-                    for entry in _entries(record, "subtasks")]
-        failures = [_failure(build_message(DecisionFailure, entry))
-                    for entry in _entries(record, "failures")]
+        subtasks = tuple(SubtaskRecord.from_dict(e) for e in _entries(record, "subtasks"))
+        failures = tuple(failure_from_dict(e) for e in _entries(record, "failures"))
     except ProtocolError:
         return None
-    return Final(record, since, subtasks, failures, _record_stacks(record))
+    return Final(since, subtasks, failures, _record_stacks(record), _dispatcher_account(record))
 
 
 def _entries(record: dict, name: str) -> list[dict]:
@@ -230,49 +240,29 @@ def _entries(record: dict, name: str) -> list[dict]:
     return entries
 
 
-def _as_sent(subtask: dict) -> dict:
-    """A record's subtask as its message carried it (an infinite end is "inf" in records)."""
-    intervals = subtask.get("intervals")
-    if not isinstance(intervals, list):
-        return subtask
-    return dict(subtask, intervals=[
-        [*iv[:3], math.inf] if isinstance(iv, list) and len(iv) == 4 and iv[3] == "inf"
-        else iv for iv in intervals])
-
-
-def _failure(m: DecisionFailure) -> dict:
-    return {"t": m.t, "vehicle": m.vehicle, "stage": m.stage, "reason": m.reason}
-
-
-def _record_stacks(record: dict) -> list[list]:
+def _record_stacks(record: dict) -> tuple[StackRecord, ...]:
+    """The record's stacks done that are in shape (a damaged entry is left out)."""
     entries = record.get("stacks_done")
-    return [[e[0], e[1], float(e[2])] for e in entries if isinstance(e, list) and len(e) == 3
-            and isinstance(e[0], str) and isinstance(e[1], int) and not isinstance(e[1], bool)
-            and isinstance(e[2], int | float) and not isinstance(e[2], bool)
-            and math.isfinite(e[2])] if isinstance(entries, list) else []
+    return tuple(StackRecord(e[0], e[1], float(e[2])) for e in entries
+                 if isinstance(e, list) and len(e) == 3
+                 and isinstance(e[0], str) and isinstance(e[1], int) and not isinstance(e[1], bool)
+                 and isinstance(e[2], int | float) and not isinstance(e[2], bool)
+                 and math.isfinite(e[2])) if isinstance(entries, list) else ()
 
 
-def _frozen(value: Any) -> Any:
-    """A hashable copy of JSON-like data, to compare subtasks and failures by content."""
-    if isinstance(value, dict):
-        return tuple(sorted((k, _frozen(v)) for k, v in value.items()))
-    if isinstance(value, list | tuple):
-        return tuple(_frozen(v) for v in value)
-    return value
-
-
-def _dispatcher_account(record: dict) -> tuple[dict, dict, int] | None:
+def _dispatcher_account(record: dict) -> Account | None:
     """Busy and waiting seconds per forklift and the decision failures from the dispatcher's
     final record, or None if they are not there in the expected shape (a damaged file)."""
     busy, wait, failures = (record.get(k) for k in ("busy_s", "wait_s", "decision_failures"))
 
     def seconds(value: Any) -> bool:
         return isinstance(value, dict) and all(
-            isinstance(k, str) and k.isdigit() and isinstance(v, int | float)
+            isinstance(k, str) and k.isdecimal() and isinstance(v, int | float)
             and not isinstance(v, bool)
             for k, v in value.items())
 
     if seconds(busy) and seconds(wait) and isinstance(failures, int) \
             and not isinstance(failures, bool):
-        return busy, wait, failures
+        return Account({int(k): v for k, v in busy.items()},
+                       {int(k): v for k, v in wait.items()}, failures)
     return None

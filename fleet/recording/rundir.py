@@ -3,7 +3,7 @@ by creating it (or taking an empty one) and writing its marker, fleet-run.json, 
 the run's id. Nothing in it is deleted afterwards; the one exception is `--force`, which
 replaces a whole run directory (never a directory a run did not make) before a new run
 claims it. Every segment written in the directory carries the marker's run id
-(fleet.recording.mcapfile), so a file of another run in it is told apart and refused by name.
+(fleet.recording.writer), so a file of another run in it is told apart and refused by name.
 """
 
 from __future__ import annotations

@@ -49,10 +49,10 @@ from pathlib import Path
 import zenoh
 
 from fleet.errors import UserError
+from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_sender
 
-DISPATCHER = "dispatcher"
-RESERVATION = "reservation"
-RECORDER = "recorder"
+# The principals log in under their sender names (fleet.wire.topics); the operator is the
+# one without a stream of its own name (its fault injector sends as the injector).
 OPERATOR = "operator"
 SERVICES = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
 
@@ -67,13 +67,8 @@ MESSAGES = ("put", "delete", "declare_subscriber", "query", "declare_queryable",
             "liveliness_token", "declare_liveliness_subscriber", "liveliness_query")
 
 
-def vehicle_user(vehicle: int) -> str:
-    """A forklift agent's user name: also its sender name, which ends its request key."""
-    return f"vehicle-{vehicle}"
-
-
 def principals(vehicles: int) -> list[str]:
-    return [*SERVICES, *(vehicle_user(v) for v in range(1, vehicles + 1))]
+    return [*SERVICES, *(vehicle_sender(v) for v in range(1, vehicles + 1))]
 
 
 @dataclass(frozen=True)
@@ -93,7 +88,7 @@ class Credentials:
         return self.logins[principal]
 
     def vehicle(self, vehicle: int) -> Login:
-        return self.logins[vehicle_user(vehicle)]
+        return self.logins[vehicle_sender(vehicle)]
 
 
 def generate_credentials(run: str, vehicles: int) -> Credentials:
@@ -167,11 +162,11 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (SUBSCRIBE + WATCH, [f"{root}/**"])],
     }
     for v in range(1, vehicles + 1):
-        grants[vehicle_user(v)] = [
+        grants[vehicle_sender(v)] = [
             (PUBLISH, [f"{root}/vehicle/{v}/**", f"{root}/clock/ack/{v}"]),
             (TOKEN, [f"{root}/vehicle/{v}/alive"]),
             (SERVE, [f"{root}/vehicle/{v}/task", f"{root}/vehicle/{v}/inject"]),
-            (ASK, [f"{root}/reservation/request/{vehicle_user(v)}", f"{root}/dispatch/claim"]),
+            (ASK, [f"{root}/reservation/request/{vehicle_sender(v)}", f"{root}/dispatch/claim"]),
             (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change",
                          f"{root}/dispatch/done"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/{v}/alive"])]

@@ -196,8 +196,8 @@ def text_file(text: str) -> Path:
 
 
 def layout_arg(text: str) -> str:
-    """A built-in layout's name or a text file (what fleet.world.layout.load_layout takes)."""
-    from fleet.world.layout import builtin_names
+    """A built-in layout's name or a text file (what fleet.world.layout_file.load_layout takes)."""
+    from fleet.world.layout_file import builtin_names
 
     return _name_or_text_file(text, builtin_names())
 

@@ -1,6 +1,7 @@
-"""Zenoh plumbing shared by every process: the key space (docs/protocol.md), session
-configuration, and a request helper. Processes are clients of one router (`fleet run` starts
-it; in compose it is the `router` service); tests may connect peers directly."""
+"""Zenoh plumbing shared by every process: session configuration, numbered publishers and a
+request helper (the keys they use are fleet.wire.topics). Processes are clients of one router
+(`fleet run` starts it; in compose it is the `router` service); tests may connect peers
+directly."""
 
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ from fleet.errors import UserError
 from fleet.runtime.access import configure_client, configure_router
 from fleet.runtime.argtypes import endpoint, positive_float
 from fleet.wire.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
+from fleet.wire.topics import Keys
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 # Congestion control for streams that must not lose a message (table changes, the clock, the
@@ -34,127 +36,6 @@ DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 RELIABLE = zenoh.CongestionControl.BLOCK
 CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
 log = logging.getLogger("fleet.runtime.bus")
-
-
-@dataclass(frozen=True)
-class Keys:
-    """Every key expression of one run, under fleet/<run>/."""
-
-    run: str = "default"
-
-    @property
-    def root(self) -> str:
-        return f"fleet/{self.run}"
-
-    @property
-    def everything(self) -> str:
-        return f"{self.root}/**"
-
-    @property
-    def reservation_requests(self) -> str:
-        """Where the reservation service answers: every principal's request key."""
-        return f"{self.root}/reservation/request/*"
-
-    def reservation_request(self, sender: str) -> str:
-        """Where `sender` sends its requests: the key names who asks, so access control
-        can let a forklift ask only under its own name (docs/protocol.md)."""
-        return f"{self.root}/reservation/request/{sender}"
-
-    @property
-    def reservation_change(self) -> str:
-        return f"{self.root}/reservation/change"
-
-    @property
-    def reservation_alive(self) -> str:
-        return f"{self.root}/reservation/alive"
-
-    def vehicle_state(self, vehicle: int) -> str:
-        return f"{self.root}/vehicle/{vehicle}/state"
-
-    def vehicle_alive(self, vehicle: int | str) -> str:
-        return f"{self.root}/vehicle/{vehicle}/alive"
-
-    def vehicle_task(self, vehicle: int) -> str:
-        return f"{self.root}/vehicle/{vehicle}/task"
-
-    @property
-    def clock(self) -> str:
-        return f"{self.root}/clock"
-
-    def clock_ack(self, vehicle: int | str) -> str:
-        return f"{self.root}/clock/ack/{vehicle}"
-
-    @property
-    def dispatch_progress(self) -> str:
-        return f"{self.root}/dispatch/progress"
-
-    @property
-    def dispatch_done(self) -> str:
-        return f"{self.root}/dispatch/done"
-
-    @property
-    def dispatcher_alive(self) -> str:
-        return f"{self.root}/dispatch/alive"
-
-    @property
-    def dispatch_claim(self) -> str:
-        return f"{self.root}/dispatch/claim"
-
-    @property
-    def dispatch_mission(self) -> str:
-        return f"{self.root}/dispatch/mission"
-
-    @property
-    def dispatch_subtask(self) -> str:
-        return f"{self.root}/dispatch/subtask"
-
-    @property
-    def dispatch_stack(self) -> str:
-        return f"{self.root}/dispatch/stack"
-
-    @property
-    def dispatch_failure(self) -> str:
-        return f"{self.root}/dispatch/failure"
-
-    @property
-    def dispatch_halt(self) -> str:
-        return f"{self.root}/dispatch/halt"
-
-    @property
-    def dispatch_resume(self) -> str:
-        return f"{self.root}/dispatch/resume"
-
-    @property
-    def dispatch_reopen(self) -> str:
-        return f"{self.root}/dispatch/reopen"
-
-    @property
-    def dispatch_zone(self) -> str:
-        return f"{self.root}/dispatch/zone"
-
-    def vehicle_fault(self, vehicle: int | str) -> str:
-        return f"{self.root}/vehicle/{vehicle}/fault"
-
-    def vehicle_inject(self, vehicle: int) -> str:
-        """Where the fault injector reaches an agent (breakdown, slow planner)."""
-        return f"{self.root}/vehicle/{vehicle}/inject"
-
-    @property
-    def recorder_alive(self) -> str:
-        return f"{self.root}/recorder/alive"
-
-    @property
-    def recorder_status(self) -> str:
-        return f"{self.root}/recorder/status"
-
-    @staticmethod
-    def vehicle_of(key: str) -> int | None:
-        """The vehicle id in a .../vehicle/<id>/... or .../ack/<id> key, if any."""
-        parts = str(key).split("/")
-        for i, part in enumerate(parts[:-1]):
-            if part in ("vehicle", "ack") and parts[i + 1].isdigit():
-                return int(parts[i + 1])
-        return None
 
 
 @dataclass(frozen=True)

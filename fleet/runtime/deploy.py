@@ -13,14 +13,8 @@ from pathlib import PurePosixPath
 
 from fleet.errors import UserError
 from fleet.mission.spec import MissionKind, Strategy
-from fleet.runtime.access import (
-    DISPATCHER,
-    OPERATOR,
-    RECORDER,
-    RESERVATION,
-    Credentials,
-    dictionary_text,
-)
+from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
+from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
 
 SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
 SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
@@ -155,7 +149,7 @@ def secret_files(credentials: Credentials) -> dict[str, str]:
     files = {"users": dictionary_text(credentials.logins.values()),
              "vehicle_logins": dictionary_text(
                  login for name, login in credentials.logins.items()
-                 if name.startswith("vehicle-"))}
+                 if vehicle_of(name) is not None)}
     for principal in SERVICES_WITH_LOGINS:
         files[f"{principal}_password"] = credentials[principal].password + "\n"
     return files

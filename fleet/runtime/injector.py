@@ -22,13 +22,14 @@ from dataclasses import dataclass, field
 import zenoh
 
 from fleet.mission.faults import Fault, FaultKind, Scenario
-from fleet.runtime.bus import Keys, Requester, RequestFailed, Stream, received, wait_gone
+from fleet.runtime.bus import Requester, RequestFailed, Stream, received, wait_gone
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.linkproxy import LinkProxy
 from fleet.wire.protocol import ClockAck, ClockTick, InjectFault, Reply
+from fleet.wire.topics import INJECTOR, Keys
 
 log = logging.getLogger("fleet.runtime.injector")
-SENDER = "injector"
+SENDER = INJECTOR
 INJECTOR_ID = 0  # its ClockAck's vehicle field
 ACK_WAIT_S = 10.0
 SERVICE_GONE_S = 10.0
@@ -71,7 +72,7 @@ class Injector:
                               key=lambda pair: pair[0].t)
         self.requester = Requester(self.session, SENDER, timeout_s=10.0, retry_s=10.0)
         self.inbox: queue.Queue[zenoh.Sample | None] = queue.Queue()
-        self.ack = Stream(self.session, self.keys.clock_ack("injector"), SENDER, reliable=True)
+        self.ack = Stream(self.session, self.keys.injector_ack, SENDER, reliable=True)
         self.acked: dict[int, int] = {}  # forklift -> last tick it acknowledged
         self.acks = threading.Condition()
         self.subscribers = [

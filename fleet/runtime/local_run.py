@@ -19,16 +19,12 @@ import zenoh
 
 from fleet.mission.faults import FaultKind, Scenario
 from fleet.mission.spec import Mission
-from fleet.recording.mcapfile import next_segment
 from fleet.recording.rundir import fresh
+from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
-    DISPATCHER,
     OPERATOR,
-    RECORDER,
-    RESERVATION,
     generate_credentials,
     router_acl,
-    vehicle_user,
     write_dictionary,
     write_private,
 )
@@ -36,7 +32,6 @@ from fleet.runtime.bus import (
     SLOW_CONNECT_S,
     BusConfig,
     BusError,
-    Keys,
     follow_recorded,
     free_port,
     open_session,
@@ -45,6 +40,15 @@ from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
 from fleet.wire.protocol import MissionDone, Progress, ProtocolError, decode
+from fleet.wire.topics import (
+    DISPATCHER,
+    RECORDER,
+    RESERVATION,
+    Keys,
+    genuine,
+    published_by,
+    vehicle_sender,
+)
 
 ROUTER_TIMEOUT_MS = 30_000
 ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
@@ -168,7 +172,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             v = int(kind.split("-")[1])
             connect = ["--connect", f"tcp/127.0.0.1:{proxies[v].port}"] if v in proxies \
                 else ["--connect", endpoint]
-            return ["agent", "--run", spec.run, *connect, *login(vehicle_user(v)), "--id",
+            return ["agent", "--run", spec.run, *connect, *login(vehicle_sender(v)), "--id",
                     str(v), "--layout", spec.mission.layout, *spec.extra.get("agent", [])]
         if kind == "dispatcher":  # a restart picks the mission up where it was
             return ["dispatcher", *common, *login(DISPATCHER), *dispatcher_args(spec),
@@ -316,13 +320,13 @@ def _from_dispatcher(sample: zenoh.Sample) -> MissionDone | Progress | None:
     except ProtocolError as exc:
         log.warning("rejected a message on %s: %s", sample.key_expr, exc)
         return None
-    message, key, sender = envelope.message, str(sample.key_expr), envelope.sender
+    message, key = envelope.message, str(sample.key_expr)
     if not isinstance(message, MissionDone | Progress):
         log.warning("rejected a %s on %s: it does not belong there", message.TYPE, key)
         return None
-    wanted = "dispatch/done" if isinstance(message, MissionDone) else "dispatch/progress"
-    if sender != "dispatcher" or not key.endswith(wanted):
+    if not genuine(key, envelope):
+        wanted = published_by(DISPATCHER)[type(message)].pattern
         log.warning("ignored a %s on %s from %r: only the dispatcher's on %s counts",
-                    message.TYPE, key, sender, wanted)
+                    message.TYPE, key, envelope.sender, wanted)
         return None
     return message

@@ -92,7 +92,8 @@ def save_figure(fig: Figure, path: str, dpi: float = DPI) -> None:
     plt.close(fig)
 
 
-def _cell_square(layout: Layout, cell: Cell, **style) -> Rectangle:
+def cell_square(layout: Layout, cell: Cell, **style) -> Rectangle:
+    """The square of a cell on a map, in world coordinates, styled by `style`."""
     x, y = layout.cell_center(cell)
     half = layout.cell_size / 2
     return Rectangle((x - half, y - half), layout.cell_size, layout.cell_size, **style)
@@ -111,16 +112,16 @@ def draw_layout(ax: Axes, layout: Layout, filled: Iterable[Cell] | None = None,
     for c in range(layout.cols):
         for r in range(layout.rows):
             if (c, r) not in taken:
-                ax.add_patch(_cell_square(layout, (c, r), **FLOOR))
+                ax.add_patch(cell_square(layout, (c, r), **FLOOR))
     for cell in obstacle_cells:
-        ax.add_patch(_cell_square(layout, cell, **OBSTACLE))
+        ax.add_patch(cell_square(layout, cell, **OBSTACLE))
     for stack in layout.stacks:
         full = stack.cell in filled_cells
-        ax.add_patch(_cell_square(layout, stack.cell, gid=f"stack/{stack.cluster}#{stack.index}",
+        ax.add_patch(cell_square(layout, stack.cell, gid=f"stack/{stack.cluster}#{stack.index}",
                                   **(FILLED_STACK if full else EMPTY_STACK)))
         stack_number(ax, layout, stack, "white" if full else "0.3")
     for station in layout.stations:
-        ax.add_patch(_cell_square(layout, station.cell, **STATION))
+        ax.add_patch(cell_square(layout, station.cell, **STATION))
         x, y, style = station_label_spot(layout, station)
         ax.text(x, y, station.name, fontsize=7, weight="bold", rotation_mode="anchor",
                 zorder=Z_LABEL, **style)
@@ -258,7 +259,7 @@ RESERVED_ALPHA = 0.15
 
 def draw_reservations(ax: Axes, layout: Layout, reservations: Sequence[Reservation]) -> None:
     for r in reservations:
-        ax.add_patch(_cell_square(layout, r.cell, color=forklift_color(r.vehicle),
+        ax.add_patch(cell_square(layout, r.cell, color=forklift_color(r.vehicle),
                                   alpha=RESERVED_ALPHA, zorder=Z_RESERVED))
 
 

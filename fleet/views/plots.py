@@ -2,16 +2,18 @@
 quarter, a Gantt chart of the subtasks, a snapshot of the warehouse at one instant, a heat map
 of where the forklifts were, and an animation of the whole run.
 
-They read the record as the plain dict of `fleet.mission.record` (for a recording, as rebuilt by
-`fleet.recording.mission_record.record_of`), so they draw any saved run; the heat map also reads the
-recorded vehicle states. Each returns its figure (fleet.views.drawing.save_figure writes it), so
-what a reader sees can be checked on the figure itself.
+They read the mission record (fleet.mission.record.MissionSummary; for a recording, as
+rebuilt by fleet.recording.mission_record.summary_of), so they draw any saved run; the heat
+map also reads the recorded vehicle states. Each returns its figure
+(fleet.views.drawing.save_figure writes it), so what a reader sees can be checked on the
+figure itself.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 from itertools import pairwise
 from pathlib import Path
 
@@ -33,7 +35,7 @@ from matplotlib.transforms import Affine2D
 from PIL import Image
 
 from fleet.errors import UserError
-from fleet.mission.record import held_intervals
+from fleet.mission.record import MissionSummary, held_intervals
 from fleet.planning.geometry import Cell, body_corners, cells_under
 from fleet.planning.maneuvers import Manner, world_pose
 from fleet.planning.trajectory import Pose
@@ -42,7 +44,7 @@ from fleet.views.drawing import (
     Z_FORKLIFT_TEXT,
     Z_RESERVED,
     Z_STACK_TEXT,
-    _cell_square,
+    cell_square,
     draw_layout,
     forklift_handles,
     forklift_patch,
@@ -61,42 +63,41 @@ SHOW_AHEAD_S = 20.0  # a snapshot shows reserved cells this far ahead
 HELD_NOW_ALPHA, HELD_SOON_ALPHA = 0.35, 0.12  # reserved cells held now, held soon
 
 
-def heading(record: dict) -> str:
+def heading(record: MissionSummary) -> str:
     """Which run a plot is of, for its title."""
-    m = record["mission"]
-    return (f"{m['kind']} mission with the {m['strategy']} strategy on {m['layout']}, "
-            f"{len(record['starts'])} forklifts")
+    m = record.mission
+    return (f"{m.kind} mission with the {m.strategy} strategy on {m.layout}, "
+            f"{len(record.starts)} forklifts")
 
 
-def forklifts(record: dict) -> list[int]:
+def forklifts(record: MissionSummary) -> list[int]:
     """Every forklift of the run, numbered from 1, also those that never had a subtask."""
-    return sorted(set(range(1, len(record["starts"]) + 1))
-                  | {s["vehicle"] for s in record["subtasks"]})
+    return sorted(set(range(1, len(record.starts) + 1)) | {s.vehicle for s in record.subtasks})
 
 
-def quarters(record: dict) -> list[int]:
+def quarters(record: MissionSummary) -> list[int]:
     """Stacks done in each quarter of the mission's end time."""
-    end = record["end_time_s"] or 1.0
+    end = record.end_time_s or 1.0
     counts = [0, 0, 0, 0]
-    for _, _, t in record["stacks_done"]:
-        counts[min(3, int(4 * t / end))] += 1
+    for stack in record.stacks_done:
+        counts[min(3, int(4 * stack.t / end))] += 1
     return counts
 
 
-def filling_sequence(layout: Layout, record: dict) -> Figure:
+def filling_sequence(layout: Layout, record: MissionSummary) -> Figure:
     """Each stack coloured by the quarter of the end time it was done in and numbered in the
     order done (the seed's Figure 13)."""
-    fill = record["mission"]["kind"] == "fill"
+    fill = record.mission.kind == "fill"
     verb = "filled" if fill else "emptied"
-    end = record["end_time_s"] or 1.0
-    left = len(layout.stacks) - len(record["stacks_done"])
+    end = record.end_time_s or 1.0
+    left = len(layout.stacks) - len(record.stacks_done)
     fig, ax = map_figure(layout)
     handles = draw_layout(ax, layout, stacks_label=f"not {verb}: {left} stacks" if left else None)
     cell_of = {(s.cluster, s.index): s.cell for s in layout.stacks}
-    for order, (cluster, index, t) in enumerate(record["stacks_done"], start=1):
-        cell = cell_of[cluster, index]
-        ax.add_patch(_cell_square(layout, cell, color=QUARTER_COLORS[min(3, int(4 * t / end))],
-                                  alpha=0.8))
+    for order, stack in enumerate(record.stacks_done, start=1):
+        cell = cell_of[stack.cluster, stack.index]
+        ax.add_patch(cell_square(layout, cell, alpha=0.8,
+                                 color=QUARTER_COLORS[min(3, int(4 * stack.t / end))]))
         x, y = layout.cell_center(cell)
         ax.text(x, y - 0.12 * layout.cell_size, str(order), ha="center", va="center",
                 fontsize=7, weight="bold", color="white", zorder=Z_STACK_TEXT)
@@ -104,30 +105,29 @@ def filling_sequence(layout: Layout, record: dict) -> Figure:
                         f"({q * end / 4:.0f} to {(q + 1) * end / 4:.0f} s): {n} stacks")
                   for q, (c, n) in enumerate(zip(QUARTER_COLORS, quarters(record), strict=True))]
     ax.set_title(f"{'Filling' if fill else 'Emptying'} sequence: when each stack was {verb}, "
-                 f"the last at {record['end_time_s']:.2f} s\n{heading(record)}\nbold number: "
+                 f"the last at {record.end_time_s:.2f} s\n{heading(record)}\nbold number: "
                  f"the order {verb}; small number: the stack's place in its cluster",
                  fontsize=10)
     legend_below(ax, by_quarter + handles, ncols=4)
     return fig
 
 
-def gantt(record: dict) -> Figure:
+def gantt(record: MissionSummary) -> Figure:
     """One row per forklift, its subtasks along time: driving to a shelf in the forklift's
     colour, to a station in a lighter shade, claiming or unloading in grey, waiting (stop
     maneuvers) in black, failed plans as crosses above the row."""
     vehicles = forklifts(record)
     fig, ax = plt.subplots(figsize=(14, 1.9 + 0.55 * len(vehicles)), layout="constrained")
     row = {v: k for k, v in enumerate(vehicles)}
-    for s in record["subtasks"]:
-        y, color = row[s["vehicle"]], forklift_color(s["vehicle"])
-        ax.barh(y, s["t_end"] - s["t_i"], left=s["t_i"], height=0.6,
-                color=color if s["kind"] == "deliver" else lighter(color, 0.55))
-        ax.barh(y, s["t_done"] - s["t_end"], left=s["t_end"], color=CLAIM_COLOR, height=0.6)
-        for st in s["steps"]:
+    for s in record.subtasks:
+        y, color = row[s.vehicle], forklift_color(s.vehicle)
+        ax.barh(y, s.t_end - s.t_i, left=s.t_i, height=0.6,
+                color=color if s.kind == "deliver" else lighter(color, 0.55))
+        ax.barh(y, s.t_done - s.t_end, left=s.t_end, color=CLAIM_COLOR, height=0.6)
+        for st in s.steps:
             if st[0] == "stop":
                 ax.barh(y, st[4] - st[3], left=st[3], color="black", height=0.25)
-    failures = [(f["t"], row[f["vehicle"]] - 0.42) for f in record["failures"]
-                if f["vehicle"] in row]
+    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures if f.vehicle in row]
     if failures:
         ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
     ax.set_yticks(range(len(vehicles)), [f"forklift {v}" for v in vehicles])
@@ -135,7 +135,7 @@ def gantt(record: dict) -> Figure:
         label.set_color(forklift_color(v))
         label.set_fontweight("bold")
     ax.set_ylim(len(vehicles) - 0.5, -0.6)  # forklift 1 on top, room for its crosses
-    last = max([record["end_time_s"]] + [s["t_done"] for s in record["subtasks"]])
+    last = max([record.end_time_s] + [s.t_done for s in record.subtasks])
     ax.set_xlim(0, 1.01 * last or 1.0)
     ax.set_xlabel("simulated time [s]")
     swatches = vehicles or [1]  # the legend's colours: every forklift's
@@ -152,13 +152,14 @@ def gantt(record: dict) -> Figure:
     return fig
 
 
-def pose_at(record: dict, vehicle: int, t: float, layout: Layout) -> tuple[float, float, float]:
+def pose_at(record: MissionSummary, vehicle: int, t: float,
+            layout: Layout) -> tuple[float, float, float]:
     """World pose of a forklift at time t, interpolated within the maneuver it is doing."""
-    pose = Pose.parse(record["starts"][vehicle - 1])  # vehicles are numbered from 1
-    for s in record["subtasks"]:
-        if s["vehicle"] != vehicle:
+    pose = Pose.parse(record.starts[vehicle - 1])  # vehicles are numbered from 1
+    for s in record.subtasks:
+        if s.vehicle != vehicle:
             continue
-        for label, start, end, t0, t1, *_ in s["steps"]:
+        for label, start, end, t0, t1, *_ in s.steps:
             if t0 <= t < t1:
                 p = Pose.parse(start)
                 x, y, th = world_pose(p.cell, p.heading, Manner.from_label(label),
@@ -178,12 +179,13 @@ def fleet_handles(vehicles: Iterable[int], ahead: float) -> list[Artist]:
             Patch(color="0.3", alpha=HELD_SOON_ALPHA, label=f"reserved in the next {ahead:g} s")]
 
 
-def snapshot(layout: Layout, record: dict, t: float, ahead: float = SHOW_AHEAD_S) -> Figure:
+def snapshot(layout: Layout, record: MissionSummary, t: float,
+             ahead: float = SHOW_AHEAD_S) -> Figure:
     """The warehouse at instant t: stacks filled or empty, each forklift and the cells it
     holds now (dark) or will hold within `ahead` seconds (light), in its colour."""
-    fill = record["mission"]["kind"] == "fill"
+    fill = record.mission.kind == "fill"
     cell_of = {(s.cluster, s.index): s.cell for s in layout.stacks}
-    done = {cell_of[c, i] for c, i, td in record["stacks_done"] if td <= t}
+    done = {cell_of[s.cluster, s.index] for s in record.stacks_done if s.t <= t}
     present = done if fill else {s.cell for s in layout.stacks} - done
     fig, ax = map_figure(layout)
     handles = draw_layout(ax, layout, present)
@@ -193,7 +195,7 @@ def snapshot(layout: Layout, record: dict, t: float, ahead: float = SHOW_AHEAD_S
         color = forklift_color(v)
         for vehicle, cell, t0, t1 in held:
             if vehicle == v and t0 < t + ahead and t1 > t:
-                ax.add_patch(_cell_square(
+                ax.add_patch(cell_square(
                     layout, cell, color=color, zorder=Z_RESERVED,
                     alpha=HELD_NOW_ALPHA if t0 <= t else HELD_SOON_ALPHA))
         x, y, th = pose_at(record, v, t, layout)
@@ -248,7 +250,7 @@ def occupancy_seconds(layout: Layout, states: Iterable[tuple[float, VehicleState
     return seconds
 
 
-def heat_map(layout: Layout, record: dict, states: Iterable[tuple[float, VehicleState]],
+def heat_map(layout: Layout, record: MissionSummary, states: Iterable[tuple[float, VehicleState]],
              cap_s: float = STATE_GAP_CAP_S) -> Figure:
     """Cell occupancy over the run from the recorded vehicle states, over the layout."""
     seconds = {c: s for c, s in occupancy_seconds(layout, states, cap_s).items()
@@ -261,7 +263,7 @@ def heat_map(layout: Layout, record: dict, states: Iterable[tuple[float, Vehicle
         lo, hi = float(values.min()), float(values.max())
         # Log scale: parked forklifts hold a few cells for hundreds of seconds while a lane
         # sees seconds to minutes; a linear scale would show little but the parking spots.
-        squares = PatchCollection([_cell_square(layout, c) for c in seconds], cmap="YlOrRd",
+        squares = PatchCollection([cell_square(layout, c) for c in seconds], cmap="YlOrRd",
                                   norm=LogNorm(vmin=lo, vmax=max(hi, 2 * lo)), alpha=0.85,
                                   edgecolor="none")
         squares.set_array(values)
@@ -282,10 +284,10 @@ FPS = 10
 GIF_DPI = 80  # 960 x 740 pixels for paper: readable, and a paper mission stays a few megabytes
 
 
-def frame_times(record: dict, frames: int) -> list[float]:
+def frame_times(record: MissionSummary, frames: int) -> list[float]:
     """`frames` instants spread evenly from 0 to when the last forklift parked (or the last
     stack was done, if later), both ends included."""
-    end = max(record["end_time_s"], record.get("all_parked_s", 0.0))
+    end = max(record.end_time_s, record.all_parked_s)
     if frames == 1:
         return [end]
     return [end * k / (frames - 1) for k in range(frames)]
@@ -310,15 +312,15 @@ class _RunArtists:
     and the title. `show(t)` updates them in place for instant t; `artists` lists them
     in drawing order."""
 
-    def __init__(self, ax, layout: Layout, record: dict, ahead: float) -> None:
+    def __init__(self, ax, layout: Layout, record: MissionSummary, ahead: float) -> None:
         self.layout, self.record, self.ahead = layout, record, ahead
-        self.fill = record["mission"]["kind"] == "fill"
-        done_at = {(c, i): t for c, i, t in record["stacks_done"]}
+        self.fill = record.mission.kind == "fill"
+        done_at = {(s.cluster, s.index): s.t for s in record.stacks_done}
         self.stack_done = np.array([done_at.get((s.cluster, s.index), math.inf)
                                     for s in layout.stacks])
         self.stack_rgba = np.tile(to_rgba(GOODS_COLOR), (len(layout.stacks), 1))
         self.stacks = ax.add_collection(PatchCollection(
-            [_cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
+            [cell_square(layout, s.cell) for s in layout.stacks], edgecolor="white", lw=0.4))
         # White numbers on present stacks (the background's dark ones show on the others),
         # as glyph outlines in one collection: a frame draws them at once, not as 136 texts.
         self.numbers = ax.add_collection(_stack_numbers(layout))
@@ -333,12 +335,12 @@ class _RunArtists:
         self.held_t1 = np.array([h[3] for h in held], dtype=float)
         self.held_rgba = np.array([to_rgba(forklift_color(v)) for v, _ in square]).reshape(-1, 4)
         self.held = ax.add_collection(PatchCollection(
-            [_cell_square(layout, c) for _, c in square], edgecolor="none", zorder=Z_RESERVED))
+            [cell_square(layout, c) for _, c in square], edgecolor="none", zorder=Z_RESERVED))
         self.cluster_names = [t for t in ax.texts if (t.get_gid() or "").startswith("cluster/")]
         # Per-forklift records: pose_at then scans one forklift's subtasks, not the fleet's.
-        self.tracks = {v: {"starts": record["starts"],
-                           "subtasks": [s for s in record["subtasks"] if s["vehicle"] == v]}
-                       for v in range(1, len(record["starts"]) + 1)}
+        self.tracks = {v: replace(record, subtasks=tuple(s for s in record.subtasks
+                                                         if s.vehicle == v))
+                       for v in range(1, len(record.starts) + 1)}
         self.bodies = [ax.add_patch(forklift_patch(layout, v, 0.0, 0.0, 0.0))
                        for v in self.tracks]
         self.labels = [ax.text(0.0, 0.0, str(v), ha="center", va="center", fontsize=8,
@@ -426,7 +428,7 @@ def movie_writer(path: str, fps: int) -> animation.AbstractMovieWriter:
                     f"{suffix or 'a name without extension'}")
 
 
-def animate(path: str, layout: Layout, record: dict, fps: int = FPS, frames: int = FRAMES,
+def animate(path: str, layout: Layout, record: MissionSummary, fps: int = FPS, frames: int = FRAMES,
             ahead: float = SHOW_AHEAD_S, dpi: int = GIF_DPI,
             progress: Callable[[int, int], None] | None = None) -> int:
     """An animation of the run (GIF, or MP4 by the path's extension): each frame a snapshot()

@@ -38,10 +38,9 @@ from foxglove.messages import (
     Vector3,
 )
 
-from fleet.mission.seam import GOODS
 from fleet.planning.geometry import Cell
 from fleet.views.palette import GOODS_COLOR, RACK_COLOR, STATION_COLOR, forklift_color
-from fleet.wire.protocol import Message, StackDone, VehicleState, WireChange
+from fleet.wire.protocol import GOODS, Message, StackDone, VehicleState, WireChange
 from fleet.world.layout import Layout
 
 FRAME = "warehouse"

@@ -1,2 +1,2 @@
-"""What travels between processes: the message catalogue (docs/protocol.md) and the conversions
-between core objects and messages."""
+"""What travels between processes: the message catalogue (docs/protocol.md), the catalogue of
+topics it travels on, and the conversions between core objects and messages."""

@@ -46,6 +46,10 @@ ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
 
+# Reservation owners that are no forklift (forklifts are 1..N), in every commit and change.
+GOODS = 0  # the goods on the stacks
+ZONE = -1  # closed zones
+
 
 @dataclass(frozen=True)
 class Message:
@@ -210,7 +214,8 @@ class Progress(Message):
 
 @dataclass(frozen=True)
 class MissionDone(Message):
-    """The dispatcher's last word: the mission record (record_io.record_to_dict) or an error."""
+    """The dispatcher's last word: the mission record (fleet.mission.record:
+    MissionSummary.to_dict) or an error."""
 
     TYPE: ClassVar[str] = "dispatch.done"
     ok: bool

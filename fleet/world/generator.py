@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import tomli_w
 
 from fleet.errors import UserError
-from fleet.world.layout import Layout, parse_layout
+from fleet.world.layout import Layout
+from fleet.world.layout_file import parse_layout
 
 MIN_DEPTH = 4  # lanes per side: fewer leave an aisle no parking slot (slots_per_aisle)
 

@@ -11,11 +11,6 @@ from fleet.planning.trajectory import Pose
 from fleet.world.layout import Layout
 
 
-def filled_before(layout: Layout, cluster: str, index: int) -> set[Cell]:
-    """Cells of the stacks filled before stack `index` of `cluster` (fill order)."""
-    return {s.cell for s in layout.stacks if s.cluster == cluster and s.index < index}
-
-
 def filled_counts(layout: Layout, counts: dict[str, int]) -> set[Cell]:
     """Cells of the first `n` stacks of each named cluster."""
     cells = set()

@@ -1,270 +1,42 @@
-"""Recordings of runs as MCAP files (docs/recording.md): the one format analysis and plots
-read, written by the recorder process and by the in-process engine alike.
+"""Reading recordings (fleet.recording.format): what analysis, plots and the recorder's
+restart read.
 
-Each zenoh key is a channel whose messages are the raw msgpack payloads as they travelled
-(message encoding `msgpack`, a JSON schema per message type); log time is when the message
-was received, publish time its simulation time. The run's description is a metadata record
-and the layout a TOML attachment, so a recording stands on its own. View channels under
-/view/ carry Foxglove scene messages (protobuf) for Foxglove to display.
-
-Small chunks flushed about once a second bound what a killed recorder loses; `read_recording`
-recovers every complete chunk of a truncated file and says where reading stopped. A recorder
-restarted during a run writes a new segment of the same run (run-2.mcap, run-3.mcap, ...);
-`read_recording` of the run reads every segment as one recording and says where no recorder
-was running. Each segment carries the id of the run directory it was written in (metadata
-`segment`), so a file of another run in the directory is refused by name, never merged.
+`read_recording` recovers every complete chunk of a truncated file (a killed recorder) and
+says where reading stopped. Of a run recorded in segments (a recorder restarted during the
+run: fleet.recording.segments) it reads every segment as one recording and says where no
+recorder was running; a segment of another run in the run directory is refused by name,
+never merged.
 """
 
 from __future__ import annotations
 
-import functools
 import heapq
-import json
 import math
 import os
-import platform
-import re
-import sys
-import types
-import typing
 from collections import Counter
-from collections.abc import Callable
-from dataclasses import MISSING, dataclass, field, fields, replace
-from importlib.metadata import PackageNotFoundError, version
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
-from mcap.records import Attachment, Channel, Footer, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Footer, Metadata, Schema
+from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
 
-from fleet import __version__
 from fleet.errors import UserError
-from fleet.mission.spec import Mission
-from fleet.recording.rundir import MARKER, run_id_of
-from fleet.wire.protocol import (
-    ClockAck,
-    ClockTick,
-    DecisionFailure,
-    Envelope,
-    Halt,
-    MissionDone,
-    MissionInfo,
-    Progress,
-    ProtocolError,
-    RecorderStatus,
-    Resume,
-    StackDone,
-    StackReopened,
-    SubtaskEvent,
-    VehicleFault,
-    VehicleState,
-    WireChange,
-    ZoneClosed,
-    decode,
+from fleet.recording.format import (
+    LAYOUT_ATTACHMENT,
+    MCAP_MAGIC,
+    NS,
+    RUN_METADATA,
+    SEGMENT_METADATA,
+    VIEW_PREFIX,
 )
-from fleet.wire.protocol import Message as WireMessage
-from fleet.world.layout import Layout, layout_source, parse_layout
-
-PROFILE = "forklift-fleet"
-SEGMENT_METADATA = "segment"  # {"run_id": the run directory's}: which run a file is of
-RUN_FILE = "run.mcap"  # a run directory's recording (its first segment)
-SEGMENT_FILE = re.compile(r"run-([2-9]|[1-9]\d+)\.mcap")  # later segments: run-2.mcap, ...
-MCAP_MAGIC = b"\x89MCAP0\r\n"  # every MCAP file starts with it
-MESSAGE_ENCODING = "msgpack"
-VIEW_PREFIX = "/view/"
-CHUNK_BYTES = 64 * 1024  # small chunks: a crash loses at most the one being filled
-NS = 1_000_000_000
-
-# What each key under fleet/<run>/ carries and who may send it ({0}: the key's vehicle id).
-# The channel's schema is chosen by key, not by content, so a hostile payload is recorded on
-# the channel it arrived on, as it was; analysis believes a message only from its sender.
-KEY_TYPES: tuple[tuple[re.Pattern, type[WireMessage], str], ...] = tuple(
-    (re.compile(rf"fleet/[^/]+/{pattern}"), cls, sender) for pattern, cls, sender in (
-        (r"vehicle/(\d+)/state", VehicleState, "vehicle-{0}"),
-        (r"reservation/change", WireChange, "reservation"),
-        (r"clock", ClockTick, "clock"),
-        (r"clock/ack/(\d+)", ClockAck, "vehicle-{0}"),
-        (r"dispatch/progress", Progress, "dispatcher"),
-        (r"dispatch/done", MissionDone, "dispatcher"),
-        (r"dispatch/mission", MissionInfo, "dispatcher"),
-        (r"dispatch/subtask", SubtaskEvent, "dispatcher"),
-        (r"dispatch/stack", StackDone, "dispatcher"),
-        (r"dispatch/failure", DecisionFailure, "dispatcher"),
-        (r"recorder/status", RecorderStatus, "recorder"),
-        (r"dispatch/halt", Halt, "dispatcher"),
-        (r"dispatch/resume", Resume, "dispatcher"),
-        (r"dispatch/reopen", StackReopened, "dispatcher"),
-        (r"dispatch/zone", ZoneClosed, "dispatcher"),
-        (r"vehicle/(\d+)/fault", VehicleFault, "vehicle-{0}"),
-        (r"clock/ack/injector", ClockAck, "injector"),
-    ))
-
-
-def message_type(key: str) -> type[WireMessage] | None:
-    found = _key_type(key)
-    return found[0] if found else None
-
-
-def expected_sender(key: str) -> str | None:
-    found = _key_type(key)
-    return found[1] if found else None
-
-
-@functools.lru_cache(maxsize=4096)
-def _key_type(key: str) -> tuple[type[WireMessage], str] | None:
-    for pattern, cls, sender in KEY_TYPES:
-        match = pattern.fullmatch(key)
-        if match:
-            return cls, sender.format(*match.groups())
-    return None
-
-
-def _json_type(hint: Any) -> dict:
-    origin = typing.get_origin(hint)
-    if origin in (types.UnionType, typing.Union):
-        return {"anyOf": [_json_type(h) for h in typing.get_args(hint)]}
-    if hint is type(None):
-        return {"type": "null"}
-    simple = {bool: "boolean", int: "integer", float: "number", str: "string", dict: "object"}
-    if hint in simple:
-        return {"type": simple[hint]}
-    if origin is list:
-        return {"type": "array", "items": _json_type(typing.get_args(hint)[0])}
-    if origin is tuple:
-        items = [_json_type(h) for h in typing.get_args(hint)]
-        return {"type": "array", "prefixItems": items, "minItems": len(items),
-                "maxItems": len(items)}
-    raise TypeError(f"no JSON schema for {hint!r}")  # pragma: no cover
-
-
-def json_schema(cls: type[WireMessage]) -> dict:
-    """The JSON schema of a message in its envelope (fleet/wire/protocol.py), msgpack-encoded."""
-    hints = typing.get_type_hints(cls)
-    body = {"type": "object", "additionalProperties": False,
-            "properties": {f.name: _json_type(hints[f.name]) for f in fields(cls)},
-            "required": [f.name for f in fields(cls)
-                         if f.default is MISSING and f.default_factory is MISSING]}
-    return {"title": cls.TYPE, "type": "object",
-            "properties": {"v": {"const": 1}, "type": {"const": cls.TYPE},
-                           "sender": {"type": "string"}, "seq": {"type": "integer"},
-                           "t": {"type": "number"}, "body": body},
-            "required": ["v", "type", "sender", "seq", "t", "body"]}
-
-
-MAX_NS = 2**63 - 1  # MCAP times are unsigned 64-bit; Foxglove's are signed
-
-
-def _ns(seconds: float) -> int:
-    """Seconds as MCAP nanoseconds; a time that does not fit (a forged one) becomes 0."""
-    if not math.isfinite(seconds) or not 0 <= seconds <= MAX_NS / NS:
-        return 0
-    return round(seconds * NS)
-
-
-def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
-                 speed: float = 1.0, command: str = "") -> MissionInfo:
-    """What a recording says about its run (the dispatcher publishes it)."""
-    starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
-    versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
-                "mcap": _package_version("mcap")}
-    return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
-                       mission.strategy.value, vehicles, mission.seed, clock, speed,
-                       [str(p) for p in starts], command or " ".join(sys.argv), versions)
-
-
-def _package_version(name: str) -> str:
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return "unknown"
-
-
-def run_metadata(info: MissionInfo) -> dict[str, str]:
-    """The run's description as MCAP metadata (strings only)."""
-    data = {"layout": info.layout, "mission": info.kind, "strategy": info.strategy,
-            "vehicles": str(info.vehicles), "seed": str(info.seed), "clock": info.clock,
-            "speed": repr(info.speed), "starts": " ".join(info.starts),
-            "command": info.command, "fleet_version": __version__}
-    data.update({f"version_{k}": str(v) for k, v in info.versions.items()})
-    return data
-
-
-class RecordingWriter:
-    """Writes one run's MCAP file. Not thread-safe: one thread writes."""
-
-    def __init__(self, path: Path, chunk_bytes: int = CHUNK_BYTES) -> None:
-        self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.run_id = run_id_of(path.parent)  # of the run directory it is in (None: none)
-        self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed by close()
-        self._writer = Writer(self._file, chunk_size=chunk_bytes,
-                              compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library=f"forklift-fleet {__version__}")
-        if self.run_id is not None:  # first, before any chunk: a torn file still says it
-            self._writer.add_metadata(SEGMENT_METADATA, {"run_id": self.run_id})
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self.messages = 0
-        self.described = False
-
-    def _schema(self, name: str, encoding: str, data: Callable[[], bytes]) -> int:
-        if name not in self._schemas:
-            self._schemas[name] = self._writer.register_schema(name, encoding, data())
-        return self._schemas[name]
-
-    def _channel(self, topic: str, encoding: str, schema_id: Callable[[], int]) -> int:
-        if topic not in self._channels:
-            self._channels[topic] = self._writer.register_channel(topic, encoding,
-                                                                  schema_id())
-        return self._channels[topic]
-
-    def _raw_schema(self, key: str) -> int:
-        cls = message_type(key)
-        if cls is None:
-            return 0
-        return self._schema(cls.TYPE, "jsonschema", lambda: _dumps(json_schema(cls)))
-
-    def write(self, key: str, payload: bytes, log_ns: int, sim_time: float) -> None:
-        """One message as it travelled on `key`."""
-        channel = self._channel(key, MESSAGE_ENCODING, lambda: self._raw_schema(key))
-        self._writer.add_message(channel, log_time=log_ns, data=payload,
-                                 publish_time=_ns(sim_time), sequence=self.messages)
-        self.messages += 1
-
-    def write_view(self, topic: str, message: Any, log_ns: int) -> None:
-        """A Foxglove message (foxglove.messages.*) on a view channel."""
-        channel = self._channels.get(topic)
-        if channel is None:
-            schema = message.get_schema()
-            channel = self._channel(topic, schema.encoding, lambda: self._schema(
-                schema.name, schema.encoding, lambda: bytes(schema.data)))
-        self._writer.add_message(channel, log_time=log_ns, data=message.encode(),
-                                 publish_time=log_ns)
-
-    def describe(self, info: MissionInfo) -> None:
-        """The run's metadata and its layout attachment, once."""
-        if self.described:
-            return
-        self._writer.add_metadata("run", run_metadata(info))
-        self._writer.add_attachment(0, 0, "layout.toml", "application/toml",
-                                    info.layout_toml.encode())
-        self.described = True
-
-    def flush(self) -> None:
-        """Close the chunk in progress and push everything to the file."""
-        self._writer.flush()
-
-    def close(self) -> None:
-        self._writer.finish()
-        self._file.close()
-
-
-def _dumps(data: dict) -> bytes:
-    return json.dumps(data, sort_keys=True).encode()
-
-
-# -------------------------------------------------------------------------------- reading
+from fleet.recording.rundir import MARKER, run_id_of
+from fleet.recording.segments import RUN_FILE, run_dir_of, segment_paths
+from fleet.wire.protocol import Envelope, Message, MissionInfo, ProtocolError, decode
+from fleet.wire.topics import genuine
+from fleet.world.layout import Layout
+from fleet.world.layout_file import parse_layout
 
 
 @dataclass(frozen=True)
@@ -276,16 +48,13 @@ class Recorded:
     error: str = ""
 
     @property
-    def message(self) -> WireMessage | None:
+    def message(self) -> Message | None:
         return None if self.envelope is None else self.envelope.message
 
     @property
     def genuine(self) -> bool:
         """A valid message of the type its key carries, from the one sender of that key."""
-        found = _key_type(self.key)
-        return (self.envelope is not None and found is not None
-                and type(self.envelope.message) is found[0]
-                and self.envelope.sender == found[1])
+        return self.envelope is not None and genuine(self.key, self.envelope)
 
 
 @dataclass(frozen=True)
@@ -344,7 +113,7 @@ class Recording:
                 last = segment
         return found
 
-    def of(self, cls: type[WireMessage]) -> list[tuple[Recorded, Any]]:
+    def of(self, cls: type[Message]) -> list[tuple[Recorded, Any]]:
         """Every genuine message of a type (from its key's sender, on its key), with where
         and when it was recorded."""
         return [(r, r.envelope.message) for r in self.messages
@@ -381,7 +150,7 @@ class Recording:
                     and math.isfinite(r.envelope.sim_time)), default=0.0)
 
     def layout(self) -> Layout:
-        data = self.attachments.get("layout.toml")
+        data = self.attachments.get(LAYOUT_ATTACHMENT)
         if data is None and self.info is not None:
             data = self.info.layout_toml.encode()
         if data is None:
@@ -398,44 +167,6 @@ class Recording:
 class RecordingError(UserError, ValueError):
     """A file that is not a readable recording; the message says why. The user's to fix (a
     UserError), and still the ValueError it always was to whoever catches that."""
-
-
-def segment_number(path: Path) -> int | None:
-    """1 for run.mcap, N for run-N.mcap, None for any other name."""
-    if path.name == RUN_FILE:
-        return 1
-    match = SEGMENT_FILE.fullmatch(path.name)
-    return int(match[1]) if match else None
-
-
-def segment_paths(path: Path) -> list[Path]:
-    """Every segment of a run, in order (run.mcap, run-2.mcap, ..., run-10.mcap), given its
-    directory or its run.mcap; any other file is a recording of its own. A directory with
-    no segment gives an empty list."""
-    path = Path(path)
-    if path.is_dir():
-        folder = path
-    elif path.name == RUN_FILE:
-        folder = path.parent
-    else:
-        return [path]
-    try:
-        names = [entry for entry in folder.iterdir() if SEGMENT_FILE.fullmatch(entry.name)]
-    except OSError:
-        names = []
-    first = [folder / RUN_FILE] if path.name == RUN_FILE or (folder / RUN_FILE).exists() else []
-    return first + sorted(names, key=segment_number)
-
-
-def next_segment(run_dir: Path) -> Path:
-    """Where a recorder (re)started for the run in `run_dir` writes: run.mcap in a directory
-    without segments, else run-N.mcap after the last one (never an existing file, never a
-    number before one already written)."""
-    run_dir = Path(run_dir)
-    existing = segment_paths(run_dir) if run_dir.is_dir() else []
-    if not existing:
-        return run_dir / RUN_FILE
-    return run_dir / f"run-{max(segment_number(p) or 1 for p in existing) + 1}.mcap"
 
 
 def recording_file(path: Path) -> Path:
@@ -485,7 +216,7 @@ def read_description(path: Path, within_records: int = 100_000) -> dict[str, dic
             for _, record in zip(range(within_records), records, strict=False):
                 if isinstance(record, Metadata):
                     found[record.name] = dict(record.metadata)
-                    if "run" in found:  # the segment's own comes first, when it has one
+                    if RUN_METADATA in found:  # the segment's own comes first, when it has one
                         break
         except Exception as exc:  # mcap raises its own, struct and decompression errors
             if not found:
@@ -507,7 +238,7 @@ def read_recording(path: Path) -> Recording:
         raise RecordingError(f"{path}: no {RUN_FILE} in this directory")
     if len(paths) == 1:
         recording = _read_segment(paths[0])[0]
-        _check_one_run(_run_dir(path), [recording])
+        _check_one_run(run_dir_of(path), [recording])
         return recording
     parts: list[tuple[Recording, list[int]]] = []
     errors: list[RecordingError] = []
@@ -520,21 +251,13 @@ def read_recording(path: Path) -> Recording:
                 segment_path, problem=f"not read: {exc}")]), []))
     if len(errors) == len(paths):
         raise errors[0]
-    _check_one_run(_run_dir(path), [part for part, _ in parts])
+    _check_one_run(run_dir_of(path), [part for part, _ in parts])
     return _merge(parts)
 
 
 # What a run's description says that its segments must agree on (older recordings carry no
 # run id: this still tells a segment of another mission apart).
 SAME_RUN = ("layout", "mission", "strategy", "vehicles", "seed", "clock", "speed")
-
-
-def _run_dir(path: Path) -> Path | None:
-    """The run directory a path names (itself, or its run.mcap's); None for a lone file."""
-    path = Path(path)
-    if path.is_dir():
-        return path
-    return path.parent if path.name == RUN_FILE else None
 
 
 def _check_one_run(folder: Path | None, segments: list[Recording]) -> None:
@@ -560,9 +283,9 @@ def _check_one_run(folder: Path | None, segments: list[Recording]) -> None:
                 f"{segment.run_id or 'none'}; this directory's run is {expected or 'without one'}, "
                 f"from {source}): a run directory holds one run's segments only; move "
                 f"{segment.path.name} out of {folder} to read the run")
-    described = [s for s in read if "run" in s.metadata]
+    described = [s for s in read if RUN_METADATA in s.metadata]
     for segment in described[1:]:
-        first, this = described[0].metadata["run"], segment.metadata["run"]
+        first, this = described[0].metadata[RUN_METADATA], segment.metadata[RUN_METADATA]
         differ = [f"{k} {this.get(k)!r}, not {first.get(k)!r}" for k in SAME_RUN
                   if this.get(k) != first.get(k)]
         if differ:
@@ -642,7 +365,7 @@ def _read_segment(path: Path) -> tuple[Recording, list[int]]:
                 schemas[record.id] = record
             elif isinstance(record, Channel):
                 channels[record.id] = record
-            elif isinstance(record, Message):
+            elif isinstance(record, McapMessage):
                 if _add_message(recording, channels, schemas, record):
                     digests.append(hash(record.data))
             elif isinstance(record, Metadata):
@@ -661,7 +384,7 @@ def _read_segment(path: Path) -> tuple[Recording, list[int]]:
 
 
 def _add_message(recording: Recording, channels: dict[int, Channel],
-                 schemas: dict[int, Schema], record: Message) -> bool:
+                 schemas: dict[int, Schema], record: McapMessage) -> bool:
     """Add a record; True if it is a message of a msgpack channel."""
     channel = channels.get(record.channel_id)
     if channel is None:

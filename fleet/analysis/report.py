@@ -1,0 +1,267 @@
+"""The analysis of a recording as a Report: its fields, the verdicts, and the text of
+`fleet analyze` and of `fleet run`'s summary."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fleet.analysis.streams import Gap
+from fleet.analysis.time_use import VehicleStats
+from fleet.analysis.windows import SILENT, NotRecorded, RecorderDown, SegmentRead, Unverified
+from fleet.wire.protocol import GOODS
+
+
+@dataclass
+class Report:
+    """What a recording says about its run, and the verdicts (its fields, flat, are the JSON
+    of `fleet analyze --json`, docs/metrics.md)."""
+
+    path: str
+    complete: bool  # the file ended with its footer
+    problem: str  # why reading stopped early
+    recovered_span_s: float  # receive-time span of what could be read
+    recovered_sim_s: float  # the latest sim time in it
+    mission: dict[str, Any]
+    finished: bool  # the dispatcher's result is in the recording
+    mission_error: str
+    end_time_s: float
+    all_parked_s: float  # the last trajectory's end
+    stacks_expected: int
+    stacks_done: int
+    stacks_duplicated: list[str]
+    stacks_lost: list[str]
+    subtasks: int
+    # The dispatcher's count (docs/metrics.md): a chosen forklift given no goal it accepts, or
+    # a decided trajectory that could not be planned. Only the latter and the dispatches that
+    # ended with no decision at all are announced, one dispatch.failure message each.
+    decision_failures: int
+    plans_failed: int
+    undecided: int  # dispatches without a decision (each iter_dispatch choices without a goal)
+    commit_conflicts: int
+    vehicles: list[VehicleStats]  # fleet.analysis.time_use: where each forklift's time went
+    messages: dict[str, int]  # per message type
+    messages_lost: int
+    gaps: list[Gap]
+    messages_cut_off: int  # sent by a forklift around the time it was down: never arrived
+    malformed: int  # payloads that were no valid message (recorded as they came)
+    foreign: int  # valid messages on a key not theirs, or from a sender not the key's
+    overlaps: list = field(default_factory=list)
+    outside_reservation: list = field(default_factory=list)
+    double_bookings: list = field(default_factory=list)
+    # A run recorded in segments (docs/recording.md): the files, the windows without a
+    # recorder, what was sent then, and what the verdicts could not check because of it.
+    segments: list[SegmentRead] = field(default_factory=list)
+    recorder_gaps: list[RecorderDown] = field(default_factory=list)
+    not_recorded: list[NotRecorded] = field(default_factory=list)
+    messages_not_recorded: int = 0
+    unverified: list[Unverified] = field(default_factory=list)
+    # Findings set aside, not failed: inside a window whose reservations are not known.
+    outside_reservation_unverified: list = field(default_factory=list)
+    double_bookings_unverified: list = field(default_factory=list)
+    # Stacks counted done from the dispatcher's final record: their dispatch/stack message
+    # was sent while no recorder was running.
+    stacks_not_recorded: list[str] = field(default_factory=list)
+    # Why the numbers (subtasks, decision failures, end time, each forklift's time) leave
+    # something out: what a dispatcher announced that neither a recorder nor its final record
+    # kept (fleet.recording.mission_record). Empty: they are whole.
+    incomplete: list[str] = field(default_factory=list)
+
+    @property
+    def safe(self) -> bool:
+        return not (self.overlaps or self.outside_reservation or self.double_bookings)
+
+    @property
+    def work_done(self) -> bool:
+        return (self.stacks_done == self.stacks_expected and not self.stacks_duplicated
+                and not self.stacks_lost)
+
+    @property
+    def passed(self) -> bool:
+        return self.safe and self.work_done and self.messages_lost == 0
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        for name in ("overlaps", "outside_reservation", "double_bookings",
+                     "outside_reservation_unverified", "double_bookings_unverified"):
+            data[name] = len(getattr(self, name))
+            data[f"{name}_first"] = [_jsonable(asdict(x)) for x in getattr(self, name)[:20]]
+        data.update(safe=self.safe, work_done=self.work_done, passed=self.passed)
+        return _jsonable(data)
+
+    def verdict_lines(self) -> list[str]:
+        def mark(ok: bool) -> str:
+            return "pass" if ok else "FAIL"
+
+        unchecked = ""
+        if self.unverified:
+            set_aside = (len(self.outside_reservation_unverified)
+                         + len(self.double_bookings_unverified))
+            silent = sum(u.why.startswith(SILENT) for u in self.unverified)
+            why = ", ".join(part for part in (
+                f"{len(self.unverified) - silent} with no recorder running"
+                if len(self.unverified) > silent else "",
+                f"{silent} of a forklift {SILENT}" if silent else "") if part)
+            unchecked = (f"; {len(self.unverified)} windows not verified ({why})"
+                         + (f", {set_aside} findings in them not judged" if set_aside else ""))
+        return [
+            f"safety             {mark(self.safe)}: {len(self.overlaps)} overlaps, "
+            f"{len(self.outside_reservation)} moments outside a reservation, "
+            f"{len(self.double_bookings)} double-booked cells{unchecked}",
+            f"work               {mark(self.work_done)}: {self.stacks_done} of "
+            f"{self.stacks_expected} stacks, {len(self.stacks_duplicated)} twice, "
+            f"{len(self.stacks_lost)} lost"
+            + (f" ({len(self.stacks_not_recorded)} known done from the dispatcher's record "
+               f"only)" if self.stacks_not_recorded else ""),
+            f"messages           {mark(self.messages_lost == 0)}: "
+            f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
+            + (f"{self.messages_cut_off} sent while cut off, " if self.messages_cut_off
+               else "")
+            + (f"{self.messages_not_recorded} not recorded (no recorder running), "
+               if self.recorder_gaps else "")
+            + f"{self.malformed} malformed, {self.foreign} foreign",
+        ]
+
+    def numbers_lines(self) -> list[str]:
+        """End time, subtasks, decision failures and waiting: as `fleet run` and `fleet analyze`
+        print them (docs/metrics.md)."""
+        no_goal = self.decision_failures - self.plans_failed
+        stopped = sum(v.stopped_s for v in self.vehicles)
+        postponed = sum(v.postponed_s for v in self.vehicles)
+        return [
+            f"  end time           {self.end_time_s:.2f} s (last stack done); every forklift "
+            f"parked at {self.all_parked_s:.2f} s",
+            f"  stacks             {self.stacks_done} of {self.stacks_expected}",
+            f"  subtasks           {self.subtasks}",
+            f"  decision failures  {self.decision_failures}: {self.plans_failed} plans failed, "
+            f"{no_goal} choices without a goal"
+            + (f" ({self.undecided} dispatches without a decision)" if self.undecided else ""),
+            f"  waiting            {stopped + postponed:.2f} s in all: {stopped:.2f} s stopped, "
+            f"{postponed:.2f} s postponed",
+            *self.incomplete_lines(),
+        ]
+
+    def incomplete_lines(self) -> list[str]:
+        """That the numbers are not whole, and why (nothing when they are)."""
+        if not self.incomplete:
+            return []
+        return ["  incomplete         these figures miss what no recorder or record kept:",
+                *(f"                     {why}" for why in self.incomplete)]
+
+    def vehicle_lines(self, distance: bool = False) -> list[str]:
+        """Each forklift's time (fleet.analysis.time_use), with its distance if asked; a down
+        column only when some forklift was down."""
+        down = any(v.down_s for v in self.vehicles)
+        head = "  forklift" + (" distance m" if distance else "") + \
+            " busy s stopped s postponed s handling s" + (" down s" if down else "") + \
+            " idle s busy %"
+        out = [head]
+        for v in self.vehicles:
+            out.append(f"  {v.vehicle:>8}" + (f" {v.distance_m:10.1f}" if distance else "")
+                       + f" {v.busy_s:6.1f} {v.stopped_s:9.1f} {v.postponed_s:11.1f}"
+                       f" {v.handling_s:10.1f}" + (f" {v.down_s:6.1f}" if down else "")
+                       + f" {v.idle_s:6.1f} {v.utilisation:6.0%}")
+        return out
+
+    def lines(self) -> list[str]:
+        m = self.mission
+        out = [f"recording {self.path}"]
+        if not self.complete:
+            out.append(f"  truncated: {self.problem}; recovered {self.recovered_span_s:.1f} s "
+                       f"of messages, up to sim time {self.recovered_sim_s:.1f} s")
+        if len(self.segments) > 1:
+            out.append(f"  segments           {len(self.segments)}: " + ", ".join(
+                f"{Path(s.path).name} ({s.messages} messages"
+                + ("" if s.complete else ", torn") + ")" for s in self.segments))
+        for g in self.recorder_gaps:
+            sim = "" if g.sim_from_s is None or g.sim_to_s is None else \
+                f", sim time {g.sim_from_s:.2f} to {g.sim_to_s:.2f} s"
+            out.append(f"  no recorder        {g.duration_s:.2f} s between {Path(g.after).name} "
+                       f"and {Path(g.before).name}{sim}")
+        out += [
+            f"  mission            {m.get('kind')} on {m.get('layout')} with "
+            f"{m.get('vehicles')} forklifts, strategy {m.get('strategy')}, clock "
+            f"{m.get('clock')}, seed {m.get('seed')}",
+            f"  finished           {'yes' if self.finished else 'no'}"
+            + (f" ({self.mission_error})" if self.mission_error else ""),
+            *self.numbers_lines(),
+            f"  commit conflicts   {self.commit_conflicts}",
+            *self.vehicle_lines(distance=True),
+        ]
+        out.append("  messages           " + ", ".join(
+            f"{k} {n}" for k, n in sorted(self.messages.items())))
+        out += self._listed(LOSSES)
+        out += [f"  {line}" for line in self.verdict_lines()]
+        out += self._listed(FINDINGS)
+        if self.stacks_not_recorded:
+            out.append(f"  done, not recorded {', '.join(self.stacks_not_recorded[:20])}"
+                       + (" ..." if len(self.stacks_not_recorded) > 20 else ""))
+        if self.stacks_lost:
+            out.append(f"  not done           {', '.join(self.stacks_lost[:20])}"
+                       + (" ..." if len(self.stacks_lost) > 20 else ""))
+        return out
+
+    def _listed(self, listings: tuple[Listing, ...]) -> list[str]:
+        """The first rows of each listing, one a line under its label."""
+        out = []
+        for listing in listings:
+            rows = getattr(self, listing.rows)
+            out += [f"  {listing.label:<19}{listing.line(row)}" for row in rows[:listing.limit]]
+            if listing.more and len(rows) > listing.limit:
+                out.append(f"  {listing.label:<19}... {len(rows) - listing.limit} "
+                           f"{listing.more} more")
+        return out
+
+
+@dataclass(frozen=True)
+class Listing:
+    """Rows of a Report field listed one a line: at most `limit`, then, if `more` names
+    them, how many more there are."""
+
+    rows: str  # the Report field
+    label: str
+    line: Callable[[Any], str]
+    limit: int = 10
+    more: str = ""
+
+
+def _unverified(u: Unverified) -> str:
+    owner = "the goods'" if u.vehicle == GOODS else f"forklift {u.vehicle}"
+    return f"{owner} {u.check} from sim time {u.sim_from_s:.2f} to {u.sim_to_s:.2f} s: {u.why}"
+
+
+# Before the verdicts: what was lost, and what was sent while no recorder ran.
+LOSSES = (
+    Listing("gaps", "gap", lambda g: f"{g.missing} lost on {g.key} from {g.sender} at seq "
+            f"{g.first_missing}"),
+    Listing("not_recorded", "not recorded", lambda n: f"{n.missing} on {n.key} from "
+            f"{n.sender} at seq {n.first_missing} (no recorder running)", more="streams"),
+)
+# After them: what could not be checked, and what failed.
+FINDINGS = (
+    Listing("unverified", "not verified", _unverified, limit=20, more="windows"),
+    Listing("outside_reservation_unverified", "not judged", lambda o: f"t={o.t:.2f} s "
+            f"forklift {o.vehicle} on {list(o.cells)}: its reservations then are not known"),
+    Listing("double_bookings_unverified", "not judged", lambda d: f"cell {d.cell} by "
+            f"{d.vehicles} over [{d.t0:.2f}, {d.t1:.2f}): the reservations then are not known"),
+    Listing("overlaps", "overlap", lambda o: f"t={o.t:.2f} s forklifts {o.vehicles} on "
+            f"{list(o.cells)}"),
+    Listing("outside_reservation", "outside", lambda o: f"t={o.t:.2f} s forklift {o.vehicle} "
+            f"on {list(o.cells)}"),
+    Listing("double_bookings", "double-booked", lambda d: f"cell {d.cell} by {d.vehicles} "
+            f"over [{d.t0:.2f}, {d.t1:.2f})"),
+    Listing("stacks_duplicated", "done twice", str),
+)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value
