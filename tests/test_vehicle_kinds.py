@@ -10,7 +10,8 @@ from fleet.params import VehicleDims
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.vehicles.registry import UnknownVehicleKind, vehicle_kind
-from fleet.world.layout import LayoutError, layout_source, load_layout, parse_layout
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import layout_source, load_layout, parse_layout
 
 
 def test_the_registry_refuses_an_unknown_kind_naming_the_known_ones():
