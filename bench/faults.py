@@ -17,10 +17,9 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-from dispatcher.clock import DETECT_TIMEOUT_S
 from fleet.analysis.analyze import analyze
-from fleet.mission.faults import VEHICLE_KINDS, builtin_scenarios, load_scenario
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.faults import DETECT_TIMEOUT_S, VEHICLE_KINDS, builtin_scenarios, load_scenario
+from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
 from fleet.recording.reader import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume
@@ -29,7 +28,7 @@ MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
 
 
 def run(names: list[str] | None = None, say: Callable[[str], None] = print,
-        clock: str = "fast", speed: float = 1.0) -> dict:
+        clock: ClockMode = ClockMode.FAST, speed: float = 1.0) -> dict:
     """One row per scenario (a kind's own scenario is named after the kind), and the
     fault-free run's as "fault_free"."""
     names = names or builtin_scenarios()
@@ -49,7 +48,7 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print,
     return rows
 
 
-def _run(out: Path, name: str | None, clock: str, speed: float) -> dict:
+def _run(out: Path, name: str | None, clock: ClockMode, speed: float) -> dict:
     scenario = load_scenario(name) if name else None
     outcome = run_processes(RunSpec(MISSION, 4, out, clock, speed, faults=scenario,
                                     faults_source=name or ""))

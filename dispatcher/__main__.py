@@ -1,5 +1,5 @@
 import sys
 
-from fleet.cli import main
+from dispatcher.process import main
 
-sys.exit(main(["dispatcher", *sys.argv[1:]]))
+sys.exit(main())

@@ -1,5 +1,6 @@
-"""The one source of "now" (DESIGN.md section 3), published by the dispatcher on
-fleet/<run>/clock. Both clocks are `Pacer`s of the engine (fleet/mission/seam.py).
+"""The one source of "now" for every process of a run: all planning is in sim time, and the
+dispatcher publishes it on fleet/<run>/clock (docs/runtime.md). Both clocks are `Pacer`s of the
+engine (fleet/mission/seam.py).
 
 Fast: discrete events. Before each decision the clock moves to the decision's instant and
 waits until every agent has acknowledged the tick (having published its states up to it), so
@@ -17,14 +18,16 @@ ahead of now, so that every forklift that can move hears of the freeze before it
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
+from contextlib import ExitStack
 
 import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
-from fleet.mission.faults import FaultKind, Scenario
+from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
 from fleet.mission.freeze import (
     BREAKDOWN,
     Disruption,
@@ -33,27 +36,65 @@ from fleet.mission.freeze import (
     ZoneClosure,
     scheduled_at,
 )
+from fleet.mission.spec import ClockMode
 from fleet.runtime.bus import RELIABLE, received
 from fleet.wire.protocol import ClockAck, ClockTick, VehicleFault, encode
 from fleet.wire.topics import CLOCK, Keys
 
+log = logging.getLogger("fleet.dispatcher")
 SENDER = CLOCK
 ACK_TIMEOUT_S = 60.0
 INJECTOR = 0  # the fault injector acknowledges ticks as "vehicle" 0
-DETECT_TIMEOUT_S = 20.0  # a fault not seen by then was not detected: the run fails
 RECORDER_WAIT_S = 60.0
 
 
-class FastClock:
+class _Clock:
+    """What both clocks share: the publisher of the ticks, the forklifts' fault reports
+    (heard with liveliness, under `liveness.changed`, which the clocks wait on) and what was
+    detected."""
+
     def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
-                 liveness: Liveness, log, scenario: Scenario | None = None,
+                 liveness: Liveness) -> None:
+        self.vehicles = vehicles
+        self.liveness = liveness
+        # Each fault seen: what, its sim instant, and the wall clock when it was detected and
+        # when the engine had recovered (asked the clock again): `fleet bench faults` reads it.
+        self.detected: list[dict] = []
+        self.declared = ExitStack()
+        self.publisher = self.declared.enter_context(
+            session.declare_publisher(keys.clock, congestion_control=RELIABLE))
+
+    def _send(self, tick: ClockTick) -> None:
+        self.publisher.put(encode(tick, SENDER, tick.tick, tick.t))
+
+    def _listen(self, session: zenoh.Session, keys: Keys) -> None:
+        """Hear the forklifts' fault reports; called once the clock is ready for them."""
+        self.declared.enter_context(
+            session.declare_subscriber(keys.vehicle_fault("*"), self._on_fault))
+
+    def _on_fault(self, sample: zenoh.Sample) -> None:
+        message = received(sample, VehicleFault, log)
+        if message is not None and message.vehicle in self.vehicles:
+            with self.liveness.changed:  # what the clock waits on, with liveliness
+                self._reported(message.vehicle, message.state)
+                self.liveness.changed.notify_all()
+
+    def _reported(self, vehicle: int, state: str) -> None:
+        """A forklift's report ("broken", "repaired"), taken holding liveness.changed."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        self.declared.close()
+
+
+class FastClock(_Clock):
+    def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
+                 liveness: Liveness, scenario: Scenario | None = None,
                  recorded: bool = False, tick: int = 0, t: float = 0.0) -> None:
         """`tick` and `t`: where a restarted dispatcher's clock goes on from (the forklifts
         refuse a tick that is not after the last one they heard)."""
-        self.vehicles = vehicles
+        super().__init__(session, keys, vehicles, liveness)
         self.recorded = recorded
-        self.liveness = liveness
-        self.log = log
         self.scenario = scenario
         self.pending = [i for i in scenario.instants() if i > t] if scenario else []
         self.down: frozenset[int] = frozenset()
@@ -64,28 +105,21 @@ class FastClock:
         self.acked: dict[int, int] = {}
         # (forklift, "broken" / "repaired") heard; guarded by liveness.changed
         self.reports: set[tuple[int, str]] = set()
-        # Each fault seen: what, its sim instant, and the wall clock when it was detected and
-        # when the engine had recovered (asked the clock again): `fleet bench faults` reads it.
-        self.detected: list[dict] = []
         self.changed = threading.Condition()
-        self.publisher = session.declare_publisher(keys.clock, congestion_control=RELIABLE)
-        self.subscribers = [session.declare_subscriber(keys.clock_ack("*"), self._on_ack),
-                            session.declare_subscriber(keys.vehicle_fault("*"), self._on_fault)]
+        self.declared.enter_context(session.declare_subscriber(keys.clock_ack("*"),
+                                                               self._on_ack))
+        self._listen(session, keys)
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
-        message = received(sample, ClockAck, self.log)
+        message = received(sample, ClockAck, log)
         if message is None:
             return
         with self.changed:
             self.acked[message.vehicle] = max(self.acked.get(message.vehicle, 0), message.tick)
             self.changed.notify_all()
 
-    def _on_fault(self, sample: zenoh.Sample) -> None:
-        message = received(sample, VehicleFault, self.log)
-        if message is not None and message.vehicle in self.vehicles:
-            with self.liveness.changed:  # what _detect waits on, with liveliness
-                self.reports.add((message.vehicle, message.state))
-                self.liveness.changed.notify_all()
+    def _reported(self, vehicle: int, state: str) -> None:
+        self.reports.add((vehicle, state))  # what _detect waits for
 
     @property
     def awaited(self) -> list[int]:
@@ -98,8 +132,7 @@ class FastClock:
         waited for: `disruptions` reports it."""
         self.tick += 1
         self.t = max(self.t, t)
-        self.publisher.put(encode(ClockTick(self.tick, "fast", self.t, down=sorted(self.down)),
-                                  SENDER, self.tick, self.t))
+        self._send(ClockTick(self.tick, ClockMode.FAST.value, self.t, down=sorted(self.down)))
         deadline = time.monotonic() + ACK_TIMEOUT_S
         with self.changed:
             while late := [v for v in self.awaited if self.acked.get(v, 0) < self.tick and
@@ -156,7 +189,7 @@ class FastClock:
         else:
             self.scheduled_down.add(expected.vehicle)
         self.detected.append(_sighting(expected))
-        self.log.info("detected %s after %.3f s", expected, time.monotonic() - started)
+        log.info("detected %s after %.3f s", expected, time.monotonic() - started)
         return expected
 
     def instant(self, t: float) -> float:
@@ -168,11 +201,6 @@ class FastClock:
 
     def finish(self, t_end: float) -> None:
         self.advance(t_end)
-
-    def close(self) -> None:
-        for subscriber in self.subscribers:
-            subscriber.undeclare()
-        self.publisher.undeclare()
 
 
 def _sighting(disruption: Disruption) -> dict:
@@ -193,7 +221,7 @@ def _who(late: list[int]) -> str:
     return ", ".join(names)
 
 
-class RealtimeClock:
+class RealtimeClock(_Clock):
     """Sim time = speed x wall time since the start. Faults are not waited for: the clock
     notices them as they come (a liveliness token gone or back, a forklift's report, a zone
     whose time has come) and the engine freezes at the first instant every forklift that can
@@ -202,7 +230,7 @@ class RealtimeClock:
     TICK_PERIOD_S = 0.5
 
     def __init__(self, session: zenoh.Session, keys: Keys, speed: float, vehicles: list[int],
-                 liveness: Liveness, log, scenario: Scenario | None = None, tick: int = 0,
+                 liveness: Liveness, scenario: Scenario | None = None, tick: int = 0,
                  t: float = 0.0, wall: float = 0.0, closed: frozenset = frozenset(),
                  lead_wall_s: float = 0.3, margin_wall_s: float = 0.5) -> None:
         """`tick`, `t` and `wall`: the last tick a restarted dispatcher's forklifts heard
@@ -210,10 +238,8 @@ class RealtimeClock:
         `closed`: the cells the store holds as a closed zone (zones closed before it)."""
         if speed <= 0:
             raise ValueError(f"--speed must be positive, not {speed}")
+        super().__init__(session, keys, vehicles, liveness)
         self.speed = speed
-        self.vehicles = vehicles
-        self.liveness = liveness
-        self.log = log
         self.lead = lead_wall_s * speed  # decide this much sim time ahead
         self.margin = margin_wall_s * speed  # a freeze this much ahead reaches everyone
         self.zones = sorted((f for f in scenario.faults if f.kind is FaultKind.CLOSE_ZONE
@@ -225,13 +251,11 @@ class RealtimeClock:
         self.generation: dict[int, int] = dict(liveness.appeared)
         self.reports: dict[int, list[str]] = {}  # "broken" / "repaired", in order, not acted on
         self.broken: set[int] = set()  # down because broken: back when repaired
-        self.detected: list[dict] = []  # as FastClock's, for `fleet bench faults`
         self.wall0 = wall - t / speed if wall else time.time()
         self.tick = tick
         self.publishing = threading.Lock()  # ticks go out numbered in order, from two threads
         self.stopping = threading.Event()
-        self.publisher = session.declare_publisher(keys.clock, congestion_control=RELIABLE)
-        self.subscriber = session.declare_subscriber(keys.vehicle_fault("*"), self._on_fault)
+        self._listen(session, keys)
         self._publish()
         self.ticker = threading.Thread(target=self._tick, daemon=True)
         self.ticker.start()
@@ -247,8 +271,8 @@ class RealtimeClock:
             self.tick += 1
             wall = time.time()
             t = (wall - self.wall0) * self.speed
-            self.publisher.put(encode(ClockTick(self.tick, "realtime", t, self.speed, wall,
-                                                down=sorted(self.down)), SENDER, self.tick, t))
+            self._send(ClockTick(self.tick, ClockMode.REALTIME.value, t, self.speed, wall,
+                                 down=sorted(self.down)))
 
     def _held_down(self, down: frozenset[int]) -> None:
         """Say at once who is down: a forklift must hear it before its freeze instant (it
@@ -261,12 +285,8 @@ class RealtimeClock:
         while not self.stopping.wait(self.TICK_PERIOD_S):
             self._publish()
 
-    def _on_fault(self, sample: zenoh.Sample) -> None:
-        message = received(sample, VehicleFault, self.log)
-        if message is not None and message.vehicle in self.vehicles:
-            with self.liveness.changed:
-                self.reports.setdefault(message.vehicle, []).append(message.state)
-                self.liveness.changed.notify_all()
+    def _reported(self, vehicle: int, state: str) -> None:
+        self.reports.setdefault(vehicle, []).append(state)  # in order: _noticed acts on them
 
     def wait_until(self, t: float) -> None:
         while (ahead := t - self.now()) > 0:
@@ -298,7 +318,7 @@ class RealtimeClock:
         self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:
             self.detected.append(_sighting(d))
-            self.log.info("noticed %s at t=%.2f", d, self.now())
+            log.info("noticed %s at t=%.2f", d, self.now())
         return found
 
     def _noticed(self, down: frozenset[int]) -> list[Disruption]:
@@ -339,5 +359,4 @@ class RealtimeClock:
     def close(self) -> None:
         self.stopping.set()
         self.ticker.join()
-        self.subscriber.undeclare()
-        self.publisher.undeclare()
+        super().close()

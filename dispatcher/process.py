@@ -10,38 +10,42 @@ last message is delivered before its session closes.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import logging
 import threading
 import time
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack, closing
+from dataclasses import dataclass
 from pathlib import Path
+
+import zenoh
 
 from dispatcher.claims import Claims, Roster
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
-from fleet.commands.run import add_mission_args, engine_options, mission_from_args
 from fleet.errors import UserError
-from fleet.mission.engine import Engine, MissionStuck
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.record import MissionSummary, digest_of
+from fleet.mission.spec import ClockMode, Mission
 from fleet.recording.writer import mission_info
-from fleet.runtime.argtypes import positive_float, scenario_arg
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
     Requester,
     RequestFailed,
     Stream,
-    add_bus_arguments,
-    bus_config,
     follow_recorded,
     open_session,
-    stop_on_signals,
 )
+from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
+from fleet.runtime.process_configs import DispatcherConfig
 from fleet.wire.protocol import (
     ZONE,
+    Message,
     MissionDone,
     MissionInfo,
     Progress,
@@ -49,69 +53,47 @@ from fleet.wire.protocol import (
     encode,
 )
 from fleet.wire.topics import DISPATCHER, Keys, published_by
+from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
 RECORDED_WAIT_S = 10.0
+Publish = Callable[[Message, float], None]
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_bus_arguments(p)
-    add_mission_args(p)
-    p.add_argument("--clock", choices=["fast", "realtime"], default="fast",
-                   help="fast: discrete events, deterministic; realtime: sim time = speed x "
-                   "wall time (default fast)")
-    p.add_argument("--speed", type=positive_float, default=1.0,
-                   help="real-time clock: sim seconds per wall second (default 1)")
-    p.add_argument("--startup-timeout", type=positive_float, default=120.0, metavar="SECONDS",
-                   help="seconds to wait for the reservation service and every agent "
-                   "(default 120)")
-    p.add_argument("--command", default="",
-                   help="the command line that started the run, for its recording (default: "
-                   "this process's)")
-    p.add_argument("--faults", metavar="SCENARIO", type=scenario_arg,
-                   help="fault scenario (docs/faults.md): the fast clock stops at its "
-                   "instants until each fault is detected; the real-time clock closes its "
-                   "zones when their time comes (default: no faults)")
-    p.add_argument("--recorded", action="store_true",
-                   help="fast clock: hold sim time while no recorder runs, so a recorder "
-                   "killed and restarted misses nothing that happened meanwhile")
-    p.add_argument("--recover", action="store_true",
-                   help="a restarted dispatcher: pick the mission up from what the "
-                   "reservation service and the forklifts hold (fill missions)")
-    p.add_argument("--exit-when-done", action="store_true",
-                   help="exit after publishing the result (once the recorder has it, with "
-                   "--recorded) instead of waiting to be stopped")
-    p.add_argument("--claims", action="store_true",
-                   help="hand out forklift ids to agents started with --id auto; without "
-                   "--vehicles the fleet is whoever claimed one before claims stopped for "
-                   "--gather seconds (docs/deployment.md)")
-    p.add_argument("--gather", type=positive_float, default=5.0, metavar="SECONDS",
-                   help="--claims without --vehicles: start once no new forklift has claimed "
-                   "an id for this many seconds (default 5)")
-    p.add_argument("--restart-marker", type=Path,
-                   help="create this file when the mission starts; if it is already there, "
-                   "this is a restart: pick the mission up as --recover does (a container "
-                   "keeps its files across restarts, not across re-creation; default: none)")
+def main(argv: Sequence[str] | None = None) -> int:
+    return process_main(DispatcherConfig, serve, "python -m dispatcher", argv)
 
 
-class Stopped(Exception):
-    """SIGTERM or SIGINT arrived in the middle of the mission."""
+@dataclass(frozen=True)
+class MissionSetup:
+    """The mission as this dispatcher runs it, settled before it starts: its fleet (claims
+    may have decided its size), whether it is picked up after a restart, the engine's options
+    (built once) and the flags."""
+
+    config: DispatcherConfig
+    mission: Mission
+    layout: Layout
+    options: EngineOptions
+    recover: bool
+
+    @property
+    def vehicles(self) -> list[int]:
+        return list(range(1, (self.mission.vehicles or len(self.layout.vehicle_starts)) + 1))
 
 
-def serve(args: argparse.Namespace) -> int:
-    mission = mission_from_args(args)
-    layout = load_layout(mission.layout)
-    options = engine_options(mission, layout, args.weights)
-    keys = Keys(args.run)
-    roster = None  # the claims of the dispatcher this one replaces
-    if args.restart_marker is not None and args.restart_marker.exists():
-        args.recover = True
-        roster = read_roster(args.restart_marker)
-        log.warning("%s exists: this dispatcher was restarted, it picks the mission up",
-                    args.restart_marker)
+def serve(config: DispatcherConfig) -> int:
+    layout = load_layout(config.mission.layout)
+    options = engine_options(config.mission, layout, config.weights)  # bad weights: at once
+    keys = Keys(config.bus.run)
+    marker = config.restart_marker
+    restarted = marker is not None and marker.exists()
+    roster = read_roster(marker) if restarted else None  # the claims of the one it replaces
+    if restarted:
+        log.warning("%s exists: this dispatcher was restarted, it picks the mission up", marker)
+    recover = config.recover or restarted
     stop = threading.Event()
     in_mission = threading.Event()
 
@@ -121,59 +103,65 @@ def serve(args: argparse.Namespace) -> int:
             raise Stopped("stopped by a signal before the mission ended")
 
     stop_on_signals(stop_requested)
-    session = open_session(bus_config(args))
-    claims = None
-    try:
-        limit = mission.vehicles or len(layout.vehicle_starts)
-        if args.claims:
-            claims = Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))
-            ids = claims.gather(mission.vehicles, args.gather, args.startup_timeout, stop)
-            if not ids:
-                raise ParticipantLost(f"no forklift claimed an id within "
-                                      f"{args.startup_timeout:g} s")
-            mission = dataclasses.replace(mission, vehicles=len(ids))
-            log.info("the fleet: %d forklifts", len(ids))
-        if args.restart_marker is not None and not args.recover:
-            write_roster(args.restart_marker, claims.roster.ids if claims else {})
-        n = mission.vehicles or len(layout.vehicle_starts)
-        vehicles = list(range(1, n + 1))
-        token = session.liveliness().declare_token(keys.dispatcher_alive)
-        info = mission_info(mission, layout, n, args.clock, args.speed, args.command)
-        # Each of the dispatcher's topics, by the message it carries (every event must reach
-        # the recorder: its publishers wait rather than drop).
-        streams = {cls: Stream(session, topic.key(keys.run), topic.sender, topic.reliable)
-                   for cls, topic in published_by(DISPATCHER).items()}
-        info_pub, done_pub = streams[MissionInfo], streams[MissionDone]
-        info_answer = session.declare_queryable(  # for a recorder that joins late
-            keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0)))
-        liveness = Liveness(session, keys)
+    with ExitStack() as scope:
+        session = scope.enter_context(open_session(config.bus.config()))  # closed last
+        mission = config.mission
+        if config.claims:
+            mission, roster = _claimed_fleet(scope, session, keys, config, layout, roster, stop)
+        if marker is not None and not recover:
+            write_roster(marker, roster or {})
+        setup = MissionSetup(config, mission, layout, options, recover)
+        scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
+        info = mission_info(mission, layout, len(setup.vehicles), config.clock.value,
+                            config.speed, config.command)
+        streams = _streams(scope, session, keys)
+        scope.enter_context(session.declare_queryable(  # for a recorder that joins late
+            keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0))))
+        liveness = scope.enter_context(closing(Liveness(session, keys)))
         recorded = threading.Event()
-        status = follow_recorded(session, keys, recorded, log)
+        scope.enter_context(follow_recorded(session, keys, recorded, log))
         try:
             in_mission.set()
-            info_pub.put(info, 0.0)
-            done = run_mission(session, keys, args, mission, layout, options, vehicles,
-                               liveness, lambda message, t: streams[type(message)].put(
-                                   message, t))
+            streams[MissionInfo].put(info, 0.0)
+            done = dispatch_mission(session, keys, setup, liveness, lambda message, t:
+                                    streams[type(message)].put(message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
             in_mission.clear()
-        done_pub.put(done, done.record.get("end_time_s", 0.0))
+        streams[MissionDone].put(done, done.record.get("end_time_s", 0.0))
         log.info("mission %s; %s", "done" if done.ok else "failed", done.error or done.digest)
-        if not args.exit_when_done:
+        if not config.exit_when_done:
             stop.wait()
-        elif args.recorded and not recorded.wait(RECORDED_WAIT_S):
+        elif config.recorded and not recorded.wait(RECORDED_WAIT_S):
             log.warning("the recorder had not recorded the result within %g s",
                         RECORDED_WAIT_S)
-        liveness.close()
-        for declared in (info_answer, *streams.values(), token, status):
-            declared.undeclare()
-    finally:
-        if claims is not None:
-            claims.close()
-        session.close()
     return 0 if done.ok else 1
+
+
+def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
+                   config: DispatcherConfig, layout: Layout, roster: dict[str, int] | None,
+                   stop: threading.Event) -> tuple[Mission, dict[str, int]]:
+    """The mission with the fleet that claimed its ids (--claims), and who holds which;
+    the claims are served (to a restarted agent) for as long as `scope` lasts."""
+    mission = config.mission
+    limit = mission.vehicles or len(layout.vehicle_starts)
+    claims = scope.enter_context(closing(
+        Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))))
+    ids = claims.gather(mission.vehicles, config.gather_s, config.startup_timeout_s, stop)
+    if not ids:
+        raise ParticipantLost(f"no forklift claimed an id within "
+                              f"{config.startup_timeout_s:g} s")
+    log.info("the fleet: %d forklifts", len(ids))
+    return dataclasses.replace(mission, vehicles=len(ids)), claims.roster.ids
+
+
+def _streams(scope: ExitStack, session: zenoh.Session, keys: Keys) -> dict[type[Message], Stream]:
+    """Each of the dispatcher's topics, by the message it carries (every event must reach
+    the recorder: its publishers wait rather than drop)."""
+    return {cls: scope.enter_context(Stream(session, topic.key(keys.run), topic.sender,
+                                            topic.reliable))
+            for cls, topic in published_by(DISPATCHER).items()}
 
 
 def read_roster(path: Path) -> dict[str, int]:
@@ -193,50 +181,49 @@ def write_roster(path: Path, ids: dict[str, int]) -> None:
     path.write_text(json.dumps(ids))
 
 
-def run_mission(session, keys: Keys, args, mission, layout, options, vehicles: list[int],
-                liveness: Liveness, publish) -> MissionDone:
+def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
+                     liveness: Liveness, publish: Publish) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
     that could not finish: the error goes into the result)."""
+    config, vehicles = setup.config, setup.vehicles
     t0 = time.perf_counter()
-    clock = None
-    try:
-        liveness.wait_for_service(args.startup_timeout)
-        mirror = TableMirror()
-        reservations = ReservationClient(session, keys, Requester(session, SENDER))
-        changes = reservations.follow(mirror)
-        liveness.wait_for(vehicles, args.startup_timeout)
-        log.info("%d forklifts and the reservation service are up", len(vehicles))
-        executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
-                                  layout.vehicle_kind)
-        recovered, tick, wall = None, 0, 0.0
-        if args.recover:
-            recovered, tick, wall = pick_up(executor, layout, vehicles, options.params)
-            log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
-                     len(recovered.done) + len(recovered.undelivered))
-        scenario = load_scenario(args.faults) if args.faults else None
-        if args.clock == "fast":
-            clock = FastClock(session, keys, vehicles, liveness, log, scenario, args.recorded,
-                              tick, recovered.t if recovered else 0.0)
-        else:
-            closed = frozenset(r.cell for r in mirror.table.reservations(ZONE))
-            clock = RealtimeClock(session, keys, args.speed, vehicles, liveness, log, scenario,
-                                  tick, recovered.t if recovered else 0.0, wall, closed)
+    with ExitStack() as scope:
+        try:
+            liveness.wait_for_service(config.startup_timeout_s)
+            mirror = TableMirror()
+            reservations = ReservationClient(session, keys, Requester(session, SENDER))
+            scope.enter_context(reservations.follow(mirror))
+            liveness.wait_for(vehicles, config.startup_timeout_s)
+            log.info("%d forklifts and the reservation service are up", len(vehicles))
+            executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
+                                      setup.layout.vehicle_kind)
+            recovered, tick, wall = None, 0, 0.0
+            if setup.recover:
+                recovered, tick, wall = pick_up(executor, setup.layout, vehicles,
+                                                setup.options.params)
+                log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
+                         len(recovered.done) + len(recovered.undelivered))
+            scenario = load_scenario(config.faults) if config.faults else None
+            t = recovered.t if recovered else 0.0
+            if config.clock is ClockMode.FAST:
+                clock = FastClock(session, keys, vehicles, liveness, scenario, config.recorded,
+                                  tick, t)
+            else:
+                closed = frozenset(r.cell for r in mirror.table.reservations(ZONE))
+                clock = RealtimeClock(session, keys, config.speed, vehicles, liveness, scenario,
+                                      tick, t, wall, closed)
+            scope.enter_context(closing(clock))
 
-        def progress(done: int, total: int, t: float, failures: int) -> None:
-            publish(Progress(done, total, t, failures), t)
+            def progress(done: int, total: int, t: float, failures: int) -> None:
+                publish(Progress(done, total, t, failures), t)
 
-        options.progress = progress
-        options.events = publish
-        record = Engine(mission, options, layout, executor, clock, recovered).run()
-        changes.undeclare()
-        as_dict = MissionSummary.of_record(record).to_dict()
-        return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
-                           wall_s=time.perf_counter() - t0, rejections=executor.rejections,
-                           detections=getattr(clock, "detected", []))
-    except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError, Stopped) as exc:
-        log.error("mission failed: %s", exc)
-        return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)
-    finally:
-        if clock is not None:
-            clock.close()
-
+            options = dataclasses.replace(setup.options, progress=progress, events=publish)
+            record = Engine(setup.mission, options, setup.layout, executor, clock,
+                            recovered).run()
+            as_dict = MissionSummary.of_record(record).to_dict()
+            return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
+                               wall_s=time.perf_counter() - t0, rejections=executor.rejections,
+                               detections=clock.detected)
+        except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError, Stopped) as exc:
+            log.error("mission failed: %s", exc)
+            return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

@@ -4,14 +4,8 @@ fleet.commands.*."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
-import time
-import traceback
 from collections.abc import Sequence
-
-import zenoh
 
 from fleet import __version__
 from fleet.commands import (
@@ -29,25 +23,13 @@ from fleet.commands import (
     service,
     train,
 )
-from fleet.commands.helptext import Parser
-from fleet.errors import UserError, describe
-from fleet.runtime.bus import RequestFailed, zenoh_message
+from fleet.errors import UserError
+from fleet.runtime import lifecycle
+from fleet.runtime.helptext import Parser
 from fleet.runtime.local_run import RunFailed
 
-EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
-# What a command may fail with for reasons outside the program: bad input (every check of it
-# raises a UserError), the network, a run's processes. Each reaches the user as one line;
-# anything else is a bug (a ValueError too: a value the user gave is refused as a UserError).
-EXPECTED = (UserError, zenoh.ZError, RequestFailed, RunFailed)
-
-
-def expected(exc: BaseException) -> bool:
-    """Whether `exc` is a failure outside the program. An OS error is one when it names its
-    file (a path the user gave that cannot be read or written, a full disk): the line says
-    which; one about no file is a bug's."""
-    if isinstance(exc, OSError):
-        return exc.filename is not None
-    return isinstance(exc, EXPECTED)
+# Besides what every process may fail with: a run's processes (`fleet run`).
+EXPECTED = (*lifecycle.EXPECTED, RunFailed)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,37 +91,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command is None:  # plain `fleet`: what there is to do
         parser.print_help()
         return 0
-    try:
-        code = int(args.handler(args) or 0)
-        sys.stdout.flush()  # a reader that left shows here, not in a message at exit
-        return code
-    except KeyboardInterrupt:
-        print(f"\n{args.prog}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # the reader left (`fleet faults list | head`): nothing to say
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error
-        return 141
-    except Exception as exc:
-        if expected(exc):
-            text = zenoh_message(exc) if isinstance(exc, zenoh.ZError) else describe(exc)
-            print(f"{args.prog}: error: {text}", file=sys.stderr)
-            return 2
-        # a bug: one line here, the traceback in a file for the report
-        path = crash_report(exc, sys.argv[1:] if argv is None else argv)
-        print(f"{args.prog}: internal error (a bug, please report it): "
-              f"{type(exc).__name__}: {describe(exc)}; the traceback is in {path}",
-              file=sys.stderr)
-        return EX_SOFTWARE
-
-
-def crash_report(exc: BaseException, argv: Sequence[str]) -> str:
-    """Write the command line and the traceback to a file in the temporary directory."""
-    fd, path = tempfile.mkstemp(prefix=f"fleet-crash-{time.strftime('%Y%m%d-%H%M%S')}-",
-                                suffix=".txt")
-    with os.fdopen(fd, "w") as out:
-        out.write(f"fleet {__version__}: fleet {' '.join(argv)}\n\n")
-        out.write("".join(traceback.format_exception(exc)))
-    return path
+    command = ["fleet", *(sys.argv[1:] if argv is None else argv)]
+    return lifecycle.exit_status(args.prog, command, lambda: args.handler(args), EXPECTED)
 
 
 if __name__ == "__main__":

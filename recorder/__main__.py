@@ -1,5 +1,5 @@
 import sys
 
-from fleet.cli import main
+from recorder.process import main
 
-sys.exit(main(["recorder", *sys.argv[1:]]))
+sys.exit(main())

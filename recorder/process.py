@@ -14,13 +14,14 @@ fleet/recording/rundir.py), so a restarted recorder's segments are of the same r
 
 from __future__ import annotations
 
-import argparse
 import logging
 import queue
 import re
 import socket
 import threading
 import time
+from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 import zenoh
@@ -30,14 +31,10 @@ from fleet.recording.reader import Recorded
 from fleet.recording.rundir import claim_new
 from fleet.recording.segments import RUN_FILE, next_segment
 from fleet.recording.writer import RecordingWriter
-from fleet.runtime.argtypes import port, port_problem, writable_dir, writable_file
-from fleet.runtime.bus import (
-    Stream,
-    add_bus_arguments,
-    bus_config,
-    open_session,
-    stop_on_signals,
-)
+from fleet.runtime.argtypes import port_problem
+from fleet.runtime.bus import Stream, open_session
+from fleet.runtime.lifecycle import process_main, stop_on_signals
+from fleet.runtime.process_configs import RecorderConfig
 from fleet.wire.protocol import (
     MissionDone,
     MissionInfo,
@@ -55,24 +52,8 @@ SENDER = RECORDER
 FLUSH_PERIOD_S = 1.0
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_bus_arguments(p)
-    p.add_argument("--out", type=writable_file, default=Path("run.mcap"), metavar="FILE",
-                   help="MCAP file to write (default run.mcap; never overwritten: a recorder "
-                   "restarted for a run writes its next segment, RUN_DIR/run-2.mcap, ...)")
-    p.add_argument("--out-dir", type=writable_dir, metavar="DIR",
-                   help="instead of --out: write DIR/<UTC date-time>-<host name>/run.mcap, or "
-                   "the next segment in this host's latest directory there when it restarts "
-                   "(a container keeps its host name across restarts; default: use --out)")
-    p.add_argument("--exit-when-done", action="store_true",
-                   help="close the file and exit once the mission's result is recorded")
-    p.add_argument("--foxglove", type=port, metavar="PORT",
-                   help="also serve the live view over the Foxglove WebSocket protocol on "
-                   "127.0.0.1:PORT (open ws://localhost:PORT in Foxglove; default: no live "
-                   "view)")
-    p.add_argument("--foxglove-host", default="127.0.0.1", metavar="HOST",
-                   help="the address the live view listens on (0.0.0.0 in a container, "
-                   "whose published port is what the host reaches; default 127.0.0.1)")
+def main(argv: Sequence[str] | None = None) -> int:
+    return process_main(RecorderConfig, serve, "python -m recorder", argv)
 
 
 class Recorder:
@@ -89,37 +70,39 @@ class Recorder:
         self.lock = threading.Lock()  # status answers read what the writer thread counts
 
     def run(self) -> None:
-        subscriber = self.session.declare_subscriber(self.keys.everything, self._on_sample)
-        status = self.session.declare_queryable(self.keys.recorder_status, self._status)
-        self.status_pub = Stream(self.session, self.keys.recorder_status, SENDER, reliable=True)
-        token = self.session.liveliness().declare_token(self.keys.recorder_alive)
-        self._ask_for_mission()
-        log.info("recording %s to %s", self.keys.everything, self.writer.path)
-        next_flush = time.monotonic() + FLUSH_PERIOD_S
-        try:
-            while True:
-                try:
-                    item = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
-                except queue.Empty:
-                    item = ()  # time to flush
-                if item is None:
-                    break
-                if item:
-                    self._record(*item)
-                if time.monotonic() >= next_flush:
-                    self.writer.flush()
-                    self._announce()
-                    next_flush = time.monotonic() + FLUSH_PERIOD_S
-            while not self.inbox.empty():  # what arrived before the stop
-                if (item := self.inbox.get_nowait()) is not None:
-                    self._record(*item)
-        finally:
-            for declared in (token, status, self.status_pub, subscriber):
-                declared.undeclare()
-            self.writer.close()
-            if self.live is not None:
-                self.live.close()
+        with ExitStack() as scope:
+            scope.callback(self.writer.close)  # last: what the declarations below feed
+            scope.enter_context(self.session.declare_subscriber(self.keys.everything,
+                                                                self._on_sample))
+            scope.enter_context(self.session.declare_queryable(self.keys.recorder_status,
+                                                               self._status))
+            self.status_pub = scope.enter_context(
+                Stream(self.session, self.keys.recorder_status, SENDER, reliable=True))
+            scope.enter_context(
+                self.session.liveliness().declare_token(self.keys.recorder_alive))
+            self._ask_for_mission()
+            log.info("recording %s to %s", self.keys.everything, self.writer.path)
+            self._write_until_stopped()
         log.info("wrote %d messages to %s", self.writer.messages, self.writer.path)
+
+    def _write_until_stopped(self) -> None:
+        next_flush = time.monotonic() + FLUSH_PERIOD_S
+        while True:
+            try:
+                item = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
+            except queue.Empty:
+                item = ()  # time to flush
+            if item is None:
+                break
+            if item:
+                self._record(*item)
+            if time.monotonic() >= next_flush:
+                self.writer.flush()
+                self._announce()
+                next_flush = time.monotonic() + FLUSH_PERIOD_S
+        while not self.inbox.empty():  # what arrived before the stop
+            if (item := self.inbox.get_nowait()) is not None:
+                self._record(*item)
 
     def stop(self) -> None:
         # From a signal handler in the main thread, which may be inside inbox.get holding the
@@ -199,46 +182,43 @@ class Recorder:
         query.reply(query.key_expr, encode(self._current_status(), SENDER, 0, 0.0))
 
 
-def serve(args: argparse.Namespace) -> int:
+def serve(config: RecorderConfig) -> int:
     # What can be refused here is, at once, not after waiting for the router.
-    if args.out_dir is None:
-        _refuse_existing(args.out)
-    busy = None if args.foxglove is None else port_problem(args.foxglove, args.foxglove_host)
+    if config.out_dir is None:
+        _refuse_existing(config.out)
+    busy = None if config.foxglove is None else \
+        port_problem(config.foxglove, config.foxglove_host)
     if busy:
-        raise UserError(f"--foxglove {args.foxglove}: {busy}")
-    # Connected first, then the file: a recorder that cannot connect leaves no file (and no
-    # run directory) behind, so the same command may simply be tried again.
-    session = open_session(bus_config(args))
-    live = None
-    try:
-        if args.out_dir is not None:
-            args.out = output_in(args.out_dir, socket.gethostname(), time.gmtime())
-        _refuse_existing(args.out)
-        live = _live_view(args)
-        recorder = Recorder(session, Keys(args.run), RecordingWriter(args.out), live,
-                            args.exit_when_done)
-        live = None  # the recorder closes it
+        raise UserError(f"--foxglove {config.foxglove}: {busy}")
+    with ExitStack() as scope:
+        # Connected first, then the file: a recorder that cannot connect leaves no file (and
+        # no run directory) behind, so the same command may simply be tried again.
+        session = scope.enter_context(open_session(config.bus.config()))
+        out = config.out if config.out_dir is None else \
+            output_in(config.out_dir, socket.gethostname(), time.gmtime())
+        _refuse_existing(out)
+        live = _live_view(config)
+        if live is not None:
+            scope.enter_context(live)
+        recorder = Recorder(session, Keys(config.bus.run), RecordingWriter(out), live,
+                            config.exit_when_done)
         stop_on_signals(recorder.stop)
         recorder.run()
-    finally:
-        if live is not None:
-            live.close()
-        session.close()
     return 0
 
 
-def _live_view(args: argparse.Namespace):
+def _live_view(config: RecorderConfig):
     """The Foxglove live view of --foxglove, or None."""
-    if args.foxglove is None:
+    if config.foxglove is None:
         return None
     from recorder.live import LiveView
 
     try:
-        live = LiveView(port=args.foxglove, host=args.foxglove_host)
+        live = LiveView(port=config.foxglove, host=config.foxglove_host)
     except RuntimeError as exc:  # foxglove's own error: the port taken meanwhile, a bad host
-        raise UserError(f"--foxglove {args.foxglove}: cannot serve the live view on "
-                        f"{args.foxglove_host}: {exc}") from None
-    log.info("Foxglove live view on ws://%s:%d", args.foxglove_host, live.port)
+        raise UserError(f"--foxglove {config.foxglove}: cannot serve the live view on "
+                        f"{config.foxglove_host}: {exc}") from None
+    log.info("Foxglove live view on ws://%s:%d", config.foxglove_host, live.port)
     return live
 
 

@@ -1,5 +1,5 @@
 import sys
 
-from fleet.cli import main
+from reservation.service import main
 
-sys.exit(main(["reservation", *sys.argv[1:]]))
+sys.exit(main())

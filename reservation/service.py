@@ -9,24 +9,20 @@ time in arrival order: the table needs no locks and a commit is atomic.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import queue
 import socket
 import threading
 import time
+from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 import zenoh
 
-from fleet.runtime.bus import (
-    Stream,
-    add_bus_arguments,
-    bus_config,
-    open_session,
-    received,
-    stop_on_signals,
-)
+from fleet.runtime.bus import Stream, open_session, received
+from fleet.runtime.lifecycle import process_main, stop_on_signals
+from fleet.runtime.process_configs import ReservationConfig
 from fleet.wire.convert import change_time
 from fleet.wire.protocol import (
     CommitRequest,
@@ -55,20 +51,16 @@ class ReservationService:
         self.rejected = 0
 
     def run(self) -> None:
-        publisher = Stream(self.session, self.keys.reservation_change, SENDER, reliable=True)
-        queryable = self.session.declare_queryable(self.keys.reservation_request("*"),
-                                                   self.inbox.put)
-        token = self.session.liveliness().declare_token(self.keys.reservation_alive)
-        log.info("serving %s at revision %d", self.keys.reservation_request("*"),
-                 self.store.revision)
-        try:
+        with Stream(self.session, self.keys.reservation_change, SENDER,
+                    reliable=True) as publisher, \
+                self.session.declare_queryable(self.keys.reservation_request("*"),
+                                               self.inbox.put), \
+                self.session.liveliness().declare_token(self.keys.reservation_alive):
+            log.info("serving %s at revision %d", self.keys.reservation_request("*"),
+                     self.store.revision)
             while (query := self.inbox.get()) is not None:
                 for change in self.answer(query):
                     publisher.put(change, change_time(change))
-        finally:
-            token.undeclare()
-            queryable.undeclare()
-            publisher.undeclare()
 
     def answer(self, query: zenoh.Query) -> list[WireChange]:
         """Reply to one query; the changes to publish."""
@@ -117,36 +109,25 @@ def not_theirs(key: str, message) -> str:
     return ""
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_bus_arguments(p)
-    p.add_argument("--journal", type=Path, default=Path("reservation.journal"),
-                   metavar="FILE",
-                   help="append-only journal (replayed on start); '{host}' in it stands for "
-                   "the host name, so a restarted container replays its own journal and a "
-                   "new one starts afresh (default reservation.journal)")
-    p.add_argument("--exit-when-done", action="store_true",
-                   help="exit once the dispatcher publishes the mission's result")
+def main(argv: Sequence[str] | None = None) -> int:
+    return process_main(ReservationConfig, serve, "python -m reservation", argv)
 
 
-def serve(args: argparse.Namespace) -> int:
-    args.journal = Path(str(args.journal).replace("{host}", socket.gethostname()))
-    args.journal.parent.mkdir(parents=True, exist_ok=True)
-    store = ReservationStore(args.journal)
-    if store.torn_bytes:
-        log.warning("cut a torn last record (%d bytes) off %s", store.torn_bytes, args.journal)
-    session = open_session(bus_config(args))
-    keys = Keys(args.run)
-    service = ReservationService(store, session, keys)
-    stop_on_signals(service.stop)
-    done = session.declare_subscriber(keys.dispatch_done, lambda sample: service.stop()
-                                      if received(sample, MissionDone, log) else None) \
-        if args.exit_when_done else None
-    try:
+def serve(config: ReservationConfig) -> int:
+    journal = Path(str(config.journal).replace("{host}", socket.gethostname()))
+    journal.parent.mkdir(parents=True, exist_ok=True)
+    with ExitStack() as scope:
+        store = ReservationStore(journal)
+        scope.callback(store.close)
+        if store.torn_bytes:
+            log.warning("cut a torn last record (%d bytes) off %s", store.torn_bytes, journal)
+        session = scope.enter_context(open_session(config.bus.config()))
+        keys = Keys(config.bus.run)
+        service = ReservationService(store, session, keys)
+        stop_on_signals(service.stop)
+        if config.exit_when_done:
+            scope.enter_context(session.declare_subscriber(
+                keys.dispatch_done,
+                lambda sample: service.stop() if received(sample, MissionDone, log) else None))
         service.run()
-    finally:
-        if done is not None:
-            done.undeclare()
-        store.close()
-        session.close()
     return 0
-

@@ -258,6 +258,13 @@ def test_only_the_dispatcher_assigns_tasks_and_only_the_operator_injects(fleet):
     assert asked == [(keys.vehicle_task(2), "task"), (keys.vehicle_inject(2), "fault")]
 
 
+def test_vehicle_asks_what_the_mission_is(fleet):
+    """A forklift takes its layout from the dispatcher's description of the run."""
+    keys = fleet.keys
+    assert ask(fleet[vehicle_sender(1)], keys.dispatch_mission, "info") == \
+        ["dispatcher answers info"]
+
+
 def test_vehicle_cannot_pose_as_another(fleet):
     """Forklift 1 serves forklift 3's task key, declares its token and answers as it: none of
     it reaches the dispatcher, while forklift 1's own queryable, token and reply do."""

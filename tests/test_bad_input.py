@@ -21,12 +21,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from zenoh_helpers import client
 
-from fleet.cli import EX_SOFTWARE, build_parser, main, subcommands
-from fleet.commands.helptext import STRATEGIES, HelpFormatter, shows_default
+from fleet.cli import build_parser, main, subcommands
 from fleet.errors import describe
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.runtime.argtypes import endpoint, finite_float, port, positive_float, sim_seconds
 from fleet.runtime.bus import free_port
+from fleet.runtime.helptext import STRATEGIES, HelpFormatter, shows_default
+from fleet.runtime.lifecycle import EX_SOFTWARE
 from fleet.runtime.local_run import ROUTER_TIMEOUT_MS, RunSpec, run_processes
 from fleet.world.layout_file import layout_source
 from fleet.world.reachability import NO_STARTS

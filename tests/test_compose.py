@@ -17,11 +17,11 @@ import zenoh
 
 from fleet.analysis.analyze import analyze
 from fleet.commands.compose import collect, compose_command, write_secrets
-from fleet.commands.run import engine_options
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.reader import read_recording
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
 from fleet.wire.topics import Keys

@@ -14,15 +14,15 @@ import pytest
 from dispatcher.claims import Roster
 from fleet.analysis.analyze import analyze
 from fleet.cli import build_parser
-from fleet.commands.run import engine_options
 from fleet.errors import UserError
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.reader import read_recording
 from fleet.runtime.access import generate_credentials, read_dictionary
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
-from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_args
+from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_config
 from fleet.wire.protocol import MissionDone
 from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout
@@ -44,7 +44,7 @@ def test_every_setting_comes_from_its_variable():
     assert config == DeployConfig(run="r", layout="small", mission="empty", strategy="greedy",
                                   vehicles="2", seed=7, clock="realtime", speed=20.0,
                                   gather_s=1.5)
-    args = service_args("dispatcher", config)
+    args = service_config("dispatcher", config).argv()
     for flag, value in (("--layout", "small"), ("--mission", "empty"), ("--strategy",
                         "greedy"), ("--vehicles", "2"), ("--seed", "7"),
                         ("--clock", "realtime"), ("--speed", "20.0"), ("--gather", "1.5"),
@@ -65,15 +65,15 @@ def test_a_bad_setting_is_an_error_naming_the_variable(env, named):
 def test_every_service_command_line_parses_as_the_cli_defines_it():
     parser = build_parser()
     for service in ("router", "reservation", "dispatcher", "vehicle", "recorder"):
-        args = parser.parse_args(service_args(service, DeployConfig()))
+        args = parser.parse_args(service_config(service, DeployConfig()).argv())
         assert args.handler is not None
-    dispatcher = parser.parse_args(service_args("dispatcher", DeployConfig()))
+    dispatcher = parser.parse_args(service_config("dispatcher", DeployConfig()).argv())
     assert dispatcher.claims and dispatcher.vehicles is None  # "auto": who claims an id
     assert dispatcher.connect == ["tcp/router:7447"] and dispatcher.exit_when_done
-    vehicle = parser.parse_args(service_args("vehicle", DeployConfig()))
+    vehicle = parser.parse_args(service_config("vehicle", DeployConfig()).argv())
     assert vehicle.id is None and vehicle.exit_when_done
     with pytest.raises(UserError, match="unknown service"):
-        service_args("forklift", DeployConfig())
+        service_config("forklift", DeployConfig())
 
 
 def test_the_roster_hands_out_the_lowest_free_id_and_the_same_one_again():
@@ -156,13 +156,13 @@ def test_a_fleet_that_claims_its_ids_runs_the_reference_mission_and_every_proces
 def test_a_secure_deployment_logs_every_service_in_with_its_own_secret():
     parser = build_parser()
     config = DeployConfig(secure=True)
-    router = parser.parse_args(service_args("router", config))
+    router = parser.parse_args(service_config("router", config).argv())
     assert str(router.users) == "/run/secrets/fleet_users" and router.acl is not None
     for service in ("reservation", "dispatcher", "recorder"):
-        args = parser.parse_args(service_args(service, config))
+        args = parser.parse_args(service_config(service, config).argv())
         assert (args.user, str(args.password_file)) == \
             (service, f"/run/secrets/fleet_{service}_password")
-    vehicle = parser.parse_args(service_args("vehicle", config))
+    vehicle = parser.parse_args(service_config("vehicle", config).argv())
     assert str(vehicle.logins) == "/run/secrets/fleet_vehicle_logins" and not vehicle.user
 
 

@@ -10,7 +10,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
 from fleet.wire.protocol import ClockTick
 from fleet.world.layout_file import load_layout
-from vehicle_agent.agent import tick_problem
+from vehicle_agent.clock import tick_problem
 
 
 def small_trip(t_start=10.0):

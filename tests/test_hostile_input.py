@@ -24,7 +24,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fleet.commands.layout import summary
-from fleet.commands.run import engine_options
 from fleet.dispatching.mlp import ClusterMLPs, WeightsError
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.seam import Task
@@ -36,6 +35,7 @@ from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajecto
 from fleet.recording.inprocess import recorded_run
 from fleet.recording.reader import RecordingError, read_recording
 from fleet.recording.writer import RecordingWriter
+from fleet.runtime.args import engine_options
 from fleet.wire.convert import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,

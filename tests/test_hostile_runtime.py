@@ -21,11 +21,11 @@ import msgpack
 import zenoh
 
 from fleet.analysis.analyze import analyze
-from fleet.commands.run import engine_options
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind, Strategy
 from fleet.recording.reader import read_recording
+from fleet.runtime.args import engine_options
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Message as WireMessage

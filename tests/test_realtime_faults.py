@@ -13,7 +13,7 @@ from bench.faults import timings
 from fleet.analysis.analyze import analyze
 from fleet.analysis.windows import SILENT
 from fleet.mission.faults import load_scenario
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
 from fleet.recording.reader import read_recording
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume, VehicleState, ZoneClosed
@@ -73,7 +73,7 @@ def test_every_kind_of_fault_on_the_real_time_clock(tmp_path: Path):
     source.write_text(SCENARIO)
     scenario = load_scenario(str(source))
     out = tmp_path / "run"
-    outcome = run_processes(RunSpec(MISSION, 4, out, "realtime", SPEED, faults=scenario,
+    outcome = run_processes(RunSpec(MISSION, 4, out, ClockMode.REALTIME, SPEED, faults=scenario,
                                     faults_source=str(source)))
     assert outcome.error == "" and outcome.done.ok
     report = analyze(read_recording(out))

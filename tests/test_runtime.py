@@ -21,21 +21,21 @@ from test_paper_missions import check_paper_mission
 from websockets.sync.client import connect
 
 from fleet.analysis.analyze import analyze
-from fleet.commands.run import engine_options
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
 from fleet.recording.inprocess import vehicle_states
 from fleet.recording.mission_record import summary_of
 from fleet.recording.reader import read_recording
+from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
-    PARENT_ENV,
     BusConfig,
     Requester,
     free_port,
     open_session,
     wait_alive,
 )
+from fleet.runtime.lifecycle import PARENT_ENV
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import (
     Progress,
@@ -211,7 +211,7 @@ def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
 def test_realtime_mission_is_safe_and_shrugs_off_hostile_messages(tmp_path):
     mission = Mission("small", MissionKind.FILL, Strategy.ANN)
     intruder = Intruder(2)
-    outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock="realtime", speed=40.0))
+    outcome = intruder.run(RunSpec(mission, 2, tmp_path, clock=ClockMode.REALTIME, speed=40.0))
     assert outcome.error == ""
     record = outcome.done.record
     recording = read_recording(tmp_path / "run.mcap")
@@ -242,7 +242,7 @@ def test_a_recorder_killed_mid_run_leaves_a_readable_recording(tmp_path):
         recorder.kill()
         statuses.undeclare()
 
-    outcome = run_processes(RunSpec(mission, 2, tmp_path, clock="realtime", speed=20.0),
+    outcome = run_processes(RunSpec(mission, 2, tmp_path, clock=ClockMode.REALTIME, speed=20.0),
                             on_ready=on_ready)
     assert "recorder exited with status -9" in outcome.error
     recording = read_recording(tmp_path / "run.mcap")

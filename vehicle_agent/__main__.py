@@ -1,5 +1,5 @@
 import sys
 
-from fleet.cli import main
+from vehicle_agent.process import main
 
-sys.exit(main(["agent", *sys.argv[1:]]))
+sys.exit(main())

@@ -1,4 +1,5 @@
-"""The vehicle agent process: one vehicle of the kind the layout names (DESIGN.md section 2).
+"""The vehicle agent: one vehicle of the kind the layout names, its own OS process, talking
+to the others only over zenoh.
 
 It declares a liveliness token, parks at its start pose (a reservation to infinity), keeps a
 mirror of the reservation service's table, and answers tasks on fleet/<run>/vehicle/<id>/task:
@@ -19,15 +20,18 @@ import math
 import queue
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import zenoh
 
 from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 from fleet.mission.seam import Task
+from fleet.mission.spec import ClockMode
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Requester, Stream, received, wait_alive
+from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
+from fleet.runtime.lifecycle import Stopped
 from fleet.vehicles.kind import Commitment
 from fleet.wire.convert import result_to_wire, step_from_wire, step_to_wire, task_from_wire
 from fleet.wire.protocol import (
@@ -45,20 +49,17 @@ from fleet.wire.protocol import (
     TaskResult,
     VehicleFault,
     VehicleStatus,
-    decode,
     encode,
 )
 from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
+from vehicle_agent.clock import SimClock, tick_problem
 
 log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5
 DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
-# No mission lasts 115 days of sim time or plays faster than 10 000x: a tick beyond is broken.
-SIM_TIME_LIMIT_S = 1e7
-MAX_SPEED = 1e4
 SYNC_TIMEOUT_S = 10.0
 # Real time: a forklift that has not heard the clock (ticks every 0.5 s) for this long
 # publishes no state: it may be down, and the dispatcher's word on where it stands is awaited.
@@ -68,59 +69,32 @@ CLOCK_SILENCE_S = 1.0
 COMMIT_SLACK_S = 0.05
 
 
-def tick_problem(tick: ClockTick, last: ClockTick | None) -> str:
-    """Why a tick cannot be the clock's next one ("" if it can)."""
-    if last is not None and tick.tick <= last.tick:
-        return f"not after tick {last.tick}"
-    if tick.mode not in ("fast", "realtime"):
-        return f"unknown mode {tick.mode!r}"
-    if last is not None and (tick.mode, tick.speed) != (last.mode, last.speed):
-        return f"mode {tick.mode} at speed {tick.speed} is not the clock's {last.mode} at " \
-            f"speed {last.speed}"
-    if not 0 <= tick.t <= SIM_TIME_LIMIT_S:
-        return f"sim time {tick.t} is outside [0, {SIM_TIME_LIMIT_S:g}] s"
-    if last is not None and tick.t < last.t:
-        return f"sim time {tick.t} is before the last tick's {last.t}"
-    if tick.mode == "realtime" and not (0 < tick.speed <= MAX_SPEED and
-                                         math.isfinite(tick.wall)):
-        return f"speed {tick.speed} or wall time {tick.wall} is not a real-time clock's"
-    return ""
+@dataclass(frozen=True)
+class _Task:
+    """A query on the task key: a task, or a halt, resume or status request."""
+
+    query: zenoh.Query
 
 
-class SimClock:
-    """This process's view of the one clock: the last tick heard."""
+@dataclass(frozen=True)
+class _Tick:
+    """A tick of the fast clock: the worker's, in turn with the tasks."""
 
-    def __init__(self) -> None:
-        self.tick: ClockTick | None = None
-
-    @property
-    def realtime(self) -> bool:
-        return self.tick is not None and self.tick.mode == "realtime"
-
-    def now(self) -> float:
-        tick = self.tick
-        if tick is None:
-            return 0.0
-        if tick.mode == "realtime":
-            return tick.t + tick.speed * (time.time() - tick.wall)
-        return tick.t
-
-    def wall_at(self, t: float) -> float | None:
-        """Real time: the Unix time at which sim time is t (None on the fast clock)."""
-        tick = self.tick
-        if tick is None or tick.mode != "realtime":
-            return None
-        return tick.wall + (t - tick.t) / tick.speed
+    tick: ClockTick
 
 
-class Stopped(Exception):
-    """SIGTERM or SIGINT: the agent leaves whatever it was doing."""
+@dataclass(frozen=True)
+class _Inject:
+    """A fault the injector sends (fleet run --faults)."""
+
+    query: zenoh.Query
 
 
-@dataclass
-class _Inbox:
-    kind: str  # "task", "tick", "inject" or "done"
-    item: object = None
+@dataclass(frozen=True)
+class _Done:
+    """A sample on dispatch/done: the mission's result, once decoded."""
+
+    sample: zenoh.Sample
 
 
 class Agent:
@@ -139,7 +113,7 @@ class Agent:
         self.clock = SimClock()
         self.reservations = ReservationClient(session, keys, Requester(session, self.sender),
                                               self.clock.now)
-        self.inbox: queue.Queue[_Inbox] = queue.Queue()
+        self.inbox: queue.Queue[_Task | _Tick | _Inject | _Done] = queue.Queue()
         self.answers: dict[str, TaskResult] = {}  # by task id: a repeated task is answered again
         self.seq = itertools.count(1)  # of task replies (each stream counts its own)
         self.stopping = threading.Event()
@@ -161,54 +135,56 @@ class Agent:
         if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
             raise RuntimeError(f"no reservation service on {self.keys.root} within "
                                f"{service_timeout_s:g} s")
-        changes = self.reservations.follow(self.mirror)
-        if self.mirror.table.reservations(self.vehicle):
-            # The table holds cells of ours: this is a restart. Where the forklift stands is
-            # what the store holds and the dispatcher says; wait for its ResumeRequest.
-            self.down = True
-            log.info("vehicle %d restarted: waiting for the dispatcher", self.vehicle)
-        else:
-            self._park()
-        self.fault_pub = Stream(self.session, self.keys.vehicle_fault(self.vehicle),
-                                self.sender, reliable=True)
-        # States are reliable too: a recording must hold every one (the recorder only
-        # enqueues, so it does not hold us up); acks pace the clock.
-        state_pub = Stream(self.session, self.keys.vehicle_state(self.vehicle), self.sender,
-                           reliable=True)
-        ack_pub = Stream(self.session, self.keys.clock_ack(self.vehicle), self.sender,
-                         reliable=True)
-        queryable = self.session.declare_queryable(
-            self.keys.vehicle_task(self.vehicle), lambda q: self.inbox.put(_Inbox("task", q)))
-        clock_sub = self.session.declare_subscriber(
-            self.keys.clock, lambda s: self._on_clock(s, state_pub, ack_pub))
-        injector = self.session.declare_queryable(
-            self.keys.vehicle_inject(self.vehicle), lambda q: self.inbox.put(_Inbox("inject", q)))
-        done_sub = self.session.declare_subscriber(
-            self.keys.dispatch_done, lambda s: self.inbox.put(_Inbox("done", s)))
-        token = self.session.liveliness().declare_token(self.keys.vehicle_alive(self.vehicle))
-        ticker = threading.Thread(target=self._realtime_states, args=(state_pub,), daemon=True)
-        ticker.start()
-        log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
-        try:
-            while True:
-                entry = self.inbox.get()
-                if entry.kind == "task":
-                    self._answer(entry.item)
-                elif entry.kind == "tick":
-                    self._fast_tick(entry.item, state_pub, ack_pub)
-                elif entry.kind == "inject":
-                    self._on_inject(entry.item)
-                elif exit_when_done and received(entry.item, MissionDone, log) is not None:
+        with ExitStack() as scope:
+            scope.enter_context(self.reservations.follow(self.mirror))
+            if self.mirror.table.reservations(self.vehicle):
+                # The table holds cells of ours: this is a restart. Where the forklift stands
+                # is what the store holds and the dispatcher says; wait for its ResumeRequest.
+                self.down = True
+                log.info("vehicle %d restarted: waiting for the dispatcher", self.vehicle)
+            else:
+                self._park()
+            self.fault_pub = scope.enter_context(Stream(
+                self.session, self.keys.vehicle_fault(self.vehicle), self.sender, reliable=True))
+            # States are reliable too: a recording must hold every one (the recorder only
+            # enqueues, so it does not hold us up); acks pace the clock.
+            state_pub = scope.enter_context(Stream(
+                self.session, self.keys.vehicle_state(self.vehicle), self.sender, reliable=True))
+            ack_pub = scope.enter_context(Stream(
+                self.session, self.keys.clock_ack(self.vehicle), self.sender, reliable=True))
+            session, keys, v, put = self.session, self.keys, self.vehicle, self.inbox.put
+            scope.enter_context(session.declare_queryable(keys.vehicle_task(v),
+                                                          lambda q: put(_Task(q))))
+            scope.enter_context(session.declare_subscriber(keys.clock, self._on_clock))
+            scope.enter_context(session.declare_queryable(keys.vehicle_inject(v),
+                                                          lambda q: put(_Inject(q))))
+            scope.enter_context(session.declare_subscriber(keys.dispatch_done,
+                                                           lambda s: put(_Done(s))))
+            scope.enter_context(session.liveliness().declare_token(keys.vehicle_alive(v)))
+            ticker = threading.Thread(target=self._realtime_states, args=(state_pub,),
+                                      daemon=True)
+            ticker.start()
+            scope.callback(ticker.join)
+            scope.callback(self.stopping.set)  # first: the state thread ends
+            log.info("vehicle %d ready at %s", self.vehicle, self.drive.pose)
+            self._work(state_pub, ack_pub, exit_when_done)
+
+    def _work(self, state_pub: Stream, ack_pub: Stream, exit_when_done: bool) -> None:
+        """The worker: everything that blocks, in arrival order."""
+        while True:
+            match self.inbox.get():
+                case _Task(query):
+                    self._answer(query)
+                case _Tick(tick):
+                    self._fast_tick(tick, state_pub, ack_pub)
+                case _Inject(query):
+                    self._on_inject(query)
+                case _Done(sample) if exit_when_done and \
+                        received(sample, MissionDone, log) is not None:
                     log.info("vehicle %d: the mission is over", self.vehicle)
                     return
-                if self.mirror.needs_resync:
-                    self.reservations.resync(self.mirror)
-        finally:
-            self.stopping.set()
-            ticker.join()
-            for declared in (token, injector, clock_sub, queryable, ack_pub, state_pub,
-                             self.fault_pub, changes, done_sub):
-                declared.undeclare()
+            if self.mirror.needs_resync:
+                self.reservations.resync(self.mirror)
 
     def stop(self) -> None:
         """Stop now, from a signal handler (it runs in the main thread, which is the worker):
@@ -230,12 +206,9 @@ class Agent:
     # -- tasks ---------------------------------------------------------------------------------
     def _answer(self, query: zenoh.Query) -> None:
         try:
-            try:
-                message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
-                                       str(query.key_expr))
-            except ProtocolError as exc:
-                query.reply_err(f"rejected: {exc}".encode())
+            message = asked(query, (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
+                            log)
+            if message is None:
                 return
             if not isinstance(message, TaskRequest):
                 if isinstance(message, HaltRequest):
@@ -369,11 +342,8 @@ class Agent:
     def _on_inject(self, query: zenoh.Query) -> None:
         """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
         try:
-            try:
-                message = self._decode(query.payload.to_bytes() if query.payload else b"",
-                                       InjectFault, str(query.key_expr))
-            except ProtocolError as exc:
-                query.reply_err(f"rejected: {exc}".encode())
+            message = asked(query, InjectFault, log)
+            if message is None:
                 return
             t = self.clock.now()
             if message.kind == "slow_planner":
@@ -400,14 +370,14 @@ class Agent:
                               self.mirror.revision, rejections or [])
 
     # -- the clock and the state stream --------------------------------------------------------
-    def _on_clock(self, sample: zenoh.Sample, state_pub, ack_pub) -> None:
+    def _on_clock(self, sample: zenoh.Sample) -> None:
         """A fast tick is the worker's, in turn with tasks; a real-time one is taken at once,
         even while the worker plans (the state thread needs to know the clock is heard)."""
         tick = received(sample, ClockTick, log)
         if tick is None:
             return
-        if tick.mode == "fast":
-            self.inbox.put(_Inbox("tick", tick))
+        if tick.mode == ClockMode.FAST:
+            self.inbox.put(_Tick(tick))
         else:
             self._take(tick)
 
@@ -435,11 +405,11 @@ class Agent:
         while not self.stopping.wait(wait):
             wait = REALTIME_STATE_PERIOD_S
             tick = self.clock.tick
-            if tick is None or tick.mode != "realtime" or self.down:
+            if tick is None or tick.mode != ClockMode.REALTIME or self.down:
                 continue
             if time.monotonic() - self.heard > CLOCK_SILENCE_S:
                 continue  # cut off or stalled: silent until the clock is heard (and says)
-            period = state_period(tick.mode, tick.speed)
+            period = state_period(ClockMode.REALTIME, tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)
             ahead = (self.drive.next_k * period - self.clock.now()) / tick.speed
             wait = min(REALTIME_STATE_PERIOD_S, max(0.0, ahead)) + DUE_MARGIN_S
@@ -459,13 +429,3 @@ class Agent:
     # -- wire ----------------------------------------------------------------------------------
     def _encode(self, message: Message, t: float) -> bytes:
         return encode(message, self.sender, next(self.seq), t)
-
-    def _decode(self, payload: bytes, expected: type | tuple[type, ...], key: str):
-        try:
-            message = decode(payload).message
-            if not isinstance(message, expected):
-                raise ProtocolError(f"a {message.TYPE} does not belong on {key}")
-        except ProtocolError as exc:
-            log.warning("rejected a message on %s: %s", key, exc)
-            raise
-        return message

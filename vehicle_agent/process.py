@@ -2,110 +2,117 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import logging
-import socket
-from pathlib import Path
+import time
+from collections.abc import Sequence
+from contextlib import suppress
 
 import zenoh
 
 from fleet.errors import UserError
+from fleet.planning.trajectory import Pose
 from fleet.runtime.access import read_dictionary
-from fleet.runtime.argtypes import layout_arg, pose, positive_float
-from fleet.runtime.bus import (
-    Requester,
-    RequestFailed,
-    add_bus_arguments,
-    bus_config,
-    open_session,
-    stop_on_signals,
-)
-from fleet.wire.protocol import ClaimReply, VehicleClaim
-from fleet.wire.topics import Keys, vehicle_sender
-from fleet.world.layout_file import load_layout
-from vehicle_agent.agent import Agent, Stopped
+from fleet.runtime.bus import Requester, RequestFailed, open_session
+from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
+from fleet.runtime.process_configs import AgentConfig
+from fleet.wire.protocol import ClaimReply, MissionInfo, ProtocolError, VehicleClaim, decode
+from fleet.wire.topics import Keys, genuine, vehicle_sender
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout, parse_layout
+from vehicle_agent.agent import Agent
 
 log = logging.getLogger("fleet.agent")
+MISSION_WAIT_S = 120.0  # for the dispatcher to say what the mission is (as it waits for us)
+ASK_TIMEOUT_S = 5.0
+ASK_PERIOD_S = 0.5
 
 
-def forklift_id(text: str) -> int | None:
-    if text == "auto":
-        return None
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is neither a number nor 'auto'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"forklift ids start at 1, not {value}")
-    return value
+def main(argv: Sequence[str] | None = None) -> int:
+    return process_main(AgentConfig, serve, "python -m vehicle_agent", argv)
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_bus_arguments(p)
-    p.add_argument("--id", type=forklift_id, required=True,
-                   help="forklift id (1, 2, ...), or 'auto': claim one from the dispatcher "
-                   "(started with --claims) under this host's name")
-    p.add_argument("--claim-as", default=socket.gethostname(),
-                   help="--id auto: the name to claim under (default: the host name, which "
-                   "a restarted container keeps, so it gets its forklift back)")
-    p.add_argument("--claim-timeout", type=positive_float, default=120.0, metavar="SECONDS",
-                   help="--id auto: seconds to keep asking for an id (default 120)")
-    p.add_argument("--layout", default="paper", type=layout_arg,
-                   help="layout name or TOML file (default paper)")
-    p.add_argument("--start", type=pose, metavar="POSE",
-                   help="start pose 'col,row,H' (default: the layout's start pose for --id)")
-    p.add_argument("--logins", type=Path, metavar="FILE",
-                   help="the forklifts' logins, a 'user:password' line each (the compose "
-                   "deployment's secret): claim an id logged in as any of them, then run as "
-                   "vehicle-ID (instead of --user and --password-file; default none)")
-    p.add_argument("--id-file", type=Path, metavar="FILE",
-                   help="write the forklift's id here once it is known (a container's health "
-                   "check reads it; default: nowhere)")
-    p.add_argument("--exit-when-done", action="store_true",
-                   help="exit once the dispatcher publishes the mission's result")
-
-
-def serve(args: argparse.Namespace) -> int:
-    layout = load_layout(args.layout)
-    keys = Keys(args.run)
-    config = bus_config(args)
-    logins = read_dictionary(args.logins) if args.logins else {}
-    vehicle = args.id
+def serve(config: AgentConfig) -> int:
+    given = load_layout(config.layout) if config.layout is not None else None  # at once
+    keys = Keys(config.bus.run)
+    bus = config.bus.config()
+    logins = read_dictionary(config.logins) if config.logins else {}
+    vehicle = config.vehicle
     if vehicle is None:  # in a session of its own, logged in as any forklift
-        claimant = config
+        claimant = bus
         if logins:
             user, password = next(iter(logins.items()))
-            claimant = dataclasses.replace(config, user=user, password=password)
-        claiming = open_session(claimant)
-        try:
-            vehicle = claim(claiming, keys, args.claim_as, args.claim_timeout)
-        finally:
-            claiming.close()
+            claimant = dataclasses.replace(bus, user=user, password=password)
+        with open_session(claimant) as claiming:
+            vehicle = claim(claiming, keys, config.claim_as, config.claim_timeout_s)
     if logins:
         user = vehicle_sender(vehicle)
         if user not in logins:
-            raise UserError(f"--logins {args.logins} has no login for {user}")
-        config = dataclasses.replace(config, user=user, password=logins[user])
-    session = open_session(config)
-    try:
-        start = args.start
+            raise UserError(f"--logins {config.logins} has no login for {user}")
+        bus = dataclasses.replace(bus, user=user, password=logins[user])
+    with open_session(bus) as session:
+        if given is not None:
+            layout, starts, whose = given, given.vehicle_starts, f"layout {given.name}"
+        else:
+            layout, starts = mission_layout(session, keys)
+            whose = "the mission"
+        start = config.start
         if start is None:
-            if not 1 <= vehicle <= len(layout.vehicle_starts):
-                raise UserError(f"forklift {vehicle}: layout {layout.name} has start poses for "
-                                f"forklifts 1 to {len(layout.vehicle_starts)}; give --start")
-            start = layout.vehicle_starts[vehicle - 1]
-        if args.id_file is not None:
-            args.id_file.parent.mkdir(parents=True, exist_ok=True)
-            args.id_file.write_text(f"{vehicle}\n")
+            if not 1 <= vehicle <= len(starts):
+                raise UserError(f"forklift {vehicle}: {whose} has start poses for forklifts 1 "
+                                f"to {len(starts)}; give --start")
+            start = starts[vehicle - 1]
+        if config.id_file is not None:
+            config.id_file.parent.mkdir(parents=True, exist_ok=True)
+            config.id_file.write_text(f"{vehicle}\n")
         agent = Agent(session, keys, vehicle, layout, start)
         stop_on_signals(agent.stop)
-        agent.run(exit_when_done=args.exit_when_done)
-    except Stopped:
-        pass  # a clean stop: the session is closed below
-    finally:
-        session.close()
+        with suppress(Stopped):  # a clean stop: the session is closed on the way out
+            agent.run(exit_when_done=config.exit_when_done)
     return 0
+
+
+def mission_layout(session: zenoh.Session, keys: Keys,
+                   timeout_s: float = MISSION_WAIT_S) -> tuple[Layout, tuple[Pose, ...]]:
+    """The layout the dispatcher's mission runs on and its forklifts' start poses, from what
+    the dispatcher says the run is (dispatch/mission, as a recorder learns it), so every
+    process plans on the very map the dispatcher decides on; asked until it answers."""
+    deadline = time.monotonic() + timeout_s
+    said = False
+    while True:
+        for reply in session.get(keys.dispatch_mission, timeout=ASK_TIMEOUT_S):
+            info = _mission_info(reply)
+            if info is not None:
+                try:
+                    starts = tuple(Pose.parse(p) for p in info.starts)
+                    return parse_layout(info.layout_toml, f"the mission's layout "
+                                        f"{info.layout}"), starts
+                except ValueError as exc:  # a LayoutError too
+                    raise UserError(f"the dispatcher's mission: {exc}") from None
+        if time.monotonic() > deadline:
+            raise UserError(f"no dispatcher said what the mission is (on "
+                            f"{keys.dispatch_mission}) within {timeout_s:g} s")
+        if not said:
+            log.info("waiting for the dispatcher to say what the mission is")
+            said = True
+        time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
+
+
+def _mission_info(reply: zenoh.Reply) -> MissionInfo | None:
+    """The run's description in a reply, believed only from the dispatcher."""
+    if reply.ok is None:
+        return None
+    try:
+        envelope = decode(reply.ok.payload.to_bytes())
+    except ProtocolError as exc:
+        log.warning("rejected a reply on %s: %s", reply.ok.key_expr, exc)
+        return None
+    if not (isinstance(envelope.message, MissionInfo) and
+            genuine(str(reply.ok.key_expr), envelope)):
+        log.warning("ignored a %s from %r on %s: only the dispatcher says what the mission "
+                    "is", envelope.message.TYPE, envelope.sender, reply.ok.key_expr)
+        return None
+    return envelope.message
 
 
 def claim(session: zenoh.Session, keys: Keys, name: str, timeout_s: float) -> int:

@@ -50,6 +50,7 @@ from fleet.analysis.windows import (
     unverified_windows,
 )
 from fleet.mission.driving import state_period
+from fleet.mission.spec import ClockMode
 from fleet.recording.format import NS
 from fleet.recording.mission_record import dispatcher_restarts, summary_of
 from fleet.recording.reader import Recording, RecordingError
@@ -88,7 +89,7 @@ def analyze(recording: Recording) -> Report:
     holes = sequence_holes(recording)
     down_halts = [m for _, m in recording.of(Halt) if not m.moving]
     # On the fast clock a forklift is stopped between two ticks: nothing of it is in flight.
-    cut_off = [h for h in holes if not h.window and info.clock == "realtime" and
+    cut_off = [h for h in holes if not h.window and info.clock == ClockMode.REALTIME and
                sent_while_down(h, down_halts, LOSS_NOTICED_WALL_S * info.speed)]
     lost = [h for h in holes if not h.window and h not in cut_off]
     unrecorded = [h for h in holes if h.window]

@@ -25,16 +25,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    return print_analysis(args.recording, args.json)
+
+
+def print_analysis(recording: Path, as_json: bool = False) -> int:
+    """Print what the recording says (as one JSON object); 1 when a verdict fails."""
     from fleet.analysis.analyze import analyze
     from fleet.commands.runs import write_summary
     from fleet.recording.reader import read_recording, recording_file
     from fleet.recording.segments import RUN_FILE
 
-    first = recording_file(args.recording)  # refuses what is no recording, saying why
-    report = analyze(read_recording(args.recording))
-    if args.recording.is_dir() or args.recording.name == RUN_FILE:  # a run's, every segment
+    first = recording_file(recording)  # refuses what is no recording, saying why
+    report = analyze(read_recording(recording))
+    if recording.is_dir() or recording.name == RUN_FILE:  # a run's, every segment
         write_summary(first.parent, report)
-    if args.json:
+    if as_json:
         print(json.dumps(report.to_json()))
     else:
         print("\n".join(report.lines()))

@@ -7,9 +7,9 @@ import json
 import platform
 import sys
 
-from fleet.commands.helptext import strategies_epilog
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
+from fleet.mission.spec import ClockMode
 from fleet.runtime.argtypes import (
     integer,
     layout_arg,
@@ -19,6 +19,7 @@ from fleet.runtime.argtypes import (
     positive_ints,
     text_file,
 )
+from fleet.runtime.helptext import strategies_epilog
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -100,7 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     faults.add_argument("--scenarios", help="comma-separated shipped scenarios (default all)")
     faults.add_argument("--json", action="store_true", help="print one JSON object keyed by "
                         "scenario (a kind's own scenario is named after the kind)")
-    faults.add_argument("--clock", choices=["fast", "realtime"], default="fast",
+    faults.add_argument("--clock", choices=[m.value for m in ClockMode], default="fast",
                         help="the runs' clock (default fast)")
     faults.add_argument("--speed", type=positive_float, default=20.0,
                         help="sim seconds per wall second with --clock realtime (default 20)")
@@ -232,7 +233,7 @@ def run_faults(args: argparse.Namespace) -> int:
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    result = faults.run(names, say, args.clock, args.speed)
+    result = faults.run(names, say, ClockMode(args.clock), args.speed)
     if not emitted_json(result, args.json):
         print(faults.table(result))
     return 0

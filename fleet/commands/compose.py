@@ -14,6 +14,7 @@ import tarfile
 import tempfile
 from pathlib import Path
 
+from fleet.commands.analyze import print_analysis
 from fleet.errors import UserError
 from fleet.recording.rundir import run_id_of
 from fleet.runtime.argtypes import positive_int, writable_dir
@@ -97,8 +98,7 @@ def run_up(args: argparse.Namespace) -> int:
     # exit when it ends, the router last, and `up` returns then.
     if subprocess.run(up).returncode not in (0, 130):
         raise UserError("docker compose up failed (its output is above)")
-    return run_analyze(argparse.Namespace(project=args.project, json=False,
-                                          dest=Path("runs/compose")))
+    return analyze_latest(args.project, Path("runs/compose"))
 
 
 def volume(project: str) -> str:
@@ -182,11 +182,14 @@ def run_collect(args: argparse.Namespace) -> int:
 
 
 def run_analyze(args: argparse.Namespace) -> int:
-    (latest,) = collect(args.project, args.dest, every=False)
-    print(f"the latest recording, copied to {latest}", file=sys.stderr)
-    from fleet.cli import main
+    return analyze_latest(args.project, args.dest, args.json)
 
-    return main(["analyze", str(latest), *(["--json"] if args.json else [])])
+
+def analyze_latest(project: str, dest: Path, as_json: bool = False) -> int:
+    """Copy the latest recording out of the volume into dest and analyse it."""
+    (latest,) = collect(project, dest, every=False)
+    print(f"the latest recording, copied to {latest}", file=sys.stderr)
+    return print_analysis(latest, as_json)
 
 
 def secrets_folder(out: Path | None) -> Path:

@@ -6,58 +6,32 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
 
-from fleet.commands.helptext import strategies_epilog
 from fleet.errors import UserError
+from fleet.runtime.args import BusFlags, add_bus_arguments
+from fleet.runtime.lifecycle import setup_logging
+from fleet.runtime.process_configs import (
+    KINDS,
+    AgentConfig,
+    DispatcherConfig,
+    ProcessConfig,
+    RecorderConfig,
+    ReservationConfig,
+    RouterConfig,
+)
 
-# What each process is for, as its user reads it (its module's docstring is its design).
-PROCESSES = {
-    "router": ("run a zenoh router for the other processes",
-               "Run a zenoh router (in Python: there is no zenohd to install). Every other "
-               "process of a run connects to it as a client. `fleet run` starts one on a "
-               "free loopback port; the compose deployment runs it as its router service."),
-    "reservation": ("run the reservation service process",
-                    "Run the reservation service: the run's authoritative space-time "
-                    "reservation table. Forklifts commit the cells their plans need through "
-                    "it; it journals every change (and replays the journal when it starts "
-                    "again) and publishes each one."),
-    "agent": ("run one forklift's agent process",
-              "Run one forklift: it plans every subtask the dispatcher hands it with the "
-              "improved hybrid A* against its copy of the reservation table, commits the "
-              "plan through the reservation service, drives it and publishes its state. "
-              "Give it its id, or `--id auto` to claim one from a dispatcher started with "
-              "--claims."),
-    "dispatcher": ("run the dispatcher process",
-                   "Run the dispatcher: it waits for the reservation service and the "
-                   "forklifts, then runs the mission, picking each forklift's next goal by "
-                   "the strategy and handing it over, and publishes the progress and, at the "
-                   "end, the mission's record."),
-    "recorder": ("record a run to an MCAP file",
-                 "Record everything a run publishes (its keys under fleet/RUN/) to an MCAP "
-                 "file that fleet analyze, fleet plot and Foxglove read; with --foxglove, "
-                 "also serve a live view of the run. Start it before the mission's other "
-                 "processes, so it hears everything."),
-}
 TABLE_CONNECT_TIMEOUT_S = 5.0
 SERVICE_WAIT_S = 3.0  # for the reservation service's token, once connected
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from dispatcher import process as dispatcher_process
-    from fleet.runtime import router
-    from fleet.runtime.bus import add_bus_arguments
-    from recorder import process as recorder_process
-    from reservation import service
-    from vehicle_agent import process as agent_process
-
-    for name, module in (("router", router), ("reservation", service),
-                         ("agent", agent_process), ("dispatcher", dispatcher_process),
-                         ("recorder", recorder_process)):
-        summary, description = PROCESSES[name]
-        p = sub.add_parser(name, help=summary, description=description,
-                           epilog=strategies_epilog() if name == "dispatcher" else None)
-        module.add_arguments(p)
-        p.set_defaults(handler=_serve(module))
+    for kind in KINDS:
+        p = sub.add_parser(kind.COMMAND, help=kind.SUMMARY, description=kind.DESCRIPTION,
+                           epilog=kind.EPILOG)
+        kind.add_arguments(p)
+        p.set_defaults(handler=lambda args, kind=kind: serve(kind.from_args(args)))
     t = sub.add_parser("table", help="show the reservation service's table, or follow it",
                        description="Load the table from a running reservation service and "
                        "print who holds how many cells; with --follow, print every change "
@@ -69,24 +43,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.set_defaults(handler=run_table)
 
 
-def _serve(module):
-    def handler(args: argparse.Namespace) -> int:
-        from fleet.runtime.bus import setup_logging
+def serve(config: ProcessConfig) -> int:
+    """Run one process of a run as this one (`fleet dispatcher`, `fleet service
+    dispatcher`): the same `serve` its package's `python -m` runs."""
+    from dispatcher import process as dispatcher_process
+    from fleet.runtime import router
+    from recorder import process as recorder_process
+    from reservation import service
+    from vehicle_agent import process as agent_process
 
-        setup_logging()
-        return module.serve(args)
-
-    return handler
+    servers: dict[type[ProcessConfig], Callable[[Any], int]] = {
+        RouterConfig: router.serve, ReservationConfig: service.serve,
+        AgentConfig: agent_process.serve, DispatcherConfig: dispatcher_process.serve,
+        RecorderConfig: recorder_process.serve}
+    setup_logging()
+    return servers[type(config)](config)
 
 
 def run_table(args: argparse.Namespace) -> int:
-    from fleet.runtime.bus import Requester, bus_config, open_session, wait_alive
+    from fleet.runtime.bus import Requester, open_session, wait_alive
     from fleet.wire.topics import Keys
     from reservation.client import ReservationClient
     from reservation.mirror import TableMirror
 
     keys = Keys(args.run)
-    config = bus_config(args)
+    config = BusFlags.from_args(args).config()
     session = open_session(config, say=lambda line: print(f"fleet table: {line}",
                                                           file=sys.stderr))
     try:

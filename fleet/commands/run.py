@@ -13,29 +13,19 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fleet.commands.helptext import strategies_epilog
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
-from fleet.mission.engine import EngineOptions
 from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
-from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
-from fleet.runtime.argtypes import (
-    integer,
-    layout_arg,
-    port,
-    port_problem,
-    positive_float,
-    positive_int,
-    scenario_arg,
-    text_file,
-    writable_dir,
-)
+from fleet.runtime.args import add_mission_args, engine_options, mission_from_args
+from fleet.runtime.argtypes import port, port_problem, positive_float, scenario_arg, writable_dir
 from fleet.runtime.bus import free_port
+from fleet.runtime.helptext import strategies_epilog
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
@@ -53,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "improved hybrid A* against the shared reservation table.",
                        epilog=strategies_epilog())
     add_mission_args(p)
-    p.add_argument("--clock", choices=["fast", "realtime"], default="fast",
+    p.add_argument("--clock", choices=[m.value for m in ClockMode], default="fast",
                    help="fast: discrete events, deterministic (default); realtime: sim time "
                    "= speed x wall time")
     p.add_argument("--speed", type=positive_float, default=1.0,
@@ -85,42 +75,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true",
                    help="no progress; print the summary as one JSON object (docs/metrics.md)")
     p.set_defaults(handler=run)
-
-
-def add_mission_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--layout", default="paper", type=layout_arg,
-                   help="layout name or TOML file (default paper)")
-    p.add_argument("--mission", choices=[k.value for k in MissionKind], default="fill",
-                   help="fill: goods from the stations to the stacks, in each cluster's fill "
-                   "order; empty: from the stacks back to the stations, in reverse (default "
-                   "fill)")
-    p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
-                   help="how the dispatcher picks each forklift's next goal (default ann; "
-                   "each is described below)")
-    p.add_argument("--vehicles", type=positive_int, default=None,
-                   help="fleet size (default: every start pose of the layout)")
-    p.add_argument("--seed", type=integer, default=0,
-                   help="the mission's seed, kept in its record (the dispatching itself "
-                   "draws no random numbers: a mission gives the same record every time; "
-                   "default 0)")
-    p.add_argument("--weights", type=text_file, metavar="FILE",
-                   help="MLP weights for --strategy ann (default: the weights shipped for the "
-                   "layout)")
-
-
-def mission_from_args(args: argparse.Namespace) -> Mission:
-    return Mission(layout=args.layout, kind=MissionKind(args.mission),
-                   strategy=Strategy(args.strategy), vehicles=args.vehicles, seed=args.seed)
-
-
-def engine_options(mission: Mission, layout: Layout, weights: Path | None,
-                   progress=None) -> EngineOptions:
-    mlp = None
-    if mission.strategy is Strategy.ANN:
-        from fleet.dispatching.scorer import load_scorer
-
-        mlp = load_scorer(layout, weights)
-    return EngineOptions(mlp=mlp, progress=progress)
 
 
 SUMMARY_WIDTH = 80  # the summary fits a terminal of 80 columns
@@ -199,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--force replaces the directory given with --out DIR; without --out "
                         "a run gets a new directory of its own and replaces nothing")
     process_only = [flag for flag, given in (
-        ("--clock realtime", args.clock != "fast"), ("--port", args.port is not None),
+        ("--clock realtime", args.clock != ClockMode.FAST), ("--port", args.port is not None),
         ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
     if args.inprocess and process_only:
         raise UserError(f"--inprocess runs the fast clock in this one process, without a "
@@ -288,7 +242,7 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
         if args.foxglove is not None:
             print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
                   file=sys.stderr)
-    spec = RunSpec(mission, n, out, args.clock, args.speed, args.weights, port,
+    spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
                    faults_source=args.faults or "", secure=args.secure)
     forklifts = f"{n} forklift agent{'s' if n > 1 else ''}"

@@ -11,6 +11,7 @@ import socket
 import sys
 from pathlib import Path
 
+from fleet.commands.processes import serve
 from fleet.runtime.deploy import (
     ACL_FILE,
     MAX_VEHICLES,
@@ -20,7 +21,7 @@ from fleet.runtime.deploy import (
     VEHICLE_ID_FILE,
     config_from_env,
     password_file,
-    service_args,
+    service_config,
 )
 
 HEALTH_TIMEOUT_S = 3.0
@@ -43,9 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_service(args: argparse.Namespace) -> int:
     config = config_from_env(os.environ)
-    argv = service_args(args.name, config)
+    process = service_config(args.name, config)
     if args.print:
-        print(shlex.join(["fleet", *argv]))
+        print(shlex.join(["fleet", *process.argv()]))
         return 0
     if args.health:
         return 0 if healthy(args.name, config) else 1
@@ -57,9 +58,7 @@ def run_service(args: argparse.Namespace) -> int:
 
         Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
         Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
-    from fleet.cli import main
-
-    return main(argv)
+    return serve(process)
 
 
 def healthy(name: str, config) -> bool:

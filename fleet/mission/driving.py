@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from fleet.mission.spec import ClockMode
 from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.vehicles.kind import Placement
 from fleet.wire.protocol import VehicleState
@@ -26,8 +27,9 @@ REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (1
 
 def state_period(mode: str, speed: float) -> float:
     """Sim seconds between two states: the fast grid, or 10 Hz of wall time but never coarser
-    than the fast grid, so the recording's safety check sees as much at any speed."""
-    if mode != "realtime":
+    than the fast grid, so the recording's safety check sees as much at any speed. `mode` is a
+    ClockMode, or a recording's clock ("inprocess" runs on the fast grid)."""
+    if mode != ClockMode.REALTIME:
         return FAST_STATE_PERIOD_S
     return min(speed * REALTIME_STATE_PERIOD_S, FAST_STATE_PERIOD_S)
 

@@ -69,6 +69,9 @@ KINDS: dict[FaultKind, KindSpec] = {
 }
 VEHICLE_KINDS = {k for k, spec in KINDS.items() if "vehicle" in spec.required}
 DEFAULT_DOWNTIME_S = 1.0
+# A fault the dispatcher has not seen this many wall seconds after it happened was not
+# detected: the run fails (and `fleet bench faults` counts no sighting later than that).
+DETECT_TIMEOUT_S = 20.0
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,10 @@
-"""Missions as data: what the fleet must do, on which layout, with which strategy and seed."""
+"""Missions as data: what the fleet must do, on which layout, with which strategy and seed;
+and the clock a run of them keeps."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import Enum, StrEnum
 
 from fleet.planning.trajectory import Pose
 
@@ -21,6 +22,13 @@ class Strategy(Enum):
     BALANCE = "balance"  # argmax G_d
     COMPREHENSIVE = "comprehensive"  # argmax S_d,0
     ANN = "ann"  # argmax S_d (Equation 9): comprehensive corrected by the MLP
+
+
+class ClockMode(StrEnum):
+    """How sim time runs in a run of processes; the wire and the recordings carry the value."""
+
+    FAST = "fast"  # discrete events: the clock jumps to each decision, deterministic
+    REALTIME = "realtime"  # sim time = speed x wall time since the start
 
 
 @dataclass(frozen=True)

@@ -166,7 +166,8 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (PUBLISH, [f"{root}/vehicle/{v}/**", f"{root}/clock/ack/{v}"]),
             (TOKEN, [f"{root}/vehicle/{v}/alive"]),
             (SERVE, [f"{root}/vehicle/{v}/task", f"{root}/vehicle/{v}/inject"]),
-            (ASK, [f"{root}/reservation/request/{vehicle_sender(v)}", f"{root}/dispatch/claim"]),
+            (ASK, [f"{root}/reservation/request/{vehicle_sender(v)}", f"{root}/dispatch/claim",
+                   f"{root}/dispatch/mission"]),
             (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change",
                          f"{root}/dispatch/done"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/{v}/alive"])]

@@ -5,27 +5,20 @@ directly."""
 
 from __future__ import annotations
 
-import argparse
-import faulthandler
 import itertools
 import json
 import logging
-import os
 import re
-import signal
 import socket
-import sys
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import zenoh
 
 from fleet.errors import UserError
 from fleet.runtime.access import configure_client, configure_router
-from fleet.runtime.argtypes import endpoint, positive_float
 from fleet.wire.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
 from fleet.wire.topics import Keys
 
@@ -34,7 +27,6 @@ DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 # mission result): the publisher waits rather than drop. Their receivers only enqueue, so
 # they drain. State streams keep zenoh's default (drop), so a stalled reader stalls no one.
 RELIABLE = zenoh.CongestionControl.BLOCK
-CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
 log = logging.getLogger("fleet.runtime.bus")
 
 
@@ -131,6 +123,12 @@ class Stream:
     def undeclare(self) -> None:
         self.publisher.undeclare()
 
+    def __enter__(self) -> Stream:
+        return self
+
+    def __exit__(self, *_) -> None:
+        self.undeclare()
+
 
 class RequestFailed(RuntimeError):
     """No valid answer came back (nobody answered in time, or the answer was malformed)."""
@@ -190,14 +188,29 @@ def received(sample: zenoh.Sample, expected: type[Message] | tuple[type[Message]
     """The message in a sample if it is valid and of an expected type; otherwise None, with
     the reason logged (a malformed message never takes a process down)."""
     try:
-        message = decode(sample.payload.to_bytes()).message
+        return _expected(sample.payload.to_bytes(), expected)
     except ProtocolError as exc:
         log.warning("rejected a message on %s: %s", sample.key_expr, exc)
         return None
-    if not isinstance(message, expected):
-        log.warning("rejected a message on %s: a %s does not belong here", sample.key_expr,
-                    message.TYPE)
+
+
+def asked(query: zenoh.Query, expected: type[Message] | tuple[type[Message], ...],
+          log: logging.Logger) -> Message | None:
+    """The message a query carries, as `received` has it; the asker is told why not in an
+    error reply."""
+    try:
+        return _expected(query.payload.to_bytes() if query.payload is not None else b"",
+                         expected)
+    except ProtocolError as exc:
+        log.warning("rejected a message on %s: %s", query.key_expr, exc)
+        query.reply_err(f"rejected: {exc}".encode())
         return None
+
+
+def _expected(payload: bytes, expected: type[Message] | tuple[type[Message], ...]) -> Message:
+    message = decode(payload).message
+    if not isinstance(message, expected):
+        raise ProtocolError(f"a {message.TYPE} does not belong here")
     return message
 
 
@@ -243,80 +256,3 @@ def wait_gone(session: zenoh.Session, key: str, timeout: float) -> bool:
         if time.monotonic() > deadline:
             return False
         time.sleep(0.05)  # paces the poll
-
-
-def add_bus_arguments(p: argparse.ArgumentParser,
-                      connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
-    """The flags every process shares: which run, and how to reach the others."""
-    p.add_argument("--run", default="default",
-                   help="run name: the run's keys live under fleet/RUN/ (default default)")
-    p.add_argument("--mode", choices=["client", "peer"], default="client",
-                   help="zenoh mode (default client of a router)")
-    p.add_argument("--connect", action="append", default=[], type=endpoint,
-                   metavar="ENDPOINT", help=f"zenoh endpoint to connect to, e.g. "
-                   f"tcp/HOST:PORT (default {DEFAULT_ROUTER}; repeatable)")
-    p.add_argument("--listen", action="append", default=[], type=endpoint,
-                   metavar="ENDPOINT", help="zenoh endpoint to listen on (default none; "
-                   "repeatable)")
-    p.add_argument("--connect-timeout", type=positive_float, default=connect_timeout_s,
-                   metavar="SECONDS", help=f"give up when no router answers at --connect "
-                   f"within this many seconds (default {connect_timeout_s:g})")
-    add_login_arguments(p)
-
-
-def add_login_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--user", default="", help="log in to a router that runs access control "
-                   "as this principal (fleet run --secure makes one per process; default: "
-                   "no login)")
-    p.add_argument("--password-file", type=Path, metavar="FILE",
-                   help="the password of --user, in a file (never on the command line; "
-                   "default none)")
-
-
-def login_of(args: argparse.Namespace) -> tuple[str, str]:
-    """The (user, password) the flags name; a user without its password is refused."""
-    if not args.user:
-        return "", ""
-    if args.password_file is None:
-        raise UserError(f"--user {args.user} needs --password-file")
-    try:
-        return args.user, args.password_file.read_text().strip()
-    except OSError as exc:
-        raise UserError(f"--password-file {args.password_file}: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise UserError(f"--password-file {args.password_file}: not UTF-8 text") from None
-
-
-def bus_config(args: argparse.Namespace) -> BusConfig:
-    connect = tuple(args.connect) or (() if args.listen else BusConfig().connect)
-    user, password = login_of(args)
-    timeout_ms = int(args.connect_timeout * 1000)
-    return BusConfig(args.mode, connect, tuple(args.listen), connect_timeout_ms=timeout_ms,
-                     user=user, password=password)
-
-
-def setup_logging() -> None:
-    """Processes log to stderr with a wall-clock timestamp (fleet run keeps one file each);
-    SIGUSR1 writes every thread's stack there (what a stuck process is doing)."""
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
-                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
-
-
-PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children
-
-
-def stop_on_signals(stop: Callable[[], None]) -> None:
-    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
-    of `fleet run` also stops when that parent is gone (killed outright, it could not stop
-    its children), so no orphan keeps running."""
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop())
-    parent = os.environ.get(PARENT_ENV)
-    if parent and parent.isdigit():
-        def watch() -> None:
-            while os.getppid() == int(parent):
-                time.sleep(1.0)  # polling the parent: there is no event to wait on
-            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
-
-        threading.Thread(target=watch, daemon=True, name="parent-watch").start()

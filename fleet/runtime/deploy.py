@@ -1,7 +1,7 @@
 """The compose deployment's configuration (docs/deployment.md): every setting comes from a
-FLEET_* environment variable, with its default here and nowhere else, and `service_args`
-turns it into the command line of each service's process. Pure: the environment is passed
-in, nothing is read or started here."""
+FLEET_* environment variable, with its default here and nowhere else, and `service_config`
+turns it into the config of each service's process (its command line: `argv()`). Pure: the
+environment is passed in, nothing is read or started here."""
 
 from __future__ import annotations
 
@@ -9,11 +9,20 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 
 from fleet.errors import UserError
-from fleet.mission.spec import MissionKind, Strategy
+from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
 from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
+from fleet.runtime.args import BusFlags
+from fleet.runtime.process_configs import (
+    AgentConfig,
+    DispatcherConfig,
+    ProcessConfig,
+    RecorderConfig,
+    ReservationConfig,
+    RouterConfig,
+)
 from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
 
 SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
@@ -30,7 +39,7 @@ class DeployConfig:
     strategy: str = "ann"
     vehicles: str = "auto"  # "auto": as many as claim an id (docker compose --scale vehicle=N)
     seed: int = 0
-    clock: str = "fast"
+    clock: str = "fast"  # a ClockMode's value
     speed: float = 10.0  # sim seconds per wall second, real-time clock
     gather_s: float = 5.0  # "auto" fleets: start once no forklift has claimed for this long
     router: str = "router"  # the router's host name (its compose service)
@@ -91,7 +100,7 @@ def _parse(name: str, text: str, default: object) -> object:
 
 def _check(config: DeployConfig) -> None:
     choices = {"mission": [k.value for k in MissionKind],
-               "strategy": [s.value for s in Strategy], "clock": ["fast", "realtime"]}
+               "strategy": [s.value for s in Strategy], "clock": [m.value for m in ClockMode]}
     for name, allowed in choices.items():
         if getattr(config, name) not in allowed:
             raise UserError(f"{ENV[name]}={getattr(config, name)!r}: one of "
@@ -101,45 +110,46 @@ def _check(config: DeployConfig) -> None:
         raise UserError(f"FLEET_VEHICLES={config.vehicles!r}: 'auto' or a fleet size")
 
 
-def service_args(service: str, config: DeployConfig) -> list[str]:
-    """The `fleet` command line of one service's process."""
+def service_config(service: str, config: DeployConfig) -> ProcessConfig:
+    """The config of one service's process."""
     if service not in SERVICES:
         raise UserError(f"unknown service {service!r}: one of {', '.join(SERVICES)}")
     if service == "router":
-        args = ["router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--exit-when-idle", "5"]
-        if config.secure:
-            args += ["--acl", ACL_FILE, "--users", str(SECRETS / "fleet_users")]
-        return args
-    common = ["--run", config.run, "--connect", config.endpoint]
+        secure = {"acl": Path(ACL_FILE), "users": Path(SECRETS / "fleet_users")} \
+            if config.secure else {}
+        return RouterConfig((f"tcp/0.0.0.0:{ROUTER_PORT}",), exit_when_idle_s=5.0, **secure)
+    if service == "vehicle":  # logged in as any forklift, then as the one it claimed
+        logins = Path(SECRETS / "fleet_vehicle_logins") if config.secure else None
+        return AgentConfig(_bus(config, ""), None, logins=logins, id_file=Path(VEHICLE_ID_FILE),
+                           exit_when_done=True)
     if service == "reservation":
-        return ["reservation", *common, *login(config, "reservation"), "--journal", JOURNAL,
-                "--exit-when-done"]
+        return ReservationConfig(_bus(config, service), Path(JOURNAL), exit_when_done=True)
     if service == "recorder":
-        return ["recorder", *common, *login(config, "recorder"), "--out-dir", RECORDINGS,
-                "--exit-when-done", "--foxglove", str(FOXGLOVE_PORT), "--foxglove-host",
-                "0.0.0.0"]
-    if service == "vehicle":
-        logins = ["--logins", str(SECRETS / "fleet_vehicle_logins")] if config.secure else []
-        return ["agent", *common, *logins, "--id", "auto", "--layout",
-                config.layout, "--id-file", VEHICLE_ID_FILE, "--exit-when-done"]
-    fleet = [] if config.vehicles == "auto" else ["--vehicles", config.vehicles]
-    return ["dispatcher", *common, *login(config, "dispatcher"), "--layout", config.layout,
-            "--mission", config.mission, "--strategy", config.strategy, *fleet,
-            "--seed", str(config.seed), "--clock", config.clock, "--speed", repr(config.speed),
-            "--claims", "--gather", repr(config.gather_s), "--restart-marker", RESTART_MARKER,
-            "--recorded", "--exit-when-done",
-            "--command", f"docker compose (FLEET_LAYOUT={config.layout} "
-            f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})"]
+        return RecorderConfig(_bus(config, service), out_dir=Path(RECORDINGS),
+                              exit_when_done=True, foxglove=FOXGLOVE_PORT,
+                              foxglove_host="0.0.0.0")
+    fleet = None if config.vehicles == "auto" else int(config.vehicles)
+    mission = Mission(config.layout, MissionKind(config.mission), Strategy(config.strategy),
+                      fleet, config.seed)
+    return DispatcherConfig(
+        _bus(config, service), mission, clock=ClockMode(config.clock), speed=config.speed,
+        command=f"docker compose (FLEET_LAYOUT={config.layout} "
+        f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})", recorded=True,
+        exit_when_done=True, claims=True, gather_s=config.gather_s,
+        restart_marker=Path(RESTART_MARKER))
+
+
+def _bus(config: DeployConfig, principal: str) -> BusFlags:
+    """How a service reaches the router: by its host name, logged in as `principal` in a
+    secure deployment ("": no login of its own)."""
+    if not (config.secure and principal):
+        return BusFlags(config.run, connect=(config.endpoint,))
+    return BusFlags(config.run, connect=(config.endpoint,), user=principal,
+                    password_file=Path(password_file(principal)))
 
 
 def password_file(principal: str) -> PurePosixPath:
     return SECRETS / f"fleet_{principal}_password"
-
-
-def login(config: DeployConfig, principal: str) -> list[str]:
-    if not config.secure:
-        return []
-    return ["--user", principal, "--password-file", str(password_file(principal))]
 
 
 def secret_files(credentials: Credentials) -> dict[str, str]:

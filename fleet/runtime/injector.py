@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from fleet.mission.faults import Fault, FaultKind, Scenario
+from fleet.mission.spec import ClockMode
 from fleet.runtime.bus import Requester, RequestFailed, Stream, received, wait_gone
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.linkproxy import LinkProxy
@@ -109,7 +110,7 @@ class Injector:
                 last = tick
             if last is None:
                 continue
-            fast = last.mode == "fast"
+            fast = last.mode == ClockMode.FAST
             now = last.t if fast else last.t + last.speed * (time.time() - last.wall)
             while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
@@ -128,7 +129,7 @@ class Injector:
 
     def _until_due(self, last: ClockTick | None) -> float | None:
         """Wall seconds to the next action on a real-time clock (None: wait for a tick)."""
-        if last is None or last.mode == "fast" or not self.actions:
+        if last is None or last.mode == ClockMode.FAST or not self.actions:
             return None
         due = last.wall + (self.actions[0][0].t - last.t) / last.speed
         return max(0.0, due - time.time())

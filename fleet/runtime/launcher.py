@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from fleet.runtime.bus import PARENT_ENV
+from fleet.runtime.lifecycle import PARENT_ENV
 
 STOP_TIMEOUT_S = 10.0
 STOPPED_LAST = ("recorder", "router")  # in this order, after every other child

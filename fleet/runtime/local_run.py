@@ -18,7 +18,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.mission.faults import FaultKind, Scenario
-from fleet.mission.spec import Mission
+from fleet.mission.spec import ClockMode, Mission
 from fleet.recording.rundir import fresh
 from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
@@ -28,6 +28,7 @@ from fleet.runtime.access import (
     write_dictionary,
     write_private,
 )
+from fleet.runtime.args import BusFlags
 from fleet.runtime.bus import (
     SLOW_CONNECT_S,
     BusConfig,
@@ -39,6 +40,14 @@ from fleet.runtime.bus import (
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
+from fleet.runtime.process_configs import (
+    AgentConfig,
+    DispatcherConfig,
+    ProcessConfig,
+    RecorderConfig,
+    ReservationConfig,
+    RouterConfig,
+)
 from fleet.wire.protocol import MissionDone, Progress, ProtocolError, decode
 from fleet.wire.topics import (
     DISPATCHER,
@@ -62,7 +71,7 @@ class RunSpec:
     vehicles: int
     run_dir: Path  # the recording, logs/ and the reservation journal: a new directory, or
     # one claimed for this run a moment ago (fleet.recording.rundir.claim); anything else is refused
-    clock: str = "fast"
+    clock: ClockMode = ClockMode.FAST
     speed: float = 1.0
     weights: Path | None = None
     port: int | None = None  # router port on 127.0.0.1 (default: a free one)
@@ -93,20 +102,12 @@ class RunFailed(RuntimeError):
     pass
 
 
-def dispatcher_args(spec: RunSpec) -> list[str]:
-    m = spec.mission
-    args = ["--layout", m.layout, "--mission", m.kind.value, "--strategy", m.strategy.value,
-            "--vehicles", str(spec.vehicles), "--seed", str(m.seed), "--clock", spec.clock,
-            "--speed", repr(spec.speed)]
-    if spec.command:
-        args += ["--command", spec.command]
-    if spec.weights is not None:
-        args += ["--weights", str(spec.weights)]
-    if spec.faults is not None:
-        args += ["--faults", spec.faults_source]
-    if spec.record:
-        args.append("--recorded")
-    return args
+def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> DispatcherConfig:
+    """The dispatcher of the run (`recover`: a restarted one picks the mission up)."""
+    return DispatcherConfig(bus, dataclasses.replace(spec.mission, vehicles=spec.vehicles),
+                            spec.weights, spec.clock, spec.speed, command=spec.command,
+                            faults=spec.faults_source if spec.faults is not None else None,
+                            recorded=spec.record, recover=recover)
 
 
 class Secrets:
@@ -124,11 +125,8 @@ class Secrets:
         for name, login in self.logins.items():
             write_private(folder / f"{name}.password", login.password)
 
-    def args(self, principal: str) -> list[str]:
-        return ["--user", principal, "--password-file", str(self.folder / f"{principal}.password")]
-
-    def router_args(self) -> list[str]:
-        return ["--acl", str(self.acl), "--users", str(self.users)]
+    def password_file(self, principal: str) -> Path:
+        return self.folder / f"{principal}.password"
 
 
 def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None = None,
@@ -151,37 +149,39 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     # A forklift whose link a fault cuts reaches the router through its own forwarder.
     proxies = {f.vehicle: LinkProxy("127.0.0.1", port) for f in
                (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
-    common = ["--run", spec.run, "--connect", endpoint]
-    live = ["--foxglove", str(spec.foxglove)] if spec.foxglove is not None else []
     secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles) \
         if spec.secure else None
 
-    def login(principal: str) -> list[str]:
-        return secrets.args(principal) if secrets else []
+    def bus(principal: str, connect: str = endpoint) -> BusFlags:
+        """How a process reaches the router, logged in as `principal` in a secure run."""
+        if secrets is None:
+            return BusFlags(spec.run, connect=(connect,))
+        return BusFlags(spec.run, connect=(connect,), user=principal,
+                        password_file=secrets.password_file(principal))
+
+    def config_of(kind: str, again: bool) -> ProcessConfig:
+        if kind == "recorder":  # run.mcap, then run-2.mcap after a restart
+            return RecorderConfig(bus(RECORDER), next_segment(spec.run_dir),
+                                  foxglove=spec.foxglove)
+        if kind == "reservation":
+            return ReservationConfig(bus(RESERVATION), journal)
+        if kind.startswith("agent-"):
+            v = int(kind.split("-")[1])
+            connect = f"tcp/127.0.0.1:{proxies[v].port}" if v in proxies else endpoint
+            return AgentConfig(bus(vehicle_sender(v), connect), v)
+        if kind == "dispatcher":  # a restart picks the mission up where it was
+            return dispatcher_config(spec, bus(DISPATCHER), recover=again)
+        raise RunFailed(f"cannot restart a {kind} process")
 
     def args_of(kind: str, again: bool = False) -> list[str]:
         """How to start each kind of process (`again`: after a fault killed it)."""
-        if kind == "recorder":
-            out = next_segment(spec.run_dir)  # run.mcap, then run-2.mcap after a restart
-            return ["recorder", *common, *login(RECORDER), "--out", str(out), *live,
-                    *spec.extra.get("recorder", [])]
-        if kind == "reservation":
-            return ["reservation", *common, *login(RESERVATION), "--journal", str(journal),
-                    *spec.extra.get("reservation", [])]
-        if kind.startswith("agent-"):
-            v = int(kind.split("-")[1])
-            connect = ["--connect", f"tcp/127.0.0.1:{proxies[v].port}"] if v in proxies \
-                else ["--connect", endpoint]
-            return ["agent", "--run", spec.run, *connect, *login(vehicle_sender(v)), "--id",
-                    str(v), "--layout", spec.mission.layout, *spec.extra.get("agent", [])]
-        if kind == "dispatcher":  # a restart picks the mission up where it was
-            return ["dispatcher", *common, *login(DISPATCHER), *dispatcher_args(spec),
-                    *(["--recover"] if again else []), *spec.extra.get("dispatcher", [])]
-        raise RunFailed(f"cannot restart a {kind} process")
+        config = config_of(kind, again)
+        return [*config.argv(), *spec.extra.get(config.COMMAND, [])]
 
     try:
-        router = launcher.start("router", ["router", "--listen", endpoint,
-                                           *(secrets.router_args() if secrets else [])])
+        router = launcher.start("router", RouterConfig(
+            (endpoint,), acl=secrets.acl if secrets else None,
+            users=secrets.users if secrets else None).argv())
         for proxy in proxies.values():
             proxy.start()
         operator = secrets.logins[OPERATOR] if secrets else None

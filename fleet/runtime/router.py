@@ -4,41 +4,20 @@ compose deployment runs it as the `router` service."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import threading
 import time
-from pathlib import Path
 
 import zenoh
 
 from fleet.errors import UserError
-from fleet.runtime.argtypes import endpoint, positive_float
-from fleet.runtime.bus import BusConfig, open_session, stop_on_signals
+from fleet.runtime.bus import BusConfig, open_session
+from fleet.runtime.lifecycle import stop_on_signals
+from fleet.runtime.process_configs import RouterConfig
 
 log = logging.getLogger("fleet.runtime.router")
-DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 LAST_OUT_S = 5.0  # how long a stopping router waits for its clients to leave
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--listen", action="append", default=[], type=endpoint, metavar="ENDPOINT",
-                   help=f"endpoint to listen on (default {DEFAULT_LISTEN}; repeatable)")
-    p.add_argument("--connect", action="append", default=[], type=endpoint, metavar="ENDPOINT",
-                   help="another router to connect to (default none; repeatable)")
-    p.add_argument("--acl", type=Path, metavar="FILE",
-                   help="enforce this access control (a JSON file: the access_control "
-                   "section fleet/runtime/access.py writes); needs --users (default: none, "
-                   "everyone "
-                   "may do everything)")
-    p.add_argument("--users", type=Path, metavar="FILE",
-                   help="authenticate every session against this user:password dictionary "
-                   "(default: no logins)")
-    p.add_argument("--exit-when-idle", type=positive_float, metavar="SECONDS",
-                   help="exit once sessions have come and every one has gone for this long "
-                   "(a deployment whose processes exit when the mission ends; default: run "
-                   "until stopped)")
 
 
 class Clients:
@@ -84,33 +63,29 @@ class Clients:
             self.changed.notify_all()
 
 
-def serve(args: argparse.Namespace) -> int:
-    listen = tuple(args.listen) or (DEFAULT_LISTEN,)
+def serve(config: RouterConfig) -> int:
     stop = threading.Event()
     stop_on_signals(stop.set)
     acl = None
-    if args.acl is not None or args.users is not None:
-        if args.acl is None or args.users is None:
+    if config.acl is not None or config.users is not None:
+        if config.acl is None or config.users is None:
             raise UserError("--acl and --users go together: access control names the users "
                             "the dictionary authenticates")
         try:
-            acl = json.loads(args.acl.read_text())
+            acl = json.loads(config.acl.read_text())
         except (OSError, ValueError) as exc:
-            raise UserError(f"--acl {args.acl}: {exc}") from None
-    session = open_session(BusConfig("router", tuple(args.connect), listen, acl=acl,
-                                     users_file=str(args.users or "")))
-    try:
+            raise UserError(f"--acl {config.acl}: {exc}") from None
+    with open_session(BusConfig("router", config.connect, config.endpoints, acl=acl,
+                                users_file=str(config.users or ""))) as session:
         clients = Clients(session)
-        log.info("routing on %s", ", ".join(listen))
-        if args.exit_when_idle is not None:
-            clients.wait_idle(args.exit_when_idle, stop)
-        stop.wait()
-        # Told to stop, the router goes last: a process closing its session after its router
-        # is gone can hang, and when `fleet run` dies every child stops at once.
-        if not clients.none.wait(LAST_OUT_S):
-            log.warning("stopping with %d sessions still connected", len(clients.connected))
-        clients.listener.undeclare()
-    finally:
-        session.close()
+        with clients.listener:
+            log.info("routing on %s", ", ".join(config.endpoints))
+            if config.exit_when_idle_s is not None:
+                clients.wait_idle(config.exit_when_idle_s, stop)
+            stop.wait()
+            # Told to stop, the router goes last: a process closing its session after its
+            # router is gone can hang, and when `fleet run` dies every child stops at once.
+            if not clients.none.wait(LAST_OUT_S):
+                log.warning("stopping with %d sessions still connected",
+                            len(clients.connected))
     return 0
-

@@ -1,4 +1,5 @@
-"""How `--help` reads: every option with its default, descriptions wrapped by paragraph, and
+"""How `--help` reads, in the `fleet` command line and in every process that starts itself
+(`python -m dispatcher`): every option with its default, descriptions wrapped by paragraph, and
 the texts that several commands share (the strategies)."""
 
 from __future__ import annotations

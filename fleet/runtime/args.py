@@ -1,0 +1,152 @@
+"""The flag groups several commands share: how a process reaches the bus (every process and
+`fleet table`), and which mission to run with which weights (`fleet run` and the dispatcher).
+Each group parses into a frozen value and renders back into the flags that give it, so whoever
+starts a process (`fleet run`, the compose deployment) writes its command line from the same
+value."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleet.errors import UserError
+from fleet.mission.engine import EngineOptions
+from fleet.mission.spec import Mission, MissionKind, Strategy
+from fleet.runtime.argtypes import (
+    endpoint,
+    integer,
+    layout_arg,
+    positive_float,
+    positive_int,
+    text_file,
+)
+from fleet.runtime.bus import DEFAULT_ROUTER, BusConfig
+from fleet.world.layout import Layout
+
+CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
+
+
+def add_bus_arguments(p: argparse.ArgumentParser,
+                      connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """The flags every process shares: which run, and how to reach the others."""
+    p.add_argument("--run", default="default",
+                   help="run name: the run's keys live under fleet/RUN/ (default default)")
+    p.add_argument("--mode", choices=["client", "peer"], default="client",
+                   help="zenoh mode (default client of a router)")
+    p.add_argument("--connect", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help=f"zenoh endpoint to connect to, e.g. "
+                   f"tcp/HOST:PORT (default {DEFAULT_ROUTER}; repeatable)")
+    p.add_argument("--listen", action="append", default=[], type=endpoint,
+                   metavar="ENDPOINT", help="zenoh endpoint to listen on (default none; "
+                   "repeatable)")
+    p.add_argument("--connect-timeout", type=positive_float, default=connect_timeout_s,
+                   metavar="SECONDS", help=f"give up when no router answers at --connect "
+                   f"within this many seconds (default {connect_timeout_s:g})")
+    p.add_argument("--user", default="", help="log in to a router that runs access control "
+                   "as this principal (fleet run --secure makes one per process; default: "
+                   "no login)")
+    p.add_argument("--password-file", type=Path, metavar="FILE",
+                   help="the password of --user, in a file (never on the command line; "
+                   "default none)")
+
+
+@dataclass(frozen=True)
+class BusFlags:
+    """How a process reaches the others, as its flags say (add_bus_arguments)."""
+
+    run: str = "default"  # the run's keys live under fleet/RUN/
+    mode: str = "client"
+    connect: tuple[str, ...] = ()  # none: DEFAULT_ROUTER, unless the process listens
+    listen: tuple[str, ...] = ()
+    connect_timeout_s: float = CONNECT_TIMEOUT_S
+    user: str = ""  # log in as this principal ...
+    password_file: Path | None = None  # ... with the password in this file
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> BusFlags:
+        return cls(args.run, args.mode, tuple(args.connect), tuple(args.listen),
+                   args.connect_timeout, args.user, args.password_file)
+
+    def argv(self) -> list[str]:
+        """The flags that give these values (a default is left out)."""
+        out = ["--run", self.run]
+        if self.mode != "client":
+            out += ["--mode", self.mode]
+        for flag, endpoints in (("--connect", self.connect), ("--listen", self.listen)):
+            for each in endpoints:
+                out += [flag, each]
+        if self.connect_timeout_s != CONNECT_TIMEOUT_S:
+            out += ["--connect-timeout", repr(self.connect_timeout_s)]
+        if self.user:
+            out += ["--user", self.user]
+        if self.password_file is not None:
+            out += ["--password-file", str(self.password_file)]
+        return out
+
+    def config(self) -> BusConfig:
+        """The session's configuration (it reads the password file)."""
+        connect = self.connect or (() if self.listen else BusConfig().connect)
+        user, password = self.login()
+        return BusConfig(self.mode, connect, self.listen,
+                         connect_timeout_ms=int(self.connect_timeout_s * 1000), user=user,
+                         password=password)
+
+    def login(self) -> tuple[str, str]:
+        """The (user, password) the flags name; a user without its password is refused."""
+        if not self.user:
+            return "", ""
+        if self.password_file is None:
+            raise UserError(f"--user {self.user} needs --password-file")
+        try:
+            return self.user, self.password_file.read_text().strip()
+        except OSError as exc:
+            raise UserError(f"--password-file {self.password_file}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise UserError(f"--password-file {self.password_file}: not UTF-8 text") from None
+
+
+def add_mission_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--layout", default="paper", type=layout_arg,
+                   help="layout name or TOML file (default paper)")
+    p.add_argument("--mission", choices=[k.value for k in MissionKind], default="fill",
+                   help="fill: goods from the stations to the stacks, in each cluster's fill "
+                   "order; empty: from the stacks back to the stations, in reverse (default "
+                   "fill)")
+    p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
+                   help="how the dispatcher picks each forklift's next goal (default ann; "
+                   "each is described below)")
+    p.add_argument("--vehicles", type=positive_int, default=None,
+                   help="fleet size (default: every start pose of the layout)")
+    p.add_argument("--seed", type=integer, default=0,
+                   help="the mission's seed, kept in its record (the dispatching itself "
+                   "draws no random numbers: a mission gives the same record every time; "
+                   "default 0)")
+    p.add_argument("--weights", type=text_file, metavar="FILE",
+                   help="MLP weights for --strategy ann (default: the weights shipped for the "
+                   "layout)")
+
+
+def mission_from_args(args: argparse.Namespace) -> Mission:
+    return Mission(layout=args.layout, kind=MissionKind(args.mission),
+                   strategy=Strategy(args.strategy), vehicles=args.vehicles, seed=args.seed)
+
+
+def mission_argv(mission: Mission) -> list[str]:
+    """The flags that give `mission` (its layout's start poses: it has no others)."""
+    fleet = [] if mission.vehicles is None else ["--vehicles", str(mission.vehicles)]
+    return ["--layout", mission.layout, "--mission", mission.kind.value, "--strategy",
+            mission.strategy.value, *fleet, "--seed", str(mission.seed)]
+
+
+def engine_options(mission: Mission, layout: Layout, weights: Path | None,
+                   progress=None) -> EngineOptions:
+    """The engine's options for the mission: with --strategy ann, the scorer of --weights (or
+    of the weights shipped for the layout), loaded here so that bad weights are refused
+    before anything starts."""
+    mlp = None
+    if mission.strategy is Strategy.ANN:
+        from fleet.dispatching.scorer import load_scorer
+
+        mlp = load_scorer(layout, weights)
+    return EngineOptions(mlp=mlp, progress=progress)

@@ -1,0 +1,123 @@
+"""How a command's process lives: it starts from its own command line (`python -m dispatcher`
+as `fleet dispatcher`), logs to stderr, stops cleanly on a signal or when the `fleet run` that
+started it is gone, and fails in one line that says why (a bug: with the traceback in a file).
+The `fleet` command line and every process share this one error path."""
+
+from __future__ import annotations
+
+import faulthandler
+import logging
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from typing import TypeVar
+
+import zenoh
+
+from fleet import __version__
+from fleet.errors import UserError, describe
+from fleet.runtime.bus import RequestFailed, zenoh_message
+from fleet.runtime.helptext import Parser
+from fleet.runtime.process_configs import ProcessConfig
+
+EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
+# What a command may fail with for reasons outside the program: bad input (every check of it
+# raises a UserError), the network. Each reaches the user as one line; anything else is a bug
+# (a ValueError too: a value the user gave is refused as a UserError).
+EXPECTED: tuple[type[BaseException], ...] = (UserError, zenoh.ZError, RequestFailed)
+PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children
+
+C = TypeVar("C", bound=ProcessConfig)
+
+
+def process_main(kind: type[C], serve: Callable[[C], int], prog: str,
+                 argv: Sequence[str] | None = None) -> int:
+    """A process started on its own (`python -m dispatcher`): its parser is the one `fleet
+    dispatcher` has, its config is built once from the flags and handed to `serve`."""
+    parser = Parser(prog=prog, description=kind.DESCRIPTION, epilog=kind.EPILOG)
+    kind.add_arguments(parser)
+    args = parser.parse_args(argv)
+    setup_logging()
+    return exit_status(prog, [prog, *(sys.argv[1:] if argv is None else argv)],
+                       lambda: serve(kind.from_args(args)))
+
+
+def exit_status(prog: str, command: Sequence[str], body: Callable[[], int | None],
+                expected_errors: tuple[type[BaseException], ...] = EXPECTED) -> int:
+    """Run a command's body and return its exit status. A failure reaches the user as one
+    line naming `prog`: an expected one (2) as its message, a bug (EX_SOFTWARE) with its
+    traceback in a crash report that names the `command` line."""
+    try:
+        code = int(body() or 0)
+        sys.stdout.flush()  # a reader that left shows here, not in a message at exit
+        return code
+    except KeyboardInterrupt:
+        print(f"\n{prog}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader left (`fleet faults list | head`): nothing to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error
+        return 141
+    except Exception as exc:
+        if expected(exc, expected_errors):
+            text = zenoh_message(exc) if isinstance(exc, zenoh.ZError) else describe(exc)
+            print(f"{prog}: error: {text}", file=sys.stderr)
+            return 2
+        path = crash_report(exc, command)
+        print(f"{prog}: internal error (a bug, please report it): "
+              f"{type(exc).__name__}: {describe(exc)}; the traceback is in {path}",
+              file=sys.stderr)
+        return EX_SOFTWARE
+
+
+def expected(exc: BaseException,
+             expected_errors: tuple[type[BaseException], ...] = EXPECTED) -> bool:
+    """Whether `exc` is a failure outside the program. An OS error is one when it names its
+    file (a path the user gave that cannot be read or written, a full disk): the line says
+    which; one about no file is a bug's."""
+    if isinstance(exc, OSError):
+        return exc.filename is not None
+    return isinstance(exc, expected_errors)
+
+
+def crash_report(exc: BaseException, command: Sequence[str]) -> str:
+    """Write the command line and the traceback to a file in the temporary directory."""
+    fd, path = tempfile.mkstemp(prefix=f"fleet-crash-{time.strftime('%Y%m%d-%H%M%S')}-",
+                                suffix=".txt")
+    with os.fdopen(fd, "w") as out:
+        out.write(f"fleet {__version__}: {' '.join(command)}\n\n")
+        out.write("".join(traceback.format_exception(exc)))
+    return path
+
+
+class Stopped(Exception):
+    """SIGTERM or SIGINT: the process leaves whatever it was doing (its handler raises this
+    where the main thread is)."""
+
+
+def setup_logging() -> None:
+    """Processes log to stderr with a wall-clock timestamp (fleet run keeps one file each);
+    SIGUSR1 writes every thread's stack there (what a stuck process is doing)."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
+
+
+def stop_on_signals(stop: Callable[[], None]) -> None:
+    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
+    of `fleet run` also stops when that parent is gone (killed outright, it could not stop
+    its children), so no orphan keeps running."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop())
+    parent = os.environ.get(PARENT_ENV)
+    if parent and parent.isdigit():
+        def watch() -> None:
+            while os.getppid() == int(parent):
+                time.sleep(1.0)  # polling the parent: there is no event to wait on
+            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
+
+        threading.Thread(target=watch, daemon=True, name="parent-watch").start()

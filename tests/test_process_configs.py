@@ -1,0 +1,94 @@
+"""Each process kind's command line: a config written as flags (how `fleet run` and the
+compose deployment start processes) parses back into the very same config, as `fleet KIND`
+and `python -m PACKAGE` parse it; and a process started on its own needs no command line of
+the `fleet` CLI, yet fails the same way: in one line."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fleet.cli import build_parser
+from fleet.mission.spec import ClockMode, Mission, MissionKind, Strategy
+from fleet.planning.trajectory import Pose
+from fleet.runtime.args import BusFlags
+from fleet.runtime.bus import free_port
+from fleet.runtime.process_configs import (
+    KINDS,
+    AgentConfig,
+    DispatcherConfig,
+    RecorderConfig,
+    ReservationConfig,
+    RouterConfig,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def configs(tmp_path: Path) -> list:
+    weights = tmp_path / "weights.json"
+    weights.write_text("{}")
+    plain = BusFlags(connect=("tcp/127.0.0.1:7447",))
+    secure = BusFlags("r", "peer", ("tcp/router:7447",), ("tcp/0.0.0.0:7448",), 5.0,
+                      "dispatcher", tmp_path / "secret")
+    return [
+        RouterConfig(), RouterConfig(("tcp/0.0.0.0:1",), ("tcp/other:2",), tmp_path / "acl",
+                                     tmp_path / "users", 5.0),
+        ReservationConfig(plain), ReservationConfig(secure, tmp_path / "{host}.journal", True),
+        AgentConfig(plain, 3), AgentConfig(secure, None, "crane", 30.0, "small",
+                                           Pose.parse("3,4,E"), tmp_path / "logins",
+                                           tmp_path / "id", True),
+        DispatcherConfig(plain, Mission()),
+        DispatcherConfig(secure, Mission("small", MissionKind.EMPTY, Strategy.GREEDY, 2, 7),
+                         weights, ClockMode.REALTIME, 20.0, 30.0, "fleet run", "kill_vehicle",
+                         True, True, True, True, 1.5, tmp_path / "marker"),
+        RecorderConfig(plain), RecorderConfig(secure, tmp_path / "a.mcap", None, True, 8765,
+                                              "0.0.0.0"),
+        RecorderConfig(plain, out_dir=tmp_path / "recordings"),
+    ]
+
+
+def test_every_config_parses_back_from_its_command_line(tmp_path):
+    parser = build_parser()
+    cases = configs(tmp_path)
+    assert {type(c) for c in cases} == set(KINDS)
+    for config in cases:
+        args = parser.parse_args(config.argv())
+        assert type(config).from_args(args) == config, config.argv()
+
+
+def test_a_config_built_in_code_runs_as_its_flags_left_out():
+    parser = build_parser()
+    for kind, required in ((RouterConfig, []), (ReservationConfig, []),
+                           (AgentConfig, ["--id", "auto"]), (DispatcherConfig, []),
+                           (RecorderConfig, [])):
+        parsed = kind.from_args(parser.parse_args([kind.COMMAND, *required]))
+        built = kind() if kind is RouterConfig else \
+            kind(BusFlags(), Mission()) if kind is DispatcherConfig else kind(BusFlags())
+        assert parsed == built
+
+
+def test_processes_start_without_the_fleet_command_line():
+    code = ("import sys, dispatcher.process, vehicle_agent.process, reservation.service, "
+            "recorder.process; print(sorted(m for m in sys.modules if m == 'fleet.cli' or "
+            "m.startswith('fleet.commands')))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("package", ["dispatcher", "vehicle_agent", "reservation", "recorder"])
+def test_a_process_alone_fails_in_one_line(package, tmp_path):
+    dead = f"tcp/127.0.0.1:{free_port()}"
+    extra = {"vehicle_agent": ["--id", "1"], "recorder": ["--out", str(tmp_path / "r.mcap")]}
+    proc = subprocess.run([sys.executable, "-m", package, "--connect", dead,
+                           "--connect-timeout", "1", *extra.get(package, [])],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(ROOT), "TMPDIR": str(tmp_path)})
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == \
+        f"python -m {package}: error: no zenoh router answers at {dead} (waited 1 s)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no crash report, no file
