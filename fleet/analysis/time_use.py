@@ -110,8 +110,8 @@ class _Timeline:
 def time_use(subtasks: Sequence[SubtaskRecord], halts: list[Halt], resumes: list[Resume],
              vehicles: int, span_s: float, kind: str,
              vehicle_kind: VehicleKind) -> list[VehicleStats]:
-    """Each vehicle's time over [0, span_s], from the subtasks (as
-    announced) and the halts and resumes of a recording. A subtask decided before a halt (its
+    """Each vehicle's time over [0, span_s], from the subtasks (as announced) and the halts
+    and resumes of a recording. A subtask decided before a halt (its
     t_i earlier) is cut by it; the engine applies a fault before any decision at its instant."""
     claim = DispatchParams().t_claim if kind == "fill" else 0.0
     events: list[tuple[float, int, Any]] = [(s.t_i, 2, s) for s in subtasks]

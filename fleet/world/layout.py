@@ -155,5 +155,3 @@ class Layout:
                 yield cell, obstacle.symbol
         for station in self.stations:
             yield station.cell, STATION
-
-

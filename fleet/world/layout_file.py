@@ -1,9 +1,10 @@
 """Layout files: a warehouse layout's TOML text (docs/layouts.md), by built-in name or path,
 read and checked into a `fleet.world.layout.Layout`.
 
-Loading checks the structure (known keys, cells on the map, no element overlapping another,
-docks pointing their forks at their station, distinct start poses, and an ASCII drawing that
-agrees with the data), raising LayoutError at the first problem, naming the element.
+Loading checks the structure (known keys, a known vehicle kind, cells on the map, no element
+overlapping another, docks working their station, distinct start poses, and an ASCII drawing
+that agrees with the data), raising LayoutError at the first problem, naming the element;
+poses and docks are checked with the vehicle kind the layout names.
 """
 
 from __future__ import annotations
