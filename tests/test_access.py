@@ -28,7 +28,17 @@ from fleet.runtime.access import (
     write_dictionary,
 )
 from fleet.runtime.bus import RELIABLE, BusConfig, free_port, wait_alive
-from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, Keys, vehicle_sender
+from fleet.wire.topics import (
+    CLOCK,
+    DISPATCHER,
+    INJECTOR,
+    RECORDER,
+    RESERVATION,
+    TOPICS,
+    Keys,
+    TopicKind,
+    vehicle_sender,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = 3
@@ -358,3 +368,47 @@ def test_clock_and_acks(fleet):
     finally:
         for s in subscribers:
             s.undeclare()
+
+
+# Who logs in for a sender the catalogue names: the clock is the dispatcher's, the injector
+# runs under the operator's login.
+LOGIN_OF = {CLOCK: DISPATCHER, INJECTOR: OPERATOR}
+
+
+def test_every_catalogued_topic_is_granted_to_its_sender():
+    """The router's rules are written beside the catalogue (fleet/wire/topics.py): each topic's
+    sender may put its publications, ask its queryables and hold its tokens on the run's keys
+    of it, so a row added to Keys without its grant fails here, not silently in a --secure
+    run."""
+    run, vehicles = "fleet/acl", 2
+    acl = router_acl(run, vehicles)
+    rules = {r["id"]: r for r in acl["rules"]}
+    allowed = {p["id"]: [rules[i] for i in p["rules"] if rules[i]["flows"] == ["ingress"]]
+               for p in acl["policies"]}
+
+    def may(login: str, message: str, key: str) -> bool:
+        return any(message in r["messages"] and any(
+            zenoh.KeyExpr(expr).includes(zenoh.KeyExpr(key)) for expr in r["key_exprs"])
+            for r in allowed[login])
+
+    checked = 0
+    for topic in TOPICS:
+        if topic.sender is None:
+            continue
+        if topic.fields == ("vehicle",):
+            keys = [topic.key("acl", v) for v in (1, vehicles)]
+        elif topic.fields == ("principal",):
+            keys = [topic.key("acl", p) for p in (DISPATCHER, vehicle_sender(1))]
+        else:
+            keys = [topic.key("acl")]
+        for key in keys:
+            sender = topic.sender_on(key)
+            login = LOGIN_OF.get(sender, sender)
+            for kind, message in ((TopicKind.PUBLICATION, "put"), (TopicKind.QUERYABLE, "query"),
+                                  (TopicKind.TOKEN, "liveliness_token")):
+                if kind in topic.kind and not (kind is TopicKind.QUERYABLE and
+                                               TopicKind.PUBLICATION in topic.kind):
+                    assert may(login, message, key), f"{login} may not {message} on {key}"
+                    checked += 1
+    assert checked > len(TOPICS)
+    assert not may(vehicle_sender(1), "put", Keys("acl").vehicle_state(2))  # and no more

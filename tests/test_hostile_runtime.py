@@ -43,7 +43,7 @@ from fleet.wire.topics import (
     PUBLICATIONS,
     TOPICS,
     Keys,
-    Kind,
+    TopicKind,
     expected_sender,
     message_type,
 )
@@ -66,7 +66,7 @@ def run_keys(keys: Keys, vehicles: int) -> list[str]:
     per-vehicle ones; one principal's request key), but liveliness tokens."""
     out = []
     for topic in TOPICS:
-        if Kind.TOKEN in topic.kind:
+        if TopicKind.TOKEN in topic.kind:
             continue
         if topic.fields == ("principal",):
             out.append(topic.key(keys.run, "test"))

@@ -101,7 +101,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     faults.add_argument("--scenarios", help="comma-separated shipped scenarios (default all)")
     faults.add_argument("--json", action="store_true", help="print one JSON object keyed by "
                         "scenario (a kind's own scenario is named after the kind)")
-    faults.add_argument("--clock", choices=[m.value for m in ClockMode], default="fast",
+    faults.add_argument("--clock", choices=[m.value for m in ClockMode],
+                        default=ClockMode.FAST.value,
                         help="the runs' clock (default fast)")
     faults.add_argument("--speed", type=positive_float, default=20.0,
                         help="sim seconds per wall second with --clock realtime (default 20)")

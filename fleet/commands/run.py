@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "improved hybrid A* against the shared reservation table.",
                        epilog=strategies_epilog())
     add_mission_args(p)
-    p.add_argument("--clock", choices=[m.value for m in ClockMode], default="fast",
+    p.add_argument("--clock", choices=[m.value for m in ClockMode], default=ClockMode.FAST.value,
                    help="fast: discrete events, deterministic (default); realtime: sim time "
                    "= speed x wall time")
     p.add_argument("--speed", type=positive_float, default=1.0,

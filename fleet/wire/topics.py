@@ -61,7 +61,7 @@ PRINCIPAL = "{principal}"  # whoever the key names (a request key names who asks
 PLACEHOLDERS = {"vehicle": r"\d+", "principal": r"[^/]+"}
 
 
-class Kind(Flag):
+class TopicKind(Flag):
     """What a topic's keys are for (one may be a publication and a queryable at once)."""
 
     PUBLICATION = auto()  # put by its sender, numbered 1, 2, ... (fleet.runtime.bus.Stream)
@@ -84,7 +84,7 @@ class Topic:
     """One topic: a key pattern below fleet/<run>/ and what travels on its keys."""
 
     pattern: str  # e.g. "vehicle/{vehicle}/state" (placeholders: PLACEHOLDERS)
-    kind: Kind
+    kind: TopicKind
     messages: tuple[type[Message], ...] = ()  # a publication's one type; a queryable's requests
     sender: str | None = None  # who alone sends `messages` (with the key's fields); None: anyone
     reliable: bool = True  # a publication waits rather than drop (congestion control BLOCK)
@@ -140,44 +140,44 @@ class Keys:
 
     # The reservation service (docs/protocol.md: the key of a request names who asks, so a
     # forklift may ask only under its own name and change only its own reservations).
-    reservation_request = Topic("reservation/request/{principal}", Kind.QUERYABLE,
+    reservation_request = Topic("reservation/request/{principal}", TopicKind.QUERYABLE,
                                 (CommitRequest, ReleaseRequest, SnapshotRequest), PRINCIPAL)
-    reservation_change = Topic("reservation/change", Kind.PUBLICATION, (WireChange,),
+    reservation_change = Topic("reservation/change", TopicKind.PUBLICATION, (WireChange,),
                                RESERVATION)
-    reservation_alive = Topic("reservation/alive", Kind.TOKEN, sender=RESERVATION)
+    reservation_alive = Topic("reservation/alive", TopicKind.TOKEN, sender=RESERVATION)
     # A forklift's agent.
-    vehicle_state = Topic("vehicle/{vehicle}/state", Kind.PUBLICATION, (VehicleState,),
+    vehicle_state = Topic("vehicle/{vehicle}/state", TopicKind.PUBLICATION, (VehicleState,),
                           VEHICLE)
-    vehicle_task = Topic("vehicle/{vehicle}/task", Kind.QUERYABLE,
+    vehicle_task = Topic("vehicle/{vehicle}/task", TopicKind.QUERYABLE,
                          (TaskRequest, HaltRequest, ResumeRequest, StatusRequest), DISPATCHER)
-    vehicle_inject = Topic("vehicle/{vehicle}/inject", Kind.QUERYABLE, (InjectFault,),
+    vehicle_inject = Topic("vehicle/{vehicle}/inject", TopicKind.QUERYABLE, (InjectFault,),
                            INJECTOR)
-    vehicle_fault = Topic("vehicle/{vehicle}/fault", Kind.PUBLICATION, (VehicleFault,),
+    vehicle_fault = Topic("vehicle/{vehicle}/fault", TopicKind.PUBLICATION, (VehicleFault,),
                           VEHICLE)
-    vehicle_alive = Topic("vehicle/{vehicle}/alive", Kind.TOKEN, sender=VEHICLE)
+    vehicle_alive = Topic("vehicle/{vehicle}/alive", TopicKind.TOKEN, sender=VEHICLE)
     # The one clock and who follows it.
-    clock = Topic("clock", Kind.PUBLICATION, (ClockTick,), CLOCK)
-    clock_ack = Topic("clock/ack/{vehicle}", Kind.PUBLICATION, (ClockAck,), VEHICLE)
-    injector_ack = Topic("clock/ack/injector", Kind.PUBLICATION, (ClockAck,), INJECTOR)
+    clock = Topic("clock", TopicKind.PUBLICATION, (ClockTick,), CLOCK)
+    clock_ack = Topic("clock/ack/{vehicle}", TopicKind.PUBLICATION, (ClockAck,), VEHICLE)
+    injector_ack = Topic("clock/ack/injector", TopicKind.PUBLICATION, (ClockAck,), INJECTOR)
     # The dispatcher: what the run is, what it decides and how the mission ends.
-    dispatch_mission = Topic("dispatch/mission", Kind.PUBLICATION | Kind.QUERYABLE,
+    dispatch_mission = Topic("dispatch/mission", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
                              (MissionInfo,), DISPATCHER)
-    dispatch_progress = Topic("dispatch/progress", Kind.PUBLICATION, (Progress,), DISPATCHER)
-    dispatch_subtask = Topic("dispatch/subtask", Kind.PUBLICATION, (SubtaskEvent,), DISPATCHER)
-    dispatch_stack = Topic("dispatch/stack", Kind.PUBLICATION, (StackDone,), DISPATCHER)
-    dispatch_failure = Topic("dispatch/failure", Kind.PUBLICATION, (DecisionFailure,),
+    dispatch_progress = Topic("dispatch/progress", TopicKind.PUBLICATION, (Progress,), DISPATCHER)
+    dispatch_subtask = Topic("dispatch/subtask", TopicKind.PUBLICATION, (SubtaskEvent,), DISPATCHER)
+    dispatch_stack = Topic("dispatch/stack", TopicKind.PUBLICATION, (StackDone,), DISPATCHER)
+    dispatch_failure = Topic("dispatch/failure", TopicKind.PUBLICATION, (DecisionFailure,),
                              DISPATCHER)
-    dispatch_halt = Topic("dispatch/halt", Kind.PUBLICATION, (Halt,), DISPATCHER)
-    dispatch_resume = Topic("dispatch/resume", Kind.PUBLICATION, (Resume,), DISPATCHER)
-    dispatch_reopen = Topic("dispatch/reopen", Kind.PUBLICATION, (StackReopened,), DISPATCHER)
-    dispatch_zone = Topic("dispatch/zone", Kind.PUBLICATION, (ZoneClosed,), DISPATCHER)
-    dispatch_done = Topic("dispatch/done", Kind.PUBLICATION, (MissionDone,), DISPATCHER)
-    dispatch_claim = Topic("dispatch/claim", Kind.QUERYABLE, (VehicleClaim,))  # any agent
-    dispatcher_alive = Topic("dispatch/alive", Kind.TOKEN, sender=DISPATCHER)
+    dispatch_halt = Topic("dispatch/halt", TopicKind.PUBLICATION, (Halt,), DISPATCHER)
+    dispatch_resume = Topic("dispatch/resume", TopicKind.PUBLICATION, (Resume,), DISPATCHER)
+    dispatch_reopen = Topic("dispatch/reopen", TopicKind.PUBLICATION, (StackReopened,), DISPATCHER)
+    dispatch_zone = Topic("dispatch/zone", TopicKind.PUBLICATION, (ZoneClosed,), DISPATCHER)
+    dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
+    dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
+    dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)
     # The recorder.
-    recorder_status = Topic("recorder/status", Kind.PUBLICATION | Kind.QUERYABLE,
+    recorder_status = Topic("recorder/status", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
                             (RecorderStatus,), RECORDER)
-    recorder_alive = Topic("recorder/alive", Kind.TOKEN, sender=RECORDER)
+    recorder_alive = Topic("recorder/alive", TopicKind.TOKEN, sender=RECORDER)
 
     @property
     def root(self) -> str:
@@ -196,7 +196,7 @@ class Keys:
 
 
 TOPICS: tuple[Topic, ...] = tuple(t for t in vars(Keys).values() if isinstance(t, Topic))
-PUBLICATIONS: tuple[Topic, ...] = tuple(t for t in TOPICS if Kind.PUBLICATION in t.kind)
+PUBLICATIONS: tuple[Topic, ...] = tuple(t for t in TOPICS if TopicKind.PUBLICATION in t.kind)
 
 _VEHICLE_SENDER = re.compile(_regex(VEHICLE))
 
@@ -221,7 +221,7 @@ def topic_of(key: str) -> Topic | None:
 @functools.lru_cache(maxsize=4096)
 def _published(key: str) -> tuple[type[Message], str] | None:
     topic = topic_of(key)
-    if topic is None or Kind.PUBLICATION not in topic.kind:
+    if topic is None or TopicKind.PUBLICATION not in topic.kind:
         return None
     return topic.message, topic.sender_on(key)
 
