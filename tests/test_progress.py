@@ -236,7 +236,10 @@ def run_main_command(stderr: int | None, env: dict, tmp: Path) -> subprocess.Pop
                             stdout=subprocess.PIPE, stderr=stderr or subprocess.PIPE)
 
 
-LOG_LINE = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ fleet\S* (INFO|WARNING|ERROR): ")
+# A log line: with a timestamp where a process set up logging, the bare sentence where
+# `fleet run` itself says it (Python's last-resort handler); never a bar's frame.
+LOG_LINE = re.compile(r"(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ fleet\S* (INFO|WARNING|ERROR): )?"
+                      r"[a-z][^|\r\n]*$")
 
 
 def env_for_runs() -> dict:
