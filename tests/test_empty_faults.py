@@ -19,11 +19,13 @@ from fleet.mission.faults import (
     load_scenario,
 )
 from fleet.mission.freeze import Motion, ScheduledPacer, cascade
+from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
+from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import GOODS, StackReopened
 from fleet.world.layout_file import load_layout
 
@@ -106,3 +108,22 @@ def test_who_would_cross_a_claimed_cell_stops_when_the_claim_is_cancelled():
     assert set(kept.freezes) == {1, 2}
     fill = cascade(table, 0.5, motions, {1}, {(3, 0): 1}.get)  # goods that never came
     assert set(fill.freezes) == {1}
+
+
+@pytest.mark.parametrize("name", ["kill_vehicle", "kill_dispatcher"])
+def test_an_empty_mission_of_processes_takes_faults_as_the_reference_does(name, tmp_path):
+    """A claim cut short with processes gives the in-process record bit for bit; a restarted
+    dispatcher picks an empty mission up from the goods the store still holds."""
+    scenario = load_scenario(name)
+    outcome = run_processes(RunSpec(EMPTY, 2, tmp_path, faults=scenario, faults_source=name))
+    assert outcome.error == "" and outcome.done.ok
+    report = analyze(read_recording(tmp_path))
+    assert report.passed and report.stacks_done == 24, report.verdict_lines()
+    if name == "kill_dispatcher":
+        assert "picked the mission up at t=350.00" in \
+            (tmp_path / "logs" / "dispatcher-2.log").read_text()
+        assert len(outcome.done.record["stacks_done"]) == 24  # with those done before
+    else:
+        reference = Engine(EMPTY, engine_options(EMPTY, SMALL, None), SMALL,
+                           pacer=ScheduledPacer(scenario)).run()
+        assert outcome.done.digest == digest(reference)

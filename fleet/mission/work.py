@@ -87,6 +87,10 @@ class MissionWork(Protocol):
         """A delivery was cut short before it arrived: its stack is to do again, its goods as
         they were before the delivery was decided. Returns the stack's cell."""
 
+    def done_at(self, goods: Interval) -> float | None:
+        """When the stack under a goods reservation of the table was done, as a restarted
+        dispatcher reads it (None: the goods say it is not)."""
+
     def pick_up(self, cluster: str, index: int) -> None:
         """A restarted dispatcher found the stack done."""
 
@@ -149,6 +153,9 @@ class StackWork(ABC):
     @abstractmethod
     def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
         """The goods' hold on a served stack's cell."""
+
+    @abstractmethod
+    def done_at(self, goods: Interval) -> float | None: ...
 
     @abstractmethod
     def _served(self, cell: Cell) -> None:
@@ -240,6 +247,9 @@ class FillWork(StackWork):
     def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
         return Interval(cell, t_end, math.inf)  # placed on arrival, for good
 
+    def done_at(self, goods: Interval) -> float | None:
+        return goods.t0 + self.params.t_unload if goods.t1 == math.inf else None
+
     @property
     def goods_off_table(self) -> frozenset[Cell]:
         return frozenset()  # every placed goods' cell is reserved from its delivery on
@@ -296,6 +306,9 @@ class EmptyWork(StackWork):
 
     def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
         return Interval(cell, 0.0, t_done)  # there until claimed
+
+    def done_at(self, goods: Interval) -> float | None:
+        return goods.t1 if goods.t1 < math.inf else None  # claimed when the hold ends
 
     @property
     def goods_off_table(self) -> frozenset[Cell]:
