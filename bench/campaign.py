@@ -172,6 +172,8 @@ def run_inprocess(mission: Mission, layout: Layout, scenario: Scenario | None, f
         done, stream = recorded_run(mission, layout, options, "fleet bench campaign", scenario)
     except MissionStuck as exc:
         return Outcome(False, True, str(exc), "", None, None, [])
+    except Exception as exc:  # a crash is a finding: its scenario is kept to replay it
+        return Outcome(False, False, f"{type(exc).__name__}: {exc}", "", None, None, [])
     write_recording(folder / "run.mcap", stream, layout)
     recording = read_recording(folder / "run.mcap")
     return Outcome(True, False, "", digest_of(done.record), analyze(recording), recording, [])
@@ -226,8 +228,8 @@ def run(spec: CampaignSpec, out: Path, progress: Callable[[str, int, int], None]
             base[kind] = mission_run(f"fault-free-{kind.value}", kind, None)
             if not base[kind].completed:
                 raise UserError(f"the fault-free {kind.value} mission on {layout.name} did "
-                                   f"not complete ({base[kind].error}): nothing to measure "
-                                   f"faults against")
+                                f"not complete ({base[kind].error}): nothing to measure "
+                                f"faults against")
         for i in range(spec.runs):
             kind = spec.kinds[i % len(spec.kinds)]
             horizon = _end(base[kind].report)

@@ -115,7 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     campaign = which.add_parser("campaign", help="seeded random fault scenarios, fill and "
                                 "empty, each run judged as fleet analyze judges it "
                                 "(docs/reliability.md)",
-                                description="Run N missions, each with faults drawn from the "
+                                description="Run missions, each with faults drawn from the "
                                 "seed and the run's number (kinds, instants, forklifts, "
                                 "durations; several per run), fill and empty in turn, and "
                                 "judge each by its recording's verdicts against the same "
