@@ -26,6 +26,7 @@ from fleet.mission.record import (
 )
 from fleet.recording.reader import Recorded, Recording, RecordingError
 from fleet.wire.protocol import (
+    DeadlockSeen,
     DecisionFailure,
     Halt,
     MissionDone,
@@ -43,8 +44,8 @@ from fleet.wire.protocol import (
 # first messages were not recorded (a stream shared by threads may swap a few neighbours).
 RESTART_DROP = 16
 # What each dispatcher publishes, each key numbered from 1 by each dispatcher that runs.
-EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, Halt, Resume,
-          StackReopened, ZoneClosed)
+EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, DeadlockSeen, Halt,
+          Resume, StackReopened, ZoneClosed)
 # Those the numbers are made of: the first three are in the final record too; a halt's stand
 # time and a stack reopened are in the recording only.
 IN_RECORD = (SubtaskEvent, DecisionFailure, StackDone)
@@ -125,7 +126,8 @@ def summary_of(recording: Recording) -> MissionSummary:
         decision_failures=decision_failures(
             recording, restarts, account.decision_failures if account else None, failures),
         wait_s=wait, busy_s=busy, stacks_done=tuple(stacks), failures=tuple(failures),
-        subtasks=tuple(subtasks), incomplete=tuple(incomplete))
+        subtasks=tuple(subtasks), deadlocks=tuple(m for _, m in recording.of(DeadlockSeen)),
+        incomplete=tuple(incomplete))
 
 
 def dispatcher_restarts(recording: Recording) -> list[Restart]:

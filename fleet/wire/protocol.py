@@ -288,6 +288,21 @@ class DecisionFailure(Message):
 
 
 @dataclass(frozen=True)
+class DeadlockSeen(Message):
+    """The dispatcher found a vehicle whose way stuck vehicles close for good, and what it did
+    (fleet/mission/deadlock.py): `moved` was sent aside to `siding` (None: none could go)."""
+
+    TYPE: ClassVar[str] = "dispatch.deadlock"
+    t: float
+    waiting: int
+    kind: str  # "cycle", "idle" or "walled"
+    chain: list[int]  # waiting -> its blocker -> ... (a cycle repeats its head)
+    moved: int | None
+    siding: str | None
+    for_vehicle: int | None  # whose way the move opens (a blocker that inherited, or waiting)
+
+
+@dataclass(frozen=True)
 class HaltRequest(Message):
     """The dispatcher freezes a forklift at t (docs/faults.md): it completes the maneuver in
     progress and drives nothing it committed after it; with `stand` (it broke down), it
@@ -457,7 +472,8 @@ TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
                               SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
-                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
+                              SubtaskEvent, StackDone, DecisionFailure, DeadlockSeen,
+                              RecorderStatus,
                               HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
                               ZoneClosed, VehicleFault, InjectFault, StatusRequest,
                               VehicleStatus, VehicleClaim, ClaimReply)

@@ -22,6 +22,7 @@ from fleet.wire.protocol import (
     ClockAck,
     ClockTick,
     CommitRequest,
+    DeadlockSeen,
     DecisionFailure,
     Envelope,
     Halt,
@@ -167,6 +168,8 @@ class Keys:
     dispatch_stack = Topic("dispatch/stack", TopicKind.PUBLICATION, (StackDone,), DISPATCHER)
     dispatch_failure = Topic("dispatch/failure", TopicKind.PUBLICATION, (DecisionFailure,),
                              DISPATCHER)
+    dispatch_deadlock = Topic("dispatch/deadlock", TopicKind.PUBLICATION, (DeadlockSeen,),
+                              DISPATCHER)
     dispatch_halt = Topic("dispatch/halt", TopicKind.PUBLICATION, (Halt,), DISPATCHER)
     dispatch_resume = Topic("dispatch/resume", TopicKind.PUBLICATION, (Resume,), DISPATCHER)
     dispatch_reopen = Topic("dispatch/reopen", TopicKind.PUBLICATION, (StackReopened,), DISPATCHER)
