@@ -33,6 +33,7 @@ from fleet.mission.pickup import Recovered
 from fleet.mission.record import FailureEvent, MissionRecord, Subtask, subtask_event
 from fleet.mission.seam import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.standstill import Cause, Standstill, failure_text, standstill
 from fleet.mission.step_aside import SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import mission_work
@@ -57,7 +58,12 @@ DECISIONS_BEFORE_SHORTEST = 100
 
 class MissionStuck(UserError):
     """No subtask could be planned for a long run of attempts (the layout or fleet leaves
-    no way forward); the message says when and what failed last."""
+    no way forward); the message says when and what failed last, `standstill` how far the
+    mission got and where each forklift stood."""
+
+    def __init__(self, standstill: Standstill) -> None:
+        super().__init__(standstill.reason)
+        self.standstill = standstill
 
 
 @dataclass(frozen=True)
@@ -255,9 +261,14 @@ class Engine:
         else:
             self._carry_out(outcome.decision, remaining)
         if self.streak.count > self.options.max_consecutive_failures:
-            raise MissionStuck(f"{self.streak.count} decisions in a row failed at t="
-                               f"{min(v.t_free for v in active):.2f} s; last: "
-                               f"{self.record.failures[-1]}")
+            raise MissionStuck(self.standstill(Cause.STUCK, (
+                f"{self.streak.count} decisions in a row failed by t={self.now:.2f} s; the "
+                f"last: {failure_text(self.record.failures[-1])}")))
+
+    def standstill(self, cause: Cause, reason: str) -> Standstill:
+        """How far the mission got, as it stops now (fleet/mission/standstill.py)."""
+        return standstill(cause, reason, self.now, self.fleet.values(), self.faults.down,
+                          self.record, self.streak, self.work.total)
 
     def _carry_out(self, decision: Decision, remaining: dict[str, int]) -> None:
         try:

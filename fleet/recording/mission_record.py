@@ -7,6 +7,8 @@ dispatcher announced then is in its final record (dispatch/done: every subtask, 
 stack of that dispatcher), so it is taken from there. A dispatcher that died and was replaced
 (docs/faults.md) left no record: what it announced while no recorder ran is known nowhere,
 and the rebuilt record's `incomplete` says so (empty: the figures are whole).
+
+A mission that did not finish says how far it got (dispatch/stopped): `recorded_standstill`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from fleet.mission.record import (
     SubtaskRecord,
     failure_from_dict,
 )
+from fleet.mission.standstill import Standstill
 from fleet.recording.reader import Recorded, Recording, RecordingError
 from fleet.wire.protocol import (
     DeadlockSeen,
@@ -31,6 +34,7 @@ from fleet.wire.protocol import (
     Halt,
     MissionDone,
     MissionInfo,
+    MissionStopped,
     Progress,
     ProtocolError,
     Resume,
@@ -268,3 +272,17 @@ def _dispatcher_account(record: dict) -> Account | None:
         return Account({int(k): v for k, v in busy.items()},
                        {int(k): v for k, v in wait.items()}, failures)
     return None
+
+
+def recorded_standstill(recording: Recording) -> Standstill | None:
+    """How far a mission that did not finish got, as its dispatcher said when it stopped
+    (fleet/mission/standstill.py); None when the mission finished, or when no account of it
+    was recorded (a dispatcher killed outright says nothing) or it is damaged."""
+    done = recording.of(MissionDone)
+    stopped = recording.of(MissionStopped)
+    if (done and done[-1][1].ok) or not stopped:
+        return None
+    try:
+        return Standstill.of_message(stopped[-1][1])
+    except ProtocolError:
+        return None

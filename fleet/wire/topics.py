@@ -31,6 +31,7 @@ from fleet.wire.protocol import (
     Message,
     MissionDone,
     MissionInfo,
+    MissionStopped,
     Progress,
     RecorderStatus,
     ReleaseRequest,
@@ -174,6 +175,8 @@ class Keys:
     dispatch_resume = Topic("dispatch/resume", TopicKind.PUBLICATION, (Resume,), DISPATCHER)
     dispatch_reopen = Topic("dispatch/reopen", TopicKind.PUBLICATION, (StackReopened,), DISPATCHER)
     dispatch_zone = Topic("dispatch/zone", TopicKind.PUBLICATION, (ZoneClosed,), DISPATCHER)
+    dispatch_stopped = Topic("dispatch/stopped", TopicKind.PUBLICATION, (MissionStopped,),
+                             DISPATCHER)
     dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
     dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)
