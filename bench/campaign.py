@@ -12,6 +12,7 @@ while `--clock realtime` runs processes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import statistics
@@ -29,7 +30,6 @@ from fleet.analysis.analyze import analyze
 from fleet.analysis.report import Report
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.engine import MissionStuck
 from fleet.mission.faults import (
     SERVICES,
     Fault,
@@ -38,13 +38,15 @@ from fleet.mission.faults import (
     check_against,
     scenario_toml,
 )
-from fleet.mission.record import digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.standstill import Cause
 from fleet.recording.inprocess import recorded_run, write_recording
+from fleet.recording.mission_record import recorded_standstill
 from fleet.recording.reader import Recording, read_recording
 from fleet.recording.rundir import claim
 from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import DeadlockSeen
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 
@@ -64,7 +66,6 @@ DISPATCHER_MARGIN_S = 60.0
 MOVING_KINDS = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
                 FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE)
 ALL_KINDS = (*MOVING_KINDS, FaultKind.SLOW_PLANNER, FaultKind.KILL_SERVICE)
-WEDGED = "decisions in a row failed"  # how a dispatcher of processes reports MissionStuck
 
 
 @dataclass(frozen=True)
@@ -165,18 +166,16 @@ def _overlap(a: Fault, b: Fault) -> bool:
 # -- running one mission ---------------------------------------------------------------------------
 def run_inprocess(mission: Mission, layout: Layout, scenario: Scenario | None, folder: Path,
                   progress: Callable[[int, float], None]) -> Outcome:
-    """The fast-clock reference in this process, its recording written to `folder`."""
+    """The fast-clock reference in this process, its recording (up to where it stopped, if
+    it did not finish) written to `folder`."""
     options = engine_options(mission, layout, None,
                              lambda done, total, t, failures: progress(done, t))
     try:
         done, stream = recorded_run(mission, layout, options, "fleet bench campaign", scenario)
-    except MissionStuck as exc:
-        return Outcome(False, True, str(exc), "", None, None, [])
     except Exception as exc:  # a crash is a finding: its scenario is kept to replay it
         return Outcome(False, False, f"{type(exc).__name__}: {exc}", "", None, None, [])
     write_recording(folder / "run.mcap", stream, layout)
-    recording = read_recording(folder / "run.mcap")
-    return Outcome(True, False, "", digest_of(done.record), analyze(recording), recording, [])
+    return judged(done.ok, done.error, done.digest, read_recording(folder / "run.mcap"), [])
 
 
 def run_with_processes(mission: Mission, vehicles: int, scenario: Scenario | None,
@@ -191,11 +190,21 @@ def run_with_processes(mission: Mission, vehicles: int, scenario: Scenario | Non
     outcome = run_processes(RunSpec(mission, vehicles, folder, clock, speed, faults=scenario,
                                     faults_source=source), lambda p: progress(p.done, p.t))
     ok = outcome.done is not None and outcome.done.ok
+    digest = outcome.done.digest if ok and outcome.done is not None else ""
     recording = read_recording(folder) if (folder / "run.mcap").exists() else None
-    report = analyze(recording) if recording is not None else None
     detect = timings(outcome, recording)[0] if recording is not None else []
-    return Outcome(ok, not ok and WEDGED in outcome.error, outcome.error,
-                   outcome.done.digest if ok else "", report, recording, detect)
+    return judged(ok, outcome.error, digest, recording, detect)
+
+
+def judged(ok: bool, error: str, digest: str, recording: Recording | None,
+           detect_s: list[float]) -> Outcome:
+    """A run's outcome as its recording tells it: a mission that did not finish is wedged
+    when its dispatcher said it was stuck (MissionStuck), else it failed."""
+    if recording is None:
+        return Outcome(ok, False, error, digest, None, None, detect_s)
+    standstill = None if ok else recorded_standstill(recording)
+    wedged = standstill is not None and standstill.cause is Cause.STUCK
+    return Outcome(ok, wedged, error, digest, analyze(recording), recording, detect_s)
 
 
 # -- the campaign ----------------------------------------------------------------------------------
@@ -281,9 +290,11 @@ def run_row(index: int, kind: MissionKind, scenario: Scenario, outcome: Outcome,
 
 
 def deadlocks(recording: Recording | None) -> list[dict[str, Any]]:
-    """The deadlocks the dispatcher saw and how each was broken, as its recording says.
-    TODO(issue 25, items 1-2): the dispatcher publishes none yet; fill from its message."""
-    return []
+    """The deadlocks the dispatcher saw and how each was broken (who was sent aside, to
+    which siding, for whom), as its recording says (`dispatch/deadlock`)."""
+    if recording is None:
+        return []
+    return [dataclasses.asdict(m) for _, m in recording.of(DeadlockSeen)]
 
 
 def write_replay(out: Path, spec: CampaignSpec, kind: MissionKind, scenario: Scenario,

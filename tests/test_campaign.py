@@ -100,3 +100,23 @@ def test_a_campaign_writes_only_in_a_new_or_empty_directory(capsys, tmp_path):
     assert main(["bench", "campaign", "--layout", "small", "--out", str(tmp_path)]) == 2
     assert f"--out {tmp_path} is not empty" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["mine.txt"]
+
+
+def test_a_mission_that_gets_stuck_is_wedged_with_its_recording(tmp_path):
+    """The campaign's own in-process run of a mission no forklift can finish (a stack walled
+    in): wedged, not crashed, and judged from what it recorded."""
+    from test_failed_runs import WALLED
+
+    from fleet.dispatching.decision import Strategy
+    from fleet.mission.spec import Mission
+    from fleet.recording.rundir import claim
+    from fleet.world.layout_file import parse_layout
+
+    (tmp_path / "walled.toml").write_text(WALLED)
+    layout = parse_layout(WALLED, "walled.toml")
+    mission = Mission(str(tmp_path / "walled.toml"), MissionKind.FILL, Strategy.GREEDY)
+    outcome = campaign.run_inprocess(mission, layout, None, claim(tmp_path / "run").path,
+                                     lambda done, t: None)
+    assert (outcome.completed, outcome.wedged) == (False, True)
+    assert "decisions in a row failed" in outcome.error
+    assert outcome.report is not None and not outcome.report.passed
