@@ -1,8 +1,9 @@
 """`fleet analyze`: what a recording says about its run, and two verdicts.
 
 Safety (fleet/analysis/safety.py, independent of the planner and the table): no two
-forklifts on one cell at one instant, no forklift outside its own reservation, no cell held
-by two owners at once. Work: every stack of the layout filled (or emptied) exactly once.
+forklifts on one cell at one instant or between two instants, no forklift outside its own
+reservation, no cell held by two owners at once. Work: every stack of the layout filled (or
+emptied) exactly once.
 Messages: every stream's sequence numbers are complete (a gap is a lost message,
 fleet/analysis/streams.py).
 
@@ -67,6 +68,9 @@ from fleet.wire.protocol import (
 from fleet.wire.topics import message_type
 
 Finding = TypeVar("Finding")
+# A vehicle's states further apart than this many state periods leave a hole between them:
+# nothing is interpolated across it, and a stack's handling over it is not seen.
+STATE_GAP_PERIODS = 1.5
 
 
 def analyze(recording: Recording) -> Report:
@@ -77,8 +81,10 @@ def analyze(recording: Recording) -> Report:
                              f"after the mission?)")
     layout = recording.layout()
     record = summary_of(recording)
-    outline = layout.vehicle_kind.outline  # numbers only: the verifier has its own geometry
+    kind = layout.vehicle_kind
+    outline = kind.outline  # numbers only: the verifier has its own geometry
     body = Body(outline.front, outline.rear, outline.width, layout.cell_size, layout.origin)
+    period = state_period(info.clock, info.speed)
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
     usable = [(t, m) for t, m in states
               if all(math.isfinite(v) for v in (t, m.x, m.y, m.theta))]
@@ -96,8 +102,7 @@ def analyze(recording: Recording) -> Report:
     gaps = stream_gaps(lost)
     downs = {g: recorder_down(recording, g) for g in recording.gaps}
     unverified = unverified_windows(recording, unrecorded, downs) + \
-        silent_windows(states, down_halts, state_period(info.clock, info.speed)) + \
-        _cut_off_windows(cut_off)
+        silent_windows(states, down_halts, period) + _cut_off_windows(cut_off)
     outside, outside_unknown = _judged(
         outside_reservation(samples, held, body),
         lambda o: reservations_unknown(unverified, o.vehicle, o.t, o.t))
@@ -138,7 +143,7 @@ def analyze(recording: Recording) -> Report:
         malformed=sum(r.envelope is None for r in recording.messages)
         + len(states) - len(usable),
         foreign=len(recording.foreign),
-        overlaps=overlaps(samples, body),
+        overlaps=overlaps(samples, body, kind.max_speed_mps, STATE_GAP_PERIODS * period),
         outside_reservation=outside,
         double_bookings=bookings,
         segments=[SegmentRead(str(s.path), s.messages, s.complete, s.problem,
