@@ -32,6 +32,7 @@ from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import ClockMode, Mission
+from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
 from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
@@ -61,6 +62,8 @@ from reservation.mirror import TableMirror
 log = logging.getLogger("fleet.dispatcher")
 RECORDED_WAIT_S = 10.0
 Publish = Callable[[Message, float], None]
+# Why a mission that runs stops early, by the error that stopped it (else Cause.FAILED).
+CAUSES: dict[type[Exception], Cause] = {Stopped: Cause.STOPPED, ParticipantLost: Cause.LOST}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -187,6 +190,7 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
     that could not finish: the error goes into the result)."""
     config, vehicles = setup.config, setup.vehicles
     t0 = time.perf_counter()
+    engine = None  # once the mission runs
     with ExitStack() as scope:
         try:
             liveness.wait_for_service(config.startup_timeout_s)
@@ -218,12 +222,16 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                 publish(Progress(done, total, t, failures), t)
 
             options = dataclasses.replace(setup.options, progress=progress, events=publish)
-            record = Engine(setup.mission, options, setup.layout, executor, clock,
-                            recovered).run()
+            engine = Engine(setup.mission, options, setup.layout, executor, clock, recovered)
+            record = engine.run()
             as_dict = MissionSummary.of_record(record).to_dict()
             return MissionDone(True, record=as_dict, digest=digest_of(as_dict),
                                wall_s=time.perf_counter() - t0, rejections=executor.rejections,
                                detections=clock.detected)
         except (ParticipantLost, MissionStuck, RequestFailed, ProtocolError, Stopped) as exc:
             log.error("mission failed: %s", exc)
+            if engine is not None:  # how far it got, for the recording (docs/recording.md)
+                stopped = exc.standstill if isinstance(exc, MissionStuck) else \
+                    engine.standstill(CAUSES.get(type(exc), Cause.FAILED), str(exc))
+                publish(stopped.message(), stopped.t)
             return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from fleet.dispatching.decision import Strategy
+from fleet.dispatching.decision import Strategy, TaskKind
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, lower_bound, run_mission
 from fleet.mission.record import digest
@@ -82,12 +82,11 @@ def test_the_mission_checker_catches_overlaps_and_repeats():
     assert any("done 2 times" in p for p in problems)
 
 
-def test_a_fleet_stuck_on_one_station_tries_the_others():
-    """Seen in a real-time fault run: four forklifts parked after their last deliveries,
-    each sent back to a station it cannot reach (the preliminary A* sees cells, not turns,
-    and keeps choosing it). After `unstick_after` failures in a row each forklift skips the
-    stations it failed to reach since the last success, and every one gets home."""
-    from fleet.mission.engine import MissionStuck
+def test_a_fleet_parked_around_a_crossing_breaks_its_cycle_and_gets_home():
+    """Seen in a real-time fault run: four forklifts parked after their last deliveries
+    around the passages' crossing, each sent back to a station its neighbour's parking
+    closes. The wait-for graph finds the cycle within a few decisions and sends one forklift
+    aside (before, only the last-resort rule got them out, after 300 failures in a row)."""
     from fleet.mission.pickup import Recovered
     from fleet.planning.trajectory import Pose
 
@@ -98,12 +97,12 @@ def test_a_fleet_stuck_on_one_station_tries_the_others():
         tuple((s.cluster, s.index, 100.0) for s in layout.stacks), (),
         {v: Pose.parse(p) for v, p in poses.items()}, dict.fromkeys(poses, 200.0),
         dict.fromkeys(poses, False), {}, 200.0)
-    with pytest.raises(MissionStuck, match="decisions in a row failed"):
-        Engine(mission, EngineOptions(unstick_after=10_000), layout,
-               recovered=everything_done).run()
-    record = Engine(mission, EngineOptions(unstick_after=20), layout,
+    record = Engine(mission, EngineOptions(unstick_after=10_000), layout,
                     recovered=everything_done).run()
-    homes = {s.vehicle: s.target for s in record.subtasks}
+    assert [(d.kind, d.moved) for d in record.deadlocks] == [("cycle", 4)]
+    assert record.deadlocks[0].chain[0] == record.deadlocks[0].chain[-1]
+    homes = {s.vehicle: s.target for s in record.subtasks if s.kind is not TaskKind.ASIDE}
     assert sorted(homes) == [1, 2, 3, 4]
     assert set(homes.values()) <= {st.name for st in layout.stations}
-    assert 20 <= record.decision_failures < 400
+    assert record.decision_failures < 20
+    assert mission_problems(record, layout) == []

@@ -25,8 +25,9 @@ from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import Engine, run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.standstill import Cause
 from fleet.recording.inprocess import vehicle_states
-from fleet.recording.mission_record import summary_of
+from fleet.recording.mission_record import recorded_standstill, summary_of
 from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
@@ -383,13 +384,26 @@ def exited(pid: int, timeout: float) -> bool:
         os.close(fd)
 
 
-def test_fleet_run_stops_every_process_it_started_on_sigterm(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_fleet_run_stopped_by_a_signal_stops_every_process_and_leaves_its_recording(tmp_path,
+                                                                                    sig):
+    """Ctrl-C (SIGINT) or SIGTERM: every child stops, the dispatcher first, so the recording
+    is closed whole and says how far the mission got."""
     run, children = started_run(tmp_path)
     assert len(children) == 8  # router, recorder, reservation, four agents, dispatcher
-    run.send_signal(signal.SIGTERM)
+    run.send_signal(sig)
     assert run.wait(60) == 130
-    assert "interrupted" in run.stderr.read().decode()
+    assert "the mission did not finish: interrupted" in run.stderr.read().decode()
     assert all(exited(pid, 0) for pid in children)
+    recording = read_recording(tmp_path)
+    assert recording.complete  # the recorder closed its file: summary and footer written
+    report = analyze(recording)
+    assert not report.finished and report.safe and not report.work_done
+    stopped = recorded_standstill(recording)
+    assert stopped.cause is Cause.STOPPED and stopped.stacks_done < stopped.stacks_total
+    assert [v.vehicle for v in stopped.vehicles] == [1, 2, 3, 4]
+    kept = json.loads((tmp_path / "summary.json").read_text())
+    assert kept["finished"] is False and kept["stopped"]["cause"] == "stopped"
 
 
 def test_children_of_a_killed_fleet_run_stop_by_themselves(tmp_path):

@@ -7,6 +7,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from fleet.mission.standstill import Standstill
+
+LABEL_WIDTH = 19  # "  label              value": where the value starts, after two spaces
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,15 +38,27 @@ def print_analysis(recording: Path, as_json: bool = False) -> int:
     """Print what the recording says (as one JSON object); 1 when a verdict fails."""
     from fleet.analysis.analyze import analyze
     from fleet.commands.runs import write_summary
+    from fleet.recording.mission_record import recorded_standstill
     from fleet.recording.reader import read_recording, recording_file
     from fleet.recording.segments import RUN_FILE
 
     first = recording_file(recording)  # refuses what is no recording, saying why
-    report = analyze(read_recording(recording))
+    read = read_recording(recording)
+    report = analyze(read)
+    stopped = recorded_standstill(read)
     if recording.is_dir() or recording.name == RUN_FILE:  # a run's, every segment
-        write_summary(first.parent, report)
+        write_summary(first.parent, report, stopped)
     if as_json:
-        print(json.dumps(report.to_json()))
+        print(json.dumps({**report.to_json(),
+                          "stopped": stopped.to_dict() if stopped is not None else None}))
     else:
-        print("\n".join(report.lines()))
+        print("\n".join(report.lines() + (stopped_lines(stopped) if stopped else [])))
     return 0 if report.passed else 1
+
+
+def stopped_lines(stopped: Standstill) -> list[str]:
+    """How far a mission that did not finish got, as `fleet analyze` and `fleet run` say it:
+    the headline, then where each forklift stood and what it was at."""
+    head, *vehicles = stopped.lines()
+    return [f"  {'stopped':<{LABEL_WIDTH}}{head}",
+            *(f"  {'':<{LABEL_WIDTH}}{line}" for line in vehicles)]

@@ -71,14 +71,19 @@ def read_run(path: Path) -> tuple[Recording, MissionSummary]:
 def run(args: argparse.Namespace) -> int:
     from fleet.views import plots
     from fleet.views.drawing import save_figure
-    from fleet.wire.protocol import VehicleState
+    from fleet.wire.protocol import MissionDone, VehicleState
 
     recording, record = read_run(args.recording)
     layout = recording.layout()
-    end = record.end_time_s
+    finished = any(m.ok for _, m in recording.of(MissionDone))
+    # A mission that did not finish is drawn up to where its recording ends: the wedge.
+    end = record.end_time_s if finished else \
+        max(record.end_time_s, record.all_parked_s, recording.last_sim_time)
     late = [t for t in args.at if t > end]
     if late:  # a snapshot after the end would show the end under another time's name
-        raise UserError(f"--at {late[0]:.10g}: the run ended at {end:.2f} s; snapshots are drawn "
+        ended = "the run ended" if finished else \
+            "the mission did not finish; its recording ends"
+        raise UserError(f"--at {late[0]:.10g}: {ended} at {end:.2f} s; snapshots are drawn "
                         f"from 0 to {end:.2f} s")
     out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)

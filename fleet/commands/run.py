@@ -4,29 +4,36 @@ summary."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import re
 import signal
 import sys
+import threading
 import time
-from dataclasses import asdict
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fleet.commands.analyze import stopped_lines
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.standstill import Standstill
 from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.reader import read_recording
+from fleet.recording.mission_record import recorded_standstill
+from fleet.recording.reader import Recording, read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.args import add_mission_args, engine_options, mission_from_args
 from fleet.runtime.argtypes import port, port_problem, positive_float, scenario_arg, writable_dir
 from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import strategies_epilog
 from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import MissionDone
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
@@ -81,10 +88,12 @@ SUMMARY_WIDTH = 80  # the summary fits a terminal of 80 columns
 VALUE_COLUMN = 21  # where the value of a "  label   value" line starts
 
 
-def summary_lines(report: Report, wall_s: float, digest: str) -> list[str]:
+def summary_lines(report: Report, wall_s: float, digest: str,
+                  ended: Ending | None = None) -> list[str]:
     """The summary of a run: its recording's numbers as `fleet analyze` has them
-    (docs/metrics.md), the wall time, the record's digest and the verdicts; a line longer
-    than SUMMARY_WIDTH goes on under its value (a path is never broken)."""
+    (docs/metrics.md), the wall time, the record's digest (of a finished mission) or how far
+    an unfinished one got (`ended`), and the verdicts; a line longer than SUMMARY_WIDTH goes
+    on under its value (a path is never broken)."""
     m = report.mission
     under = " " * VALUE_COLUMN
     labelled = [
@@ -92,15 +101,40 @@ def summary_lines(report: Report, wall_s: float, digest: str) -> list[str]:
         f"strategy {m['strategy']}",
         *report.numbers_lines(),
         f"  wall time          {wall_s:.1f} s",
-        f"  record digest      {digest[:16]}",
+        *([f"  record digest      {digest[:16]}"] if ended is None else ended.lines(report)),
     ]
+    at = f" --at {ended.t(report):.2f}" if ended is not None else ""
     verdicts = [
         f"  recording          {report.path}",
         *(f"  {line}" for line in report.verdict_lines()),
         f"  look closer        fleet analyze {report.path}",
-        f"{under}fleet plot {report.path}",
+        f"{under}fleet plot {report.path}{at}",
     ]
     return [*_fitted(labelled, under), *report.vehicle_lines(), *_fitted(verdicts, under)]
+
+
+@dataclass(frozen=True)
+class Ending:
+    """How a mission that did not finish ended: the failure `fleet run` heard, and how far
+    the mission got as the recording has it (None: its dispatcher said nothing, as when it
+    was killed outright)."""
+
+    failure: str
+    stopped: Standstill | None
+
+    def t(self, report: Report) -> float:
+        """The sim time it reached."""
+        return self.stopped.t if self.stopped is not None else report.recovered_sim_s
+
+    def lines(self, report: Report) -> list[str]:
+        if self.stopped is None:
+            return [f"  stopped            the dispatcher said nothing of how far it got; the "
+                    f"recording reaches t={report.recovered_sim_s:.2f} s"]
+        return stopped_lines(self.stopped)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"finished": False, "error": self.failure,
+                "stopped": self.stopped.to_dict() if self.stopped is not None else None}
 
 
 def _fitted(lines: list[str], indent: str) -> list[str]:
@@ -119,10 +153,13 @@ def _fitted(lines: list[str], indent: str) -> list[str]:
     return out
 
 
-def summary_json(report: Report, wall_s: float, digest: str) -> dict[str, Any]:
+def summary_json(report: Report, wall_s: float, digest: str,
+                 ended: Ending | None = None) -> dict[str, Any]:
     """The summary as one JSON object (`fleet run --json`)."""
     vehicles = report.vehicles
     return {
+        **(ended.to_json() if ended is not None else
+           {"finished": True, "error": "", "stopped": None}),
         "mission": report.mission,
         "end_time_s": report.end_time_s,
         "all_parked_s": report.all_parked_s,
@@ -172,37 +209,80 @@ def run(args: argparse.Namespace) -> int:
                       unit="stacks", enabled=not (args.quiet or args.json))
     progress = MissionProgress(bar)
     t0 = time.perf_counter()
-    failure = ""  # why the mission failed, said once the bar has ended
+    stop = threading.Event()  # Ctrl-C or SIGTERM asked the mission to stop
     try:
         if args.inprocess:
-            record = _run_inprocess(mission, layout, args.weights, progress, out, scenario)
+            with _stop_requests(stop):
+                done = _run_inprocess(mission, layout, args.weights, progress, out, scenario,
+                                      stop)
         else:
-            record, failure = _run_processes(mission, n, args, progress, out, scenario)
+            done = _run_processes(mission, n, args, progress, out, scenario)
+    except KeyboardInterrupt:  # every child stopped, the dispatcher's last word recorded
+        stop.set()
+        done = MissionDone(False, error="interrupted")
     finally:
         bar.close()  # first: what is said next goes on lines of its own
-    if record is None:
-        print(f"fleet run: the mission failed: {failure}", file=sys.stderr)
-        print(f"fleet run: logs and what was recorded are in {out}", file=sys.stderr)
-        return 1
     wall_s = time.perf_counter() - t0
-    report = _report(out / "run.mcap")
+    if not done.ok:
+        _say_failed(out, done.error, wall_s, args.json)
+        return 130 if stop.is_set() else 1
+    report = _report(out)
+    digest = digest_of(done.record)
     if args.json:
-        print(json.dumps(summary_json(report, wall_s, digest_of(record))))
+        print(json.dumps(summary_json(report, wall_s, digest)))
     else:
-        print("\n".join(summary_lines(report, wall_s, digest_of(record))))
+        print("\n".join(summary_lines(report, wall_s, digest)))
     return 0 if report.passed else 1  # a failed verdict fails the run
+
+
+def _say_failed(out: Path, failure: str, wall_s: float, as_json: bool) -> None:
+    """A mission that did not finish: why, then the summary of what its recording holds (how
+    far it got, the verdicts), when there is one to read."""
+    print(f"fleet run: the mission did not finish: {failure}", file=sys.stderr)
+    try:
+        recording = read_recording(out)
+        report = _report(out, recording)
+    except UserError as exc:  # nothing readable was recorded (a run that never started)
+        print(f"fleet run: no summary: {exc}", file=sys.stderr)
+    else:
+        ended = Ending(failure, recorded_standstill(recording))
+        if as_json:
+            print(json.dumps(summary_json(report, wall_s, "", ended)))
+        else:
+            print("\n".join(summary_lines(report, wall_s, "", ended)))
+    print(f"fleet run: logs and what was recorded are in {out}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _stop_requests(stop: threading.Event) -> Iterator[None]:
+    """While the in-process mission runs, the first Ctrl-C or SIGTERM asks it to stop before
+    its next decision (`stop`), so what it did is recorded whole; a second Ctrl-C interrupts
+    at once. A signal this process ignores stays ignored."""
+    def ask(*_) -> None:
+        stop.set()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = {sig: signal.signal(sig, ask) for sig in (signal.SIGINT, signal.SIGTERM)
+                if signal.getsignal(sig) is not signal.SIG_IGN}  # as `nohup` left it
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def command_line() -> str:
     return " ".join(["fleet", *sys.argv[1:]])
 
 
-def _report(path: Path) -> Report:
-    """The analysis of the run's recording: its numbers and verdicts."""
+def _report(out: Path, recording: Recording | None = None) -> Report:
+    """The analysis of the run's recording (every segment in its directory `out`): its
+    numbers and verdicts, kept in the directory for `fleet runs`."""
     from fleet.analysis.analyze import analyze
 
-    report = analyze(read_recording(path))
-    write_summary(path.parent, report)  # what `fleet runs` lists
+    recording = recording or read_recording(out)
+    report = analyze(recording)
+    write_summary(out, report, recorded_standstill(recording))
     return report
 
 
@@ -217,20 +297,21 @@ def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int)
 
 
 def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
-                   progress: MissionProgress, out: Path,
-                   scenario: Scenario | None) -> dict[str, Any]:
+                   progress: MissionProgress, out: Path, scenario: Scenario | None,
+                   stop: threading.Event) -> MissionDone:
+    """The mission's result; its recording, up to where it ended, in `out`."""
     options = engine_options(mission, layout, weights,
                              lambda done, total, t, failures: progress(done, t, failures))
     progress.status("planning the first subtask")
-    done, stream = recorded_run(mission, layout, options, command_line(), scenario)
+    done, stream = recorded_run(mission, layout, options, command_line(), scenario, stop)
     write_recording(out / "run.mcap", stream, layout)
-    return done.record
+    return done
 
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
                    progress: MissionProgress, out: Path,
-                   scenario: Scenario | None) -> tuple[dict[str, Any] | None, str]:
-    """The mission's record, or None and why the mission failed."""
+                   scenario: Scenario | None) -> MissionDone:
+    """The mission's result (not ok: why it failed, the dispatcher's or a dead child's)."""
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
@@ -251,6 +332,4 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
     outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures),
                             lambda *_: progress.status("all started; waiting for the first "
                                                        "subtask"))
-    if outcome.done is None or not outcome.done.ok:
-        return None, outcome.error
-    return outcome.done.record, ""
+    return outcome.done if outcome.done is not None else MissionDone(False, error=outcome.error)

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from fleet.errors import UserError
+from fleet.mission.standstill import Standstill
 from fleet.recording.reader import RecordingError, read_description, result_recorded
 from fleet.recording.rundir import MARKER, RUNS, marker_of, run_id_of
 from fleet.recording.segments import RUN_FILE, segment_paths
@@ -62,35 +63,42 @@ class RunEntry:
     verdicts: dict[str, bool] = field(default_factory=dict)  # safety, work, messages
     problem: str = ""  # why it is unreadable or has no result, or its summary no longer holds
     incomplete: bool = False  # its figures miss what no recorder or record kept
+    stopped: str = ""  # a mission that did not finish: how and when ("stuck at t=1913.00 s")
 
     @property
     def verdict_text(self) -> str:
         whole = "; figures incomplete" if self.incomplete else ""
+        stopped = f"; {self.stopped}" if self.stopped else ""
         if self.verdict == "FAIL":
-            return "FAIL: " + ", ".join(k for k in VERDICTS if not self.verdicts.get(k)) + whole
-        return (f"{self.verdict} ({self.problem})" if self.problem else self.verdict) + whole
+            return "FAIL: " + ", ".join(k for k in VERDICTS if not self.verdicts.get(k)) + \
+                stopped + whole
+        return (f"{self.verdict} ({self.problem})" if self.problem else self.verdict) + \
+            stopped + whole
 
 
 # -------------------------------------------------------------------------- the summary
 
 
-def summary_of(report, run_id: str | None, segments: dict[str, int]) -> dict[str, Any]:
-    """What `fleet runs` keeps of a judged run (a fleet.analysis.report.Report)."""
+def summary_of(report, run_id: str | None, segments: dict[str, int],
+               stopped: Standstill | None = None) -> dict[str, Any]:
+    """What `fleet runs` keeps of a judged run (a fleet.analysis.report.Report), and of one
+    that did not finish how far it got (`stopped`, as its recording says)."""
     verdicts = {"safety": report.safe, "work": report.work_done,
                 "messages": report.messages_lost == 0}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,
             "finished": report.finished, "end_time_s": report.end_time_s,
+            "stopped": stopped.to_dict() if stopped is not None else None,
             "verdicts": verdicts, "passed": report.passed, "incomplete": report.incomplete,
             "segments": segments}
 
 
-def write_summary(run_dir: Path, report) -> None:
+def write_summary(run_dir: Path, report, stopped: Standstill | None = None) -> None:
     """Keep the verdicts `fleet run` or `fleet analyze` just gave in the run directory
     (written whole, then renamed into place: never half a file). A summary.json that is not
     one of these is left alone, and one that already says the same is not written again.
     Failing to keep it fails nothing (one note): `fleet runs` then lists the run as not
     analysed."""
-    summary = summary_of(report, run_id_of(run_dir), _segment_sizes(run_dir))
+    summary = summary_of(report, run_id_of(run_dir), _segment_sizes(run_dir), stopped)
     if (run_dir / SUMMARY).exists():
         kept = _summary(run_dir)
         if kept is None:
@@ -148,6 +156,7 @@ def describe(run_dir: Path) -> RunEntry:
         entry.verdicts = {k: bool(verdicts.get(k)) for k in VERDICTS}
         entry.verdict = "pass" if all(entry.verdicts.values()) else "FAIL"
         entry.incomplete = bool(summary.get("incomplete"))
+        entry.stopped = _stopped_text(summary.get("stopped"))
         return entry
     if summary is not None:
         entry.problem = "its recording changed since it was judged"
@@ -183,6 +192,17 @@ def _summary(run_dir: Path) -> dict | None:
         isinstance(data.get(k), dict) for k in ("mission", "verdicts", "segments")) and \
         isinstance(data.get("end_time_s"), int | float)
     return data if shaped else None
+
+
+def _stopped_text(stopped: Any) -> str:
+    """How and when a judged run's mission stopped, from its summary ("" when it finished,
+    or the summary does not say in the expected shape)."""
+    if not isinstance(stopped, dict):
+        return ""
+    cause, t = stopped.get("cause"), stopped.get("t")
+    if not isinstance(cause, str) or not isinstance(t, int | float) or isinstance(t, bool):
+        return ""
+    return f"{cause} at t={t:.2f} s"
 
 
 def _modified(run_dir: Path) -> float:

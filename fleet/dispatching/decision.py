@@ -26,6 +26,7 @@ class Strategy(Enum):
 class TaskKind(Enum):
     DELIVER = "deliver"  # to a shelf cluster (put goods in fill, take goods in empty)
     RETURN = "return"  # to a picking station
+    ASIDE = "aside"  # out of another vehicle's way (a deadlock broken; no policy decides it)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from fleet.dispatching.algorithm1 import MlpFn
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
+from fleet.mission.deadlock import Wait, WaitKind, deadlocks
 from fleet.mission.drive_log import AddLeg, DriveLog
 from fleet.mission.fault_response import FaultResponse
 from fleet.mission.freeze import Disruption, VehicleDown
@@ -32,20 +33,37 @@ from fleet.mission.pickup import Recovered
 from fleet.mission.record import FailureEvent, MissionRecord, Subtask, subtask_event
 from fleet.mission.seam import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.standstill import Cause, Standstill, failure_text, standstill
+from fleet.mission.step_aside import SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationTable
-from fleet.planning.trajectory import PlanFailure, Trajectory
-from fleet.wire.protocol import DecisionFailure, Message, StackDone
+from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
+from fleet.vehicles.kind import Planner
+from fleet.wire.protocol import DeadlockSeen, DecisionFailure, Message, StackDone
 from fleet.world.layout import Layout, LayoutError
 from fleet.world.layout_file import load_layout
+
+# A vehicle whose plans failed this often since the last subtask, on a way nobody parked
+# for good closes, waits for those on its shortest way (see Engine._wait).
+REPLANS_BEFORE_SHORTEST = 2
+# The same for every vehicle after this many failed decisions in a row, since the preliminary
+# A* may fail every choice before a plan is tried (fault-free runs on `paper` reach 238 with
+# comprehensive, which breaks no deadlock: a lower count would move vehicles there that the
+# way of fewest moves only seems to need).
+DECISIONS_BEFORE_SHORTEST = 100
 
 
 class MissionStuck(UserError):
     """No subtask could be planned for a long run of attempts (the layout or fleet leaves
-    no way forward); the message says when and what failed last."""
+    no way forward); the message says when and what failed last, `standstill` how far the
+    mission got and where each forklift stood."""
+
+    def __init__(self, standstill: Standstill) -> None:
+        super().__init__(standstill.reason)
+        self.standstill = standstill
 
 
 @dataclass(frozen=True)
@@ -84,15 +102,17 @@ class FailureStreak:
     failed: list[int] = field(default_factory=list)  # vehicles whose plan failed, in order
     count: int = 0
     tried: dict[int, set[str]] = field(default_factory=dict)  # targets each failed to reach
+    plans_failed: dict[int, int] = field(default_factory=dict)  # per vehicle
 
     def succeeded(self) -> None:
-        self.failed, self.count, self.tried = [], 0, {}
+        self.failed, self.count, self.tried, self.plans_failed = [], 0, {}, {}
 
     def undecided(self) -> None:
         self.count += 1
 
     def plan_failed(self, vehicle: int, target: str) -> None:
         self.tried.setdefault(vehicle, set()).add(target)
+        self.plans_failed[vehicle] = self.plans_failed.get(vehicle, 0) + 1
         self.failed = [v for v in self.failed if v != vehicle] + [vehicle]
         self.count += 1
 
@@ -132,6 +152,10 @@ class Engine:
         self.faults = FaultResponse(self.fleet, self.record.starts, self.executor, self.work,
                                     self.record, self.drive_log, self.layout, self._emit)
         self.streak = FailureStreak()
+        self.waits: dict[int, Wait] = {}  # the wait-for graph, as of the table's revision
+        self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
+        self.asides = 0  # vehicles sent aside since the last subtask of the work
+        self.said_walled: set[tuple[int, int]] = set()  # (vehicle, revision) reported
         self.now = 0.0  # the instant the clock was last moved to
         self.undelivered: tuple[tuple[str, int, float, int], ...] = ()
         if recovered is not None:  # a restarted dispatcher: where the forklifts really are
@@ -211,6 +235,7 @@ class Engine:
 
     def _disrupt(self, disruption: Disruption) -> None:
         self.streak.tried = {}  # the table changes: a target that failed may not fail now
+        self.waits = {}  # and who can move, whatever the table's revision says
         self.faults.disrupt(disruption)
 
     def _decide(self, active: list[VehicleSlot]) -> None:
@@ -232,12 +257,18 @@ class Engine:
                 min(v.t_free for v in active), None, "dispatch",
                 f"no solid decision within iter_dispatch={self.options.params.iter_dispatch}"))
             self.streak.undecided()
+            self._break_deadlocks()
         else:
             self._carry_out(outcome.decision, remaining)
         if self.streak.count > self.options.max_consecutive_failures:
-            raise MissionStuck(f"{self.streak.count} decisions in a row failed at t="
-                               f"{min(v.t_free for v in active):.2f} s; last: "
-                               f"{self.record.failures[-1]}")
+            raise MissionStuck(self.standstill(Cause.STUCK, (
+                f"{self.streak.count} decisions in a row failed by t={self.now:.2f} s; the "
+                f"last: {failure_text(self.record.failures[-1])}")))
+
+    def standstill(self, cause: Cause, reason: str) -> Standstill:
+        """How far the mission got, as it stops now (fleet/mission/standstill.py)."""
+        return standstill(cause, reason, self.now, self.fleet.values(), self.faults.down,
+                          self.record, self.streak, self.work.total)
 
     def _carry_out(self, decision: Decision, remaining: dict[str, int]) -> None:
         try:
@@ -254,11 +285,105 @@ class Engine:
         if isinstance(result, Trajectory):
             self._apply(decision, result)
             self.streak.succeeded()
+            self.asides = 0
+            self.waiting_since.pop(decision.vehicle, None)
         else:
             self.streak.plan_failed(decision.vehicle, decision.target.name)
             self.record.decision_failures += 1
             self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
                                       result.reason.value))
+            self._break_deadlocks()
+
+    # -- deadlocks (fleet/mission/deadlock.py, fleet/mission/step_aside.py) -------------------
+    def _break_deadlocks(self) -> None:
+        """Once every vehicle with work had a chance to fail since the last subtask, find the
+        ones stuck for good and send one vehicle aside to free the longest waiting."""
+        active = self.active()
+        if self.streak.count < len(active) or self.asides >= 3 * len(self.fleet):
+            return  # not all tried yet; or sending aside goes round in circles: give up
+        store = self.executor.store
+        planner = self.planners.get(self.work.filled)
+        poses = {v.vehicle: v.pose for v in self.fleet.values()}
+
+        def movable(owner: int) -> bool:
+            return owner in self.fleet and owner not in self.faults.down
+
+        idle = {v for v in self.fleet if v not in self.faults.down}
+        self.waits = {v: w for v, w in self.waits.items() if w.revision == store.revision}
+        for v in active:
+            if not self.work.targets(v.view(), poses):
+                continue  # offered nothing to do now: it cannot move by itself
+            idle.discard(v.vehicle)
+            known = self.waits.get(v.vehicle)
+            if known is None or (not known.shortest and not known.blockers
+                                 and self._replanned(v.vehicle)):
+                self.waits[v.vehicle] = self._wait(v, planner, movable)
+            self.waiting_since.setdefault(v.vehicle, self.now)
+        for deadlock in deadlocks(self.waits, idle, self.waiting_since):
+            if deadlock.kind is WaitKind.WALLED:
+                if (deadlock.waiting, store.revision) not in self.said_walled:
+                    self.said_walled.add((deadlock.waiting, store.revision))
+                    self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
+                                            list(deadlock.chain), None, None, None))
+                continue
+            sent = break_deadlock(deadlock, self.waits, planner, store, poses,
+                                  self.work.keep_clear(), self._send_aside)
+            if sent is not None:
+                self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
+                                        list(deadlock.chain), sent.vehicle,
+                                        str(sent.trajectory.goal), sent.for_vehicle))
+                self._sent_aside(sent)
+                return
+
+    def _wait(self, v: VehicleSlot, planner: Planner, movable: Callable[[int], bool]) -> Wait:
+        """The vehicle's way as the wait-for graph sees it. A way that crosses nobody parked
+        for good but that its plans kept failing to find (the search gives up on long
+        detours) counts as blocked by whoever stands on its shortest way."""
+        store, goals = self.executor.store, self.work.wanted(v.view())
+        way = planner.blockage(v.vehicle, v.pose, goals, store, movable)
+        if way is not None and not way.blockers and self._replanned(v.vehicle):
+            way = planner.blockage(v.vehicle, v.pose, goals, store, movable, shortest=True)
+            return Wait(v.vehicle, way, store.revision, shortest=True)
+        return Wait(v.vehicle, way, store.revision)
+
+    def _replanned(self, vehicle: int) -> bool:
+        """Whether its plans, or every decision, kept failing since the last subtask (the
+        preliminary A* may fail every choice without a plan being tried)."""
+        return (self.streak.plans_failed.get(vehicle, 0) >= REPLANS_BEFORE_SHORTEST
+                or self.streak.count >= DECISIONS_BEFORE_SHORTEST)
+
+    def _seen(self, deadlock: DeadlockSeen) -> None:
+        self.record.deadlocks.append(deadlock)
+        self._emit(deadlock, deadlock.t)
+
+    def _send_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
+        """Plan and commit the vehicle's move to the nearest siding it can reach."""
+        v = self.fleet[vehicle]
+        t0 = max(v.t_free, self.now)
+        t_i = self.pacer.before_decision(t0, {vehicle: t0})[vehicle]
+        try:
+            result = self.executor.execute(Task(vehicle, TaskKind.ASIDE, v.pose, t_i, sidings,
+                                                self.work.filled,
+                                                loaded=self.work.loaded(v.next_task)))
+        except VehicleLost as exc:
+            self._disrupt(VehicleDown(exc.vehicle, self.pacer.instant(self.now),
+                                      f"agent lost: {exc}"))
+            return None
+        return result if isinstance(result, Trajectory) else None
+
+    def _sent_aside(self, sent: SentAside) -> None:
+        v, traj = self.fleet[sent.vehicle], sent.trajectory
+        self.faults.committed(dataclasses.replace(v), traj)
+        waited = sum(s.t1 - s.t0 for s in traj.steps
+                     if self.vehicle_kind.is_wait(s.manner.label))
+        v.step_aside(traj, waited)
+        self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(v.next_task)))
+        subtask = Subtask(v.vehicle, TaskKind.ASIDE, f"aside for {sent.for_vehicle}", None,
+                          None, traj.t_start, traj.t_end, traj.t_end, traj, False)
+        self.record.subtasks.append(subtask)
+        self._emit(subtask_event(subtask), traj.t_start)
+        self.asides += 1
+        self.streak.forget({v.vehicle})
 
     def _emit(self, message: Message, t: float) -> None:
         if self.options.events is not None:

@@ -19,7 +19,7 @@ class HeldLeg:
     pose: Pose  # where it stands once everything committed is driven
     leg: Trajectory | None  # its last committed leg
     loaded: bool
-    kind: str  # what the leg was for: "deliver", "return", or "" (none, or cut short)
+    kind: str  # what the leg was for: "deliver", "return", "aside", or "" (none, or cut short)
     down: bool
 
 
@@ -58,7 +58,7 @@ def recovered_state(stacks, goods: dict[Cell, float], held: list[HeldLeg], t: fl
                 undelivered.append((*by_cell[stack], end, h.vehicle))
         elif h.kind == "return":
             delivers_next[h.vehicle], handling = True, t_claim
-        else:  # cut short: still carrying goods, or still on its way back
+        else:  # cut short, or sent aside: carrying goods (a delivery next) or not
             delivers_next[h.vehicle], handling = h.loaded, 0.0
         t_free[h.vehicle] = max(end + handling, t)
         if h.leg is not None:

@@ -21,6 +21,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
+    DeadlockSeen,
     DecisionFailure,
     RecordStep,
     SubtaskEvent,
@@ -70,6 +71,7 @@ class MissionRecord:
     halts: list[tuple[int, float, str]] = field(default_factory=list)  # vehicle, t, cause
     resumes: list[tuple[int, float]] = field(default_factory=list)
     cut_subtasks: list[int] = field(default_factory=list)  # indices of subtasks cut short
+    deadlocks: list[DeadlockSeen] = field(default_factory=list)  # found, and how each broke
 
     @property
     def total_wait_s(self) -> float:
@@ -108,7 +110,7 @@ class SubtaskRecord:
     (dispatch/subtask): its whole trajectory, step by step, and the cells it reserved."""
 
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     target: str  # cluster or station
     stack: int | None  # stack index in the cluster, for deliveries
     t_i: float
@@ -206,6 +208,8 @@ class MissionSummary:
     halts: tuple[HaltRecord, ...] = ()
     resumes: tuple[ResumeRecord, ...] = ()
     cut_subtasks: tuple[int, ...] = ()  # indices into `subtasks` of those cut short
+    # Deadlocks found and how each was broken (none in most runs: their digests stay).
+    deadlocks: tuple[DeadlockSeen, ...] = ()
     # Rebuilt from a recording: what its figures miss (fleet.recording.mission_record);
     # empty when they are whole (always, in a dispatcher's own record).
     incomplete: tuple[str, ...] = ()
@@ -222,7 +226,8 @@ class MissionSummary:
             tuple(DecisionFailure(f.t, f.vehicle, f.stage, f.reason) for f in rec.failures),
             tuple(SubtaskRecord.of_event(subtask_event(s)) for s in rec.subtasks),
             tuple(HaltRecord(*h) for h in rec.halts),
-            tuple(ResumeRecord(*r) for r in rec.resumes), tuple(rec.cut_subtasks))
+            tuple(ResumeRecord(*r) for r in rec.resumes), tuple(rec.cut_subtasks),
+            tuple(rec.deadlocks))
 
     def to_dict(self) -> dict[str, Any]:
         """As JSON-able data: the dispatcher's result, which the digest is taken over."""
@@ -242,6 +247,8 @@ class MissionSummary:
             out |= {"halts": [[h.vehicle, h.t, h.cause] for h in self.halts],
                     "resumes": [[r.vehicle, r.t] for r in self.resumes],
                     "cut_subtasks": list(self.cut_subtasks)}
+        if self.deadlocks:
+            out["deadlocks"] = [body_of(d) for d in self.deadlocks]
         if self.incomplete:
             out["incomplete"] = list(self.incomplete)
         return out

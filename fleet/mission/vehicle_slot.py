@@ -29,6 +29,14 @@ class VehicleSlot:
         self.wait_s += t - self.t_free
         self.t_free = t
 
+    def step_aside(self, traj: Trajectory, waited: float) -> None:
+        """Sent out of another's way: it stands at the siding from the arrival on, with the
+        same subtask next (and the goods it carried)."""
+        self.busy_s += traj.t_end - traj.t_start - waited
+        self.wait_s += waited
+        self.pose = traj.goal
+        self.t_free = max(self.t_free, traj.t_end)
+
     def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float,
               waited: float) -> None:
         """A subtask committed (`waited`: the seconds of its steps that wait in place): it

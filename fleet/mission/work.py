@@ -22,7 +22,7 @@ from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationView
 from fleet.planning.trajectory import Pose
-from fleet.vehicles.kind import Planners
+from fleet.vehicles.kind import Planner, Planners
 from fleet.world.layout import Layout, Stack
 
 
@@ -71,6 +71,13 @@ class MissionWork(Protocol):
 
     def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
         """A decided subtask was committed: the work it does is no longer left."""
+
+    def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
+        """Every pose the vehicle's next subtask could end at, whoever stands where: what the
+        wait-for graph (fleet/mission/deadlock.py) asks its way to."""
+
+    def keep_clear(self) -> frozenset[Cell]:
+        """Cells a vehicle sent aside should not stop on (where the work still goes)."""
 
     def reopen(self, cluster: str, index: int) -> Cell:
         """A delivery was cut short before it arrived: its stack is to do again. Returns the
@@ -172,6 +179,17 @@ class StackWork(ABC):
                                       len(queue), cluster.name in self.far))
         return targets
 
+    def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
+        if view.next_task is TaskKind.RETURN:
+            return tuple(st.dock for st in self.layout.stations)
+        return tuple(pose for queue in self.queue.values() if queue
+                     for pose in self.layout.unload_poses(queue[0].cell,
+                                                          self.present - {queue[0].cell}))
+
+    def keep_clear(self) -> frozenset[Cell]:
+        return frozenset({st.dock.cell for st in self.layout.stations}
+                         | {s.cell for queue in self.queue.values() for s in queue})
+
     def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
         if decision.kind is not TaskKind.DELIVER:
             return None
@@ -224,15 +242,16 @@ class FillWork(StackWork):
                    ) -> list[Pose]:
         if self.store.conflict(view.vehicle, stack.cell, view.t_free, math.inf) is not None:
             return []  # another forklift stands on or will cross the stack's cell
-        others = [p for v, p in poses.items() if v != view.vehicle]
-        return self.poses_with_a_way_out(super()._candidate(view, stack, poses),
-                                         self.present | {stack.cell}, others)
+        return self.poses_with_a_way_out(view.vehicle, super()._candidate(view, stack, poses),
+                                         self.present | {stack.cell}, poses)
 
-    def poses_with_a_way_out(self, poses: list[Pose], after: set[Cell],
-                             others: list[Pose]) -> list[Pose]:
+    def poses_with_a_way_out(self, vehicle: int, poses: list[Pose], after: set[Cell],
+                             fleet: dict[int, Pose]) -> list[Pose]:
         """Unload poses from which a station dock is still reachable once the stack is filled
-        (a pose beside the stack may be reachable only by sweeping the stack's own cell); none
-        if filling the stack would wall in another forklift where it stands."""
+        (a pose beside the stack may be reachable only by sweeping the stack's own cell), and
+        that do not trap the forklift with another parked in its way; none if filling the
+        stack would wall in another forklift where it stands."""
+        others = [p for v, p in fleet.items() if v != vehicle]
         planner = self.planners.get(frozenset(after))
         docks = {planner.component(st.dock) for st in self.layout.stations}
         now = self.planners.get(frozenset(self.present))
@@ -240,7 +259,20 @@ class FillWork(StackWork):
         if any(planner.component(p) not in docks and now.component(p) in docks_now
                for p in others):
             return []
-        return [p for p in poses if planner.component(p) in docks]
+        return [p for p in poses if planner.component(p) in docks
+                and not self._trapped(vehicle, p, planner, fleet)]
+
+    def _trapped(self, vehicle: int, pose: Pose, planner: Planner,
+                 fleet: dict[int, Pose]) -> bool:
+        """Parked at `pose` once the stack is filled, every move out of it would cross a
+        forklift parked for good that could not leave either with this one there: neither
+        could ever move (a deadlock that no forklift sent aside can break)."""
+        blockers = planner.exit_blockers(vehicle, pose, self.store)
+        if not blockers:
+            return False
+        mine = planner.rest_cells(pose)
+        return any(planner.exit_blockers(b, fleet[b], self.store, mine) != frozenset()
+                   for b in blockers if b in fleet)
 
 
 class EmptyWork(StackWork):

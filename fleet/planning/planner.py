@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import NamedTuple
@@ -23,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fleet.params import ManeuverTimes, SearchParams, VehicleDims
+from fleet.planning.blockage import Blockage, blockage, held_for_good, sidings
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.maneuvers import Kind, Manner, Move, move_table
@@ -337,13 +339,45 @@ class HybridAStar:
                     heapq.heappush(heap, (t_end, *key))
         return False
 
+    def rest_cells(self, pose: Pose) -> list[Cell]:
+        """The cells the body covers at rest at `pose`."""
+        return [(pose.cell[0] + a, pose.cell[1] + b)
+                for a, b in self.moves[pose.heading][0].start_cells]
+
+    def blockage(self, vehicle: int, start: Pose, goals: Sequence[Pose],
+                 store: ReservationView, movable: Callable[[int], bool],
+                 shortest: bool = False) -> Blockage | None:
+        """Who stands for good in the way to the goals (fleet/planning/blockage.py)."""
+        return blockage(self.edges, self.rest_cells, vehicle, start, goals, store, movable,
+                        shortest)
+
+    def sidings(self, vehicle: int, start: Pose, store: ReservationView,
+                avoid: Collection[Cell], limit: int) -> list[Pose]:
+        """The nearest poses to step aside to, off `avoid` (fleet/planning/blockage.py)."""
+        return sidings(self.edges, self.rest_cells, vehicle, start, store, avoid, limit)
+
     def _goal_can_park(self, vehicle: int, goal: Pose, store: ReservationView) -> bool:
         cells = [(goal.cell[0] + a, goal.cell[1] + b)
                  for a, b in self.moves[goal.heading][0].start_cells]
         if not self.grid.all_free(cells):
             return False
         # Someone parked there for good can never be waited out.
-        return all(store.conflict(vehicle, c, 1e300, INF) is None for c in cells)
+        return all(held_for_good(store, vehicle, c) is None for c in cells)
+
+    def exit_blockers(self, vehicle: int, pose: Pose, store: ReservationView,
+                      also_held: Collection[Cell] = ()) -> frozenset[int] | None:
+        """Who holds for good the cells of every move out of `pose` (with `also_held` held
+        too): empty when some move leads out, None when goods or zones close every move."""
+        blockers: set[int] = set()
+        for edge in self.edges(*pose.cell, pose.heading):
+            if edge.kind is Kind.STOP:
+                continue
+            cells = (*edge.body_cells, *edge.end_cells)
+            owners = {held_for_good(store, vehicle, c) for c in cells} - {None}
+            if not owners and not set(cells) & set(also_held):
+                return frozenset()
+            blockers |= {o for o in owners if o is not None}
+        return frozenset(o for o in blockers if o > 0) if blockers else None
 
     def _build(self, vehicle: int, start: Pose, goal_node: _Node,
                expansions: int) -> Trajectory:

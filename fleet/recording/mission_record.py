@@ -7,6 +7,8 @@ dispatcher announced then is in its final record (dispatch/done: every subtask, 
 stack of that dispatcher), so it is taken from there. A dispatcher that died and was replaced
 (docs/faults.md) left no record: what it announced while no recorder ran is known nowhere,
 and the rebuilt record's `incomplete` says so (empty: the figures are whole).
+
+A mission that did not finish says how far it got (dispatch/stopped): `recorded_standstill`.
 """
 
 from __future__ import annotations
@@ -24,12 +26,15 @@ from fleet.mission.record import (
     SubtaskRecord,
     failure_from_dict,
 )
+from fleet.mission.standstill import Standstill
 from fleet.recording.reader import Recorded, Recording, RecordingError
 from fleet.wire.protocol import (
+    DeadlockSeen,
     DecisionFailure,
     Halt,
     MissionDone,
     MissionInfo,
+    MissionStopped,
     Progress,
     ProtocolError,
     Resume,
@@ -43,8 +48,8 @@ from fleet.wire.protocol import (
 # first messages were not recorded (a stream shared by threads may swap a few neighbours).
 RESTART_DROP = 16
 # What each dispatcher publishes, each key numbered from 1 by each dispatcher that runs.
-EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, Halt, Resume,
-          StackReopened, ZoneClosed)
+EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, DeadlockSeen, Halt,
+          Resume, StackReopened, ZoneClosed)
 # Those the numbers are made of: the first three are in the final record too; a halt's stand
 # time and a stack reopened are in the recording only.
 IN_RECORD = (SubtaskEvent, DecisionFailure, StackDone)
@@ -125,7 +130,8 @@ def summary_of(recording: Recording) -> MissionSummary:
         decision_failures=decision_failures(
             recording, restarts, account.decision_failures if account else None, failures),
         wait_s=wait, busy_s=busy, stacks_done=tuple(stacks), failures=tuple(failures),
-        subtasks=tuple(subtasks), incomplete=tuple(incomplete))
+        subtasks=tuple(subtasks), deadlocks=tuple(m for _, m in recording.of(DeadlockSeen)),
+        incomplete=tuple(incomplete))
 
 
 def dispatcher_restarts(recording: Recording) -> list[Restart]:
@@ -266,3 +272,17 @@ def _dispatcher_account(record: dict) -> Account | None:
         return Account({int(k): v for k, v in busy.items()},
                        {int(k): v for k, v in wait.items()}, failures)
     return None
+
+
+def recorded_standstill(recording: Recording) -> Standstill | None:
+    """How far a mission that did not finish got, as its dispatcher said when it stopped
+    (fleet/mission/standstill.py); None when the mission finished, or when no account of it
+    was recorded (a dispatcher killed outright says nothing) or it is damaged."""
+    done = recording.of(MissionDone)
+    stopped = recording.of(MissionStopped)
+    if (done and done[-1][1].ok) or not stopped:
+        return None
+    try:
+        return Standstill.of_message(stopped[-1][1])
+    except ProtocolError:
+        return None

@@ -1,7 +1,8 @@
 """One mission as processes on this machine (what `fleet run` does): a zenoh router on a
 loopback port, the recorder, the reservation service, one agent per forklift and the
 dispatcher, all clients of the router. This process follows the dispatcher's progress and
-result, and stops every child when the mission ends, on Ctrl-C, or as soon as any child dies."""
+result, and stops every child when the mission ends, on Ctrl-C (the dispatcher first, so the
+recording ends with how far the mission got), or as soon as any child dies."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import dataclasses
 import json
 import logging
 import queue
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -151,6 +153,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
     secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles) \
         if spec.secure else None
+    recorded = threading.Event()  # the recorder holds the mission's result
 
     def bus(principal: str, connect: str = endpoint) -> BusFlags:
         """How a process reaches the router, logged in as `principal` in a secure run."""
@@ -191,7 +194,6 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                 router)
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
-        recorded = threading.Event()  # the recorder holds the mission's result
         clock_started = threading.Event()  # every forklift was up: the mission runs
         subscribers.append(session.declare_subscriber(keys.clock,
                                                       lambda _: clock_started.set()))
@@ -218,6 +220,10 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                           injector.applied if injector else [])
     except RunFailed as exc:
         return RunOutcome(None, str(exc), endpoint, log_dir)
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM as fleet run has it: what ran is recorded
+        if spec.record and session is not None:
+            _stop_dispatcher_first(launcher, recorded)
+        raise
     finally:
         if injector is not None:
             injector.close()
@@ -226,6 +232,18 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         launcher.stop_all()
         for proxy in proxies.values():
             proxy.close()
+
+
+def _stop_dispatcher_first(launcher: Launcher, recorded: threading.Event) -> None:
+    """Stop the dispatcher alone, and wait (up to RECORDED_TIMEOUT_S) until the recorder
+    holds its last word: how far the mission got and its result (docs/runtime.md)."""
+    try:
+        launcher.signal("dispatcher", signal.SIGTERM)
+    except RuntimeError:  # not started yet, or gone: it has nothing more to say
+        return
+    if not recorded.wait(RECORDED_TIMEOUT_S):
+        log.warning("the recorder had not recorded the dispatcher's last word within %g s",
+                    RECORDED_TIMEOUT_S)
 
 
 def _follow(inbox: queue.Queue, on_progress: Callable[[Progress], None] | None,

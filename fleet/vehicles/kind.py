@@ -21,10 +21,11 @@ kind about a label without knowing its manners.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
+from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import Interval, ReservationView
@@ -73,6 +74,29 @@ class Planner(Protocol):
 
     def component(self, pose: Pose) -> int | None:
         """The pose's connected component on the static map (None: on a blocked cell)."""
+        ...
+
+    def blockage(self, vehicle: int, start: Pose, goals: Sequence[Pose],
+                 store: ReservationView, movable: Callable[[int], bool],
+                 shortest: bool = False) -> Blockage | None:
+        """The way to any goal crossing the fewest cells held for good by movable vehicles
+        (with `shortest`, the way of fewest moves), and who holds them (None: walled in by
+        goods, zones or vehicles that cannot move)."""
+        ...
+
+    def rest_cells(self, pose: Pose) -> list[Cell]:
+        """The cells the body covers at rest at `pose` (on this planner's map)."""
+        ...
+
+    def exit_blockers(self, vehicle: int, pose: Pose, store: ReservationView,
+                      also_held: Collection[Cell] = ()) -> frozenset[int] | None:
+        """Who holds the cells of every move out of `pose` for good (with `also_held` held
+        too): empty when a move leads out, None when goods or zones close every move."""
+        ...
+
+    def sidings(self, vehicle: int, start: Pose, store: ReservationView,
+                avoid: Collection[Cell], limit: int) -> list[Pose]:
+        """The nearest poses the vehicle can step aside to and park at, off `avoid`."""
         ...
 
 

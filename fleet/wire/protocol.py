@@ -150,7 +150,7 @@ class TaskRequest(Message):
     TYPE: ClassVar[str] = "dispatch.task"
     task_id: str
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     start: str  # pose "col,row,H" where the dispatcher believes the forklift stands
     t_i: float
     goals: list[str]
@@ -227,6 +227,30 @@ class MissionDone(Message):
     detections: list[dict] = field(default_factory=list)  # faults seen (dispatcher/clock.py)
 
 
+# One forklift where a mission that did not finish left it (fleet/mission/standstill.py):
+# (vehicle, the pose it stands at once its committed legs are driven, from when, its next
+# task "deliver" or "return", down (frozen by a fault), the targets it failed to reach since
+# its last subtask, its last failure since then ("" none)).
+WireStanding = tuple[int, PoseText, float, str, bool, list[str], str]
+
+
+@dataclass(frozen=True)
+class MissionStopped(Message):
+    """How far a mission that did not finish got, published just before the dispatcher's
+    result: why it stopped (`cause`: "stuck", "stopped" by a signal, "lost" a participant,
+    "failed" otherwise; `reason` says it in words), the sim time it reached, the stacks done
+    of the total, the decisions that failed in a row, and where each forklift stood."""
+
+    TYPE: ClassVar[str] = "dispatch.stopped"
+    cause: str
+    reason: str
+    t: float
+    stacks_done: int
+    stacks_total: int
+    failures_in_a_row: int
+    vehicles: list[WireStanding]
+
+
 # (manner label, start pose, end pose, t0, t1, v0, v1): one maneuver of a recorded subtask.
 RecordStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int]
 
@@ -256,7 +280,7 @@ class SubtaskEvent(Message):
 
     TYPE: ClassVar[str] = "dispatch.subtask"
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     target: str  # cluster or station
     stack: int | None  # stack index in the cluster, for deliveries
     t_i: float
@@ -285,6 +309,21 @@ class DecisionFailure(Message):
     vehicle: int | None  # None: no solid decision at all
     stage: str  # "dispatch" or "plan"
     reason: str
+
+
+@dataclass(frozen=True)
+class DeadlockSeen(Message):
+    """The dispatcher found a vehicle whose way stuck vehicles close for good, and what it did
+    (fleet/mission/deadlock.py): `moved` was sent aside to `siding` (None: none could go)."""
+
+    TYPE: ClassVar[str] = "dispatch.deadlock"
+    t: float
+    waiting: int
+    kind: str  # "cycle", "idle" or "walled"
+    chain: list[int]  # waiting -> its blocker -> ... (a cycle repeats its head)
+    moved: int | None
+    siding: str | None
+    for_vehicle: int | None  # whose way the move opens (a blocker that inherited, or waiting)
 
 
 @dataclass(frozen=True)
@@ -334,7 +373,7 @@ class VehicleStatus(Message):
     vehicle: int
     pose: PoseText  # where it stands once everything committed is driven
     loaded: bool  # on its last leg (or at rest)
-    kind: str  # "deliver", "return" or "" (no leg yet)
+    kind: str  # "deliver", "return", "aside" or "" (no leg yet)
     start: str = ""
     steps: list[WireStep] = field(default_factory=list)
     down: bool = False
@@ -456,11 +495,11 @@ class Envelope:
 TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
                               SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
-                              ClockTick, ClockAck, Progress, MissionDone, MissionInfo,
-                              SubtaskEvent, StackDone, DecisionFailure, RecorderStatus,
-                              HaltRequest, ResumeRequest, Halt, Resume, StackReopened,
-                              ZoneClosed, VehicleFault, InjectFault, StatusRequest,
-                              VehicleStatus, VehicleClaim, ClaimReply)
+                              ClockTick, ClockAck, Progress, MissionDone, MissionStopped,
+                              MissionInfo, SubtaskEvent, StackDone, DecisionFailure,
+                              DeadlockSeen, RecorderStatus, HaltRequest, ResumeRequest, Halt,
+                              Resume, StackReopened, ZoneClosed, VehicleFault, InjectFault,
+                              StatusRequest, VehicleStatus, VehicleClaim, ClaimReply)
 }
 
 

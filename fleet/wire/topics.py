@@ -22,6 +22,7 @@ from fleet.wire.protocol import (
     ClockAck,
     ClockTick,
     CommitRequest,
+    DeadlockSeen,
     DecisionFailure,
     Envelope,
     Halt,
@@ -30,6 +31,7 @@ from fleet.wire.protocol import (
     Message,
     MissionDone,
     MissionInfo,
+    MissionStopped,
     Progress,
     RecorderStatus,
     ReleaseRequest,
@@ -167,10 +169,14 @@ class Keys:
     dispatch_stack = Topic("dispatch/stack", TopicKind.PUBLICATION, (StackDone,), DISPATCHER)
     dispatch_failure = Topic("dispatch/failure", TopicKind.PUBLICATION, (DecisionFailure,),
                              DISPATCHER)
+    dispatch_deadlock = Topic("dispatch/deadlock", TopicKind.PUBLICATION, (DeadlockSeen,),
+                              DISPATCHER)
     dispatch_halt = Topic("dispatch/halt", TopicKind.PUBLICATION, (Halt,), DISPATCHER)
     dispatch_resume = Topic("dispatch/resume", TopicKind.PUBLICATION, (Resume,), DISPATCHER)
     dispatch_reopen = Topic("dispatch/reopen", TopicKind.PUBLICATION, (StackReopened,), DISPATCHER)
     dispatch_zone = Topic("dispatch/zone", TopicKind.PUBLICATION, (ZoneClosed,), DISPATCHER)
+    dispatch_stopped = Topic("dispatch/stopped", TopicKind.PUBLICATION, (MissionStopped,),
+                             DISPATCHER)
     dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
     dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)

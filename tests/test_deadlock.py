@@ -1,0 +1,125 @@
+"""Deadlocks: who waits for whom (fleet/mission/deadlock.py), the searches that say who stands in
+a way and where to step aside (fleet/planning/blockage.py), and missions that wedged before and
+now complete with a vehicle sent aside, judged from their recordings."""
+
+from __future__ import annotations
+
+from mission_check import mission_problems
+
+from fleet.analysis.analyze import analyze
+from fleet.dispatching.decision import Strategy, TaskKind
+from fleet.mission.deadlock import Wait, WaitKind, deadlocks, stuck
+from fleet.mission.engine import Engine, EngineOptions
+from fleet.mission.spec import Mission, MissionKind
+from fleet.planning.blockage import Blockage
+from fleet.planning.reservations import ReservationTable
+from fleet.planning.trajectory import Pose
+from fleet.recording.inprocess import recorded_run, write_recording
+from fleet.recording.reader import read_recording
+from fleet.world.generator import Shape, generate_layout
+from fleet.world.layout_file import load_layout
+
+
+def waiting(vehicle: int, *blockers: int) -> Wait:
+    return Wait(vehicle, Blockage(Pose((0, 0), 0), frozenset(blockers), frozenset()), 1)
+
+
+def test_a_cycle_of_waits_is_a_deadlock_and_its_members_are_stuck():
+    waits = {1: waiting(1, 2), 2: waiting(2, 1)}
+    assert stuck(waits, idle=()) == {1, 2}
+    found = deadlocks(waits, idle=(), priority={1: 50.0, 2: 10.0})
+    assert [d.waiting for d in found] == [2, 1]  # the longest waiting first
+    assert found[0].kind is WaitKind.CYCLE and found[0].chain == (2, 1, 2)
+
+
+def test_a_chain_ending_at_an_idle_vehicle_is_a_deadlock():
+    waits = {1: waiting(1, 2), 2: waiting(2, 3)}
+    found = deadlocks(waits, idle={3}, priority={})
+    assert [(d.waiting, d.kind, d.chain) for d in found] == [
+        (1, WaitKind.IDLE, (1, 2, 3)), (2, WaitKind.IDLE, (2, 3))]
+
+
+def test_a_wait_on_a_vehicle_that_can_still_go_is_no_deadlock():
+    # 3 has not failed yet (no wait), 4's way is only busy for a while (an empty wait).
+    waits = {1: waiting(1, 2), 2: waiting(2, 3), 5: waiting(5, 4), 4: waiting(4)}
+    assert stuck(waits, idle=()) == set()
+    assert deadlocks(waits, idle=(), priority={}) == []
+
+
+def test_a_vehicle_walled_in_for_good_is_said_as_such():
+    waits = {1: Wait(1, None, 1), 2: waiting(2, 1)}
+    found = deadlocks(waits, idle=(), priority={})
+    assert [(d.waiting, d.kind, d.chain) for d in found] == [
+        (1, WaitKind.WALLED, (1,)), (2, WaitKind.IDLE, (2, 1))]
+
+
+def small_with_one_stack_left():
+    """`small` with every stack filled but (3, 2), forklift 1 at its dock, forklift 2 parked
+    at 4,4,E across the passage to that stack."""
+    layout = load_layout("small")
+    kind = layout.vehicle_kind
+    filled = frozenset(s.cell for s in layout.stacks if s.cell != (3, 2))
+    planner = kind.planners(layout.grid_map).get(filled)
+    table = ReservationTable()
+    me, other = Pose.parse("4,6,S"), Pose.parse("4,4,E")
+    table.park(1, kind.body_cells_at_rest(me), 0.0)
+    table.park(2, kind.body_cells_at_rest(other), 0.0)
+    return layout, planner, table, me, other, layout.unload_poses((3, 2), filled)
+
+
+def test_the_blockage_names_who_stands_in_the_way_and_walls_when_it_cannot_move():
+    layout, planner, table, me, other, goals = small_with_one_stack_left()
+    way = planner.blockage(1, me, goals, table, movable=lambda v: True)
+    assert way is not None and way.blockers == {2} and way.goal in goals
+    assert set(layout.vehicle_kind.body_cells_at_rest(other)) & way.cells
+    # Forklift 2 frozen: its cells are walls, and no other way leads there.
+    assert planner.blockage(1, me, goals, table, movable=lambda v: False) is None
+    # Nobody in the way: the way is only busy for a while, if at all.
+    table.release(2)
+    assert planner.blockage(1, me, goals, table, movable=lambda v: True).blockers == set()
+
+
+def test_sidings_are_reachable_parkable_and_off_the_way():
+    layout, planner, table, me, other, goals = small_with_one_stack_left()
+    way = planner.blockage(1, me, goals, table, movable=lambda v: True)
+    sidings = planner.sidings(2, other, table, way.cells, 3)
+    assert len(sidings) == 3
+    grid = layout.grid_map(frozenset(s.cell for s in layout.stacks if s.cell != (3, 2)))
+    for pose in sidings:
+        cells = layout.vehicle_kind.body_cells_at_rest(pose)
+        assert grid.all_free(cells) and not set(cells) & way.cells
+        assert planner.component(pose) == planner.component(other)
+
+
+def test_a_move_out_of_a_pose_crossing_a_parked_vehicle_names_it():
+    layout, planner, table, _, other, _ = small_with_one_stack_left()
+    assert planner.exit_blockers(2, other, table) == frozenset()  # it can leave
+    everything = [(x, y) for x in range(8) for y in range(8)
+                  if (x, y) not in layout.vehicle_kind.body_cells_at_rest(other)]
+    assert planner.exit_blockers(2, other, table, also_held=everything) != frozenset()
+
+
+def test_an_idle_forklift_in_the_way_is_sent_aside_and_the_mission_completes(tmp_path):
+    """`small`, traffic strategy, emptying: forklift 2 is left with nothing to do across
+    forklift 1's way, and is sent aside; every verdict passes on the recording."""
+    layout = load_layout("small")
+    mission = Mission("small", MissionKind.EMPTY, Strategy.TRAFFIC, 2, 0)
+    done, stream = recorded_run(mission, layout, EngineOptions())
+    assert done.ok
+    seen = done.record["deadlocks"]
+    assert seen and all(d["moved"] is not None for d in seen)
+    asides = [s for s in done.record["subtasks"] if s["kind"] == TaskKind.ASIDE.value]
+    assert [s["vehicle"] for s in asides] == [d["moved"] for d in seen]
+    write_recording(tmp_path / "run.mcap", stream, layout)
+    report = analyze(read_recording(tmp_path / "run.mcap"))
+    assert report.passed and report.stacks_done == len(layout.stacks)
+
+
+def test_a_generated_floor_that_wedged_completes_without_a_trap():
+    """A generated floor where greedy filling wedged: two forklifts parked where each needed
+    the other's cells to leave. Unload poses that would trap a forklift are not offered."""
+    layout = generate_layout(Shape(aisles=1, depth=8, lane_depth=3, vehicles=4))
+    engine = Engine(Mission(layout.name, MissionKind.FILL, Strategy.GREEDY), layout=layout)
+    record = engine.run()
+    assert len(record.stacks_done) == len(layout.stacks)
+    assert mission_problems(record, layout) == []
