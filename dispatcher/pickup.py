@@ -6,19 +6,20 @@ the table read afterwards holds everything."""
 
 from __future__ import annotations
 
-import math
-
 from dispatcher.liveness import ParticipantLost
 from dispatcher.remote import RemoteExecutor
 from fleet.mission.pickup import HeldLeg, Recovered, recovered_state
+from fleet.mission.spec import MissionKind
+from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
+from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.convert import step_from_wire
 from fleet.wire.protocol import GOODS, ProtocolError
 from fleet.world.layout import Layout
 
 
-def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
+def pick_up(executor: RemoteExecutor, layout: Layout, kind: MissionKind, vehicles: list[int],
             params: DispatchParams) -> tuple[Recovered, int, float]:
     """The mission as the store and the forklifts hold it, and the last tick they heard: its
     number and (real time) its wall anchor."""
@@ -38,8 +39,9 @@ def pick_up(executor: RemoteExecutor, layout: Layout, vehicles: list[int],
         except (ValueError, ProtocolError) as exc:
             raise ParticipantLost(f"forklift {s.vehicle}'s status is malformed: {exc}") from None
         held.append(HeldLeg(s.vehicle, pose, leg, s.loaded, s.kind, s.down))
-    goods = {r.cell: r.t0 for r in executor.store.reservations(GOODS) if r.t1 == math.inf}
+    goods = [Interval(r.cell, r.t0, r.t1) for r in executor.store.reservations(GOODS)]
     stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
     last = max(statuses, key=lambda s: s.tick)
-    return recovered_state(stacks, goods, held, last.t, params.t_claim, params.t_unload), \
-        last.tick, last.wall
+    work = mission_work(kind, layout, params, executor.store,
+                        layout.vehicle_kind.planners(layout.grid_map))
+    return recovered_state(stacks, goods, held, last.t, work), last.tick, last.wall

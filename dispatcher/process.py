@@ -203,8 +203,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                                       setup.layout.vehicle_kind)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
-                recovered, tick, wall = pick_up(executor, setup.layout, vehicles,
-                                                setup.options.params)
+                recovered, tick, wall = pick_up(executor, setup.layout, setup.mission.kind,
+                                                vehicles, setup.options.params)
                 log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
                          len(recovered.done) + len(recovered.undelivered))
             scenario = load_scenario(config.faults) if config.faults else None

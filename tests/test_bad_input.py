@@ -165,6 +165,11 @@ BAD = [
     ("bench faults --speed nan", "argument --speed: 'nan' is not a finite number"),
     ("bench faults --scenarios nosuch", "--scenarios: 'nosuch' is not a shipped scenario"),
     ("bench strategies --weights {BINARY}", "'{BINARY}' is not UTF-8 text"),
+    ("bench campaign --runs 0", "argument --runs: '0' must be at least 1"),
+    ("bench campaign --seed -1", "argument --seed: '-1' must not be negative"),
+    ("bench campaign --kind sideways", "argument --kind: invalid choice: 'sideways'"),
+    ("bench campaign --out {FILE}", "argument --out: '{FILE}' is a file, not a directory"),
+    ("bench campaign --layout nosuch", "layout 'nosuch' is neither a built-in layout"),
     # the processes of a run
     ("router --listen garbage", "argument --listen: 'garbage' is not a zenoh endpoint"),
     ("router --listen tcp/127.0.0.1", "the address must be HOST:PORT"),

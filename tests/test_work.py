@@ -53,6 +53,9 @@ def test_each_kind_orders_its_stacks_and_says_which_way_the_goods_go(kind, cls, 
     returning = VehicleSlot(1, target.goals[0], 45.0, TaskKind.RETURN).view()
     assert [t.name for t in work.targets(returning, {})] == [st.name for st in SMALL.stations]
     assert work.reopen("a", first) == target.stack_cell  # a delivery cut short
+    # the goods as before: a fill's never came, an empty's claim left them on their stack
+    assert len(work.filled) == present and work.remaining() == {"a": 12, "b": 12}
+    assert work.goods_stay_if_cancelled is (kind is MissionKind.EMPTY)
     assert deliver(work, view, "a")[1].stack_index == first
 
 

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import platform
 import sys
+import time
+from pathlib import Path
 
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
+from fleet.recording.rundir import RUNS, default_name
 from fleet.runtime.argtypes import (
     integer,
     layout_arg,
@@ -18,6 +22,7 @@ from fleet.runtime.argtypes import (
     positive_int,
     positive_ints,
     text_file,
+    writable_dir,
 )
 from fleet.runtime.helptext import strategies_epilog
 
@@ -107,6 +112,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     faults.add_argument("--speed", type=positive_float, default=20.0,
                         help="sim seconds per wall second with --clock realtime (default 20)")
     faults.set_defaults(handler=run_faults)
+    campaign = which.add_parser("campaign", help="seeded random fault scenarios, fill and "
+                                "empty, each run judged as fleet analyze judges it "
+                                "(docs/reliability.md)",
+                                description="Run missions, each with faults drawn from the "
+                                "seed and the run's number (kinds, instants, forklifts, "
+                                "durations; several per run), fill and empty in turn, and "
+                                "judge each by its recording's verdicts against the same "
+                                "mission without faults. Every failing run's scenario is "
+                                "written to OUT as a TOML file that fleet run --faults FILE "
+                                "replays (bit for bit on the fast clock), its recording "
+                                "beside it (docs/reliability.md).")
+    campaign.add_argument("--runs", type=positive_int, default=10,
+                          help="missions with faults (default 10)")
+    campaign.add_argument("--seed", type=non_negative_int, default=2026,
+                          help="seed of the faults (default 2026)")
+    campaign.add_argument("--clock", choices=[m.value for m in ClockMode],
+                          default=ClockMode.FAST.value,
+                          help="fast: in process, the reference (default); realtime: as "
+                          "processes")
+    campaign.add_argument("--speed", type=positive_float, default=20.0,
+                          help="sim seconds per wall second with --clock realtime (default 20)")
+    campaign.add_argument("--layout", default="paper", type=layout_arg,
+                          help="layout name or TOML file (default paper)")
+    campaign.add_argument("--kind", choices=["fill", "empty", "both"], default="both",
+                          help="the missions: fill and empty in turn (both, the default) "
+                          "or one of them")
+    campaign.add_argument("--out", type=writable_dir, metavar="DIR",
+                          help="a new or empty directory for the failing runs' scenarios and "
+                          "recordings and campaign.json (default: "
+                          "runs/DATE-TIME-LAYOUT-campaign)")
+    campaign.add_argument("--json", action="store_true", help="print one JSON object")
+    campaign.set_defaults(handler=run_campaign)
 
 
 def fleet_sizes(text: str) -> list[int]:
@@ -238,3 +275,58 @@ def run_faults(args: argparse.Namespace) -> int:
     if not emitted_json(result, args.json):
         print(faults.table(result))
     return 0
+
+
+def run_campaign(args: argparse.Namespace) -> int:
+    from bench import campaign
+    from fleet.mission.spec import MissionKind
+    from fleet.world.layout_file import load_layout
+
+    layout = load_layout(args.layout)
+    kinds = tuple(MissionKind) if args.kind == "both" else (MissionKind(args.kind),)
+    spec = campaign.CampaignSpec(args.layout, args.runs, args.seed, ClockMode(args.clock),
+                                 args.speed, kinds)
+    out = campaign_dir(args.out, layout.name)
+    runs = ProgressBar(args.runs, "campaign", unit="runs", enabled=not args.json)
+
+    def progress(label: str, done: int, total: int) -> None:
+        if label == "runs":
+            runs.update(done)
+        else:
+            runs.update(runs.done, f"{label}, {done}/{total} stacks")
+
+    def say(line: str) -> None:
+        if not args.json:
+            print(line, file=sys.stderr, flush=True)
+
+    try:
+        result = campaign.run(spec, out, progress, say)
+    finally:
+        runs.close()
+    (out / "campaign.json").write_text(json.dumps(result, indent=1) + "\n")
+    if not emitted_json(result, args.json):
+        print(campaign.table(result))
+    return 0 if result["completed"] == result["runs"] and result["verdict_failures"] == 0 \
+        else 1
+
+
+def campaign_dir(out: Path | None, layout: str) -> Path:
+    """Where a campaign writes: `out` (new or empty), or a new directory under runs/ named
+    for now and the layout (-2 after it if taken). Not a run directory itself: the failing
+    runs' directories are inside it, so `fleet runs DIR` lists them."""
+    if out is not None:
+        if out.is_dir() and any(out.iterdir()):
+            raise UserError(f"--out {out} is not empty: a campaign writes only in a new or "
+                            f"empty directory (its failing runs' files are named by seed and "
+                            f"run, and another campaign's would mix in)")
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    name = default_name(layout, "campaign", time.localtime())
+    for n in itertools.count(1):
+        path = RUNS / (name if n == 1 else f"{name}-{n}")
+        try:
+            path.mkdir(parents=True)
+            return path
+        except FileExistsError:
+            continue
+    raise AssertionError("unreachable")

@@ -22,7 +22,7 @@ from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.record import digest_of
-from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.standstill import Standstill
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mission_record import recorded_standstill
@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{flag} {number}: {busy}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
-    scenario = fault_scenario(args.faults, mission, layout, n) if args.faults else None
+    scenario = fault_scenario(args.faults, layout, n) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(len(layout.stacks), f"{mission.kind.value} {mission.strategy.value}",
@@ -286,13 +286,10 @@ def _report(out: Path, recording: Recording | None = None) -> Report:
     return report
 
 
-def fault_scenario(source: str, mission: Mission, layout: Layout, vehicles: int) -> Scenario:
+def fault_scenario(source: str, layout: Layout, vehicles: int) -> Scenario:
     """The scenario of --faults, checked against the run before anything starts."""
     scenario = load_scenario(source)
     check_against(scenario, layout, vehicles)
-    if mission.kind is not MissionKind.FILL:
-        raise UserError("--faults: fault scenarios run on fill missions for now (cancelling "
-                        "a claim from a stack is not modelled yet)")
     return scenario
 
 

@@ -39,7 +39,7 @@ from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
-from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planner
 from fleet.wire.protocol import DeadlockSeen, DecisionFailure, Message, StackDone
@@ -189,7 +189,7 @@ class Engine:
         for v in self.fleet.values():
             v.pose, v.t_free = r.poses[v.vehicle], r.t_free[v.vehicle]
             v.next_task = TaskKind.DELIVER if r.delivers_next[v.vehicle] else TaskKind.RETURN
-        t_unload = self.options.params.t_unload
+        t_unload = self.work.handling(TaskKind.DELIVER)
         for cluster, index, t_done in (*r.done, *((c, i, t + t_unload)
                                                   for c, i, t, _ in r.undelivered)):
             self.work.pick_up(cluster, index)
@@ -211,12 +211,12 @@ class Engine:
         return rec
 
     def _reserve_undelivered(self) -> None:
-        """Goods the last dispatcher did not get to reserve: the forklift placed them."""
-        t_unload = self.options.params.t_unload
+        """Goods the last dispatcher did not get to reserve: the forklift handled them."""
+        t_unload = self.work.handling(TaskKind.DELIVER)
         for cluster, index, t_end, vehicle in self.undelivered:
             cell = next(s.cell for s in self.layout.stacks
                         if s.cluster == cluster and s.index == index)
-            self.executor.reserve_goods([Interval(cell, t_end, math.inf)])
+            self.executor.reserve_goods([self.work.goods_after(cell, t_end, t_end + t_unload)])
             self._emit(StackDone(cluster, index, vehicle, t_end + t_unload), t_end + t_unload)
 
     def _next_active(self) -> list[VehicleSlot] | None:

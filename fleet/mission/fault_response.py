@@ -73,14 +73,18 @@ class FaultResponse:
                 return
             first, zone, until = {disruption.vehicle}, frozenset(), disruption.t
             cause = disruption.cause
-        else:
-            first, zone, until = set(), disruption.cells, disruption.until
+        else:  # no spill on goods: nobody could enter their cells anyway
+            first, zone, until = set(), disruption.cells - self.work.goods_off_table, \
+                disruption.until
             cause = "zone closed"
         t = disruption.t
         motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]))
                    for v in self.fleet if v not in self.down}
-        result = cascade(self.executor.store, t, motions, first, self._goods_pending(t), zone,
-                         until)
+        pending = self._pending_deliveries(t)
+        by_cell = {cell: vehicle for vehicle, cells in pending.items() for cell in cells}
+        kept = pending if self.work.goods_stay_if_cancelled else {}
+        result = cascade(self.executor.store, t, motions, first, by_cell.get, zone, until,
+                         lambda vehicle: kept.get(vehicle, ()))
         goods: list[Cell] = []
         for vehicle, freeze in sorted(result.freezes.items()):
             goods += self._freeze(freeze)
@@ -98,18 +102,22 @@ class FaultResponse:
                              moving=[v for v in result.freezes if v not in self.down],
                              standing=sorted(first) if broken else [])
 
-    def _goods_pending(self, t: float) -> Callable[[Cell], int | None]:
-        """Which forklift's delivery, not yet arrived at t, reserved goods on a cell."""
+    def _pending_deliveries(self, t: float) -> dict[int, list[Cell]]:
+        """The stack cells of each forklift's deliveries not yet arrived at t: the goods
+        reserved on them go if the delivery is cancelled (and on an empty mission the goods
+        to claim stay on them)."""
         cut = set(self.record.cut_subtasks)
-        pending = {s.stack_cell: s.vehicle for i, s in enumerate(self.record.subtasks)
-                   if i not in cut and s.kind is TaskKind.DELIVER and s.t_end > t and
-                   s.stack_cell is not None}
-        return pending.get
+        pending: dict[int, list[Cell]] = {}
+        for i, s in enumerate(self.record.subtasks):
+            if i not in cut and s.kind is TaskKind.DELIVER and s.t_end > t and \
+                    s.stack_cell is not None:
+                pending.setdefault(s.vehicle, []).append(s.stack_cell)
+        return pending
 
     def _freeze(self, freeze: Freeze) -> list[Cell]:
         """Cut the forklift's plan after the maneuver in progress at freeze.t: its subtasks
-        not yet arrived are cancelled (a delivery's stack goes back to the queue). Returns
-        the stack cells whose goods reservations go with them."""
+        not yet arrived are cancelled (a delivery's stack goes back to the queue, its goods as
+        before). Returns the stack cells whose goods reservations go with them."""
         t, vehicle = freeze.t, freeze.vehicle
         v = self.fleet[vehicle]
         cut = set(self.record.cut_subtasks)

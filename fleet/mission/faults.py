@@ -7,6 +7,7 @@ process faults, the dispatcher detects and recovers, fleet/mission/freeze.py dec
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from dataclasses import dataclass
@@ -89,6 +90,12 @@ class Fault:
     def until(self) -> float:
         """When the fault ends (infinity: it does not)."""
         return math.inf if self.duration is None else self.at + self.duration
+
+    @property
+    def over(self) -> float:
+        """When what it strikes is free of it (a killed service's downtime counted as sim
+        seconds: it is wall time, and no second fault may strike the service before)."""
+        return self.at + self.downtime if self.kind is FaultKind.KILL_SERVICE else self.until
 
     def describe(self) -> str:
         who = f"forklift {self.vehicle}" if self.vehicle is not None else \
@@ -238,12 +245,40 @@ def _check_overlaps(faults: tuple[Fault, ...], where: str) -> None:
             continue
         if who in seen:
             j, before = seen[who]
-            end = before.at + before.downtime if before.kind is FaultKind.KILL_SERVICE \
-                else before.until
-            if fault.at <= end:
+            if fault.at <= before.over:
                 raise ScenarioError(f"{where}: fault {i + 1} ({fault.describe()}) starts "
                                     f"before fault {j + 1} ({before.describe()}) is over")
         seen[who] = (i, fault)
+
+
+def scenario_toml(scenario: Scenario, header: str = "") -> str:
+    """The scenario as a file `load_scenario` reads back into an equal scenario (every time
+    written exactly, as Python writes floats); `header` goes first, as comment lines."""
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    lines += [f"name = {_quoted(scenario.name)}",
+              f"description = {_quoted(scenario.description)}"]
+    for fault in scenario.faults:
+        lines += ["", "[[fault]]", f"kind = {_quoted(fault.kind.value)}", f"at = {fault.at!r}"]
+        spec = KINDS[fault.kind]
+        fields = {"vehicle": fault.vehicle, "duration": fault.duration,
+                  "factor": fault.factor, "service": fault.service,
+                  "downtime": fault.downtime, "cells": fault.cells}
+        for key in (*spec.required, *spec.optional):
+            value = fields[key]
+            if value is None:
+                continue  # an optional field left out: its default
+            if key == "cells":
+                lines.append("cells = [" + ", ".join(f'"{c},{r}"' for c, r in value) + "]")
+            elif isinstance(value, str):
+                lines.append(f"{key} = {_quoted(value)}")
+            else:
+                lines.append(f"{key} = {value!r}")
+    return "\n".join(lines) + "\n"
+
+
+def _quoted(text: str) -> str:
+    """A TOML basic string (JSON's escapes are TOML's for these)."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
 
 
 def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from fleet.mission.faults import FaultKind, Scenario
@@ -23,6 +23,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose, Step, Trajectory
+from fleet.wire.protocol import GOODS
 
 
 @dataclass(frozen=True)
@@ -73,12 +74,16 @@ class Cascade:
 
 def cascade(table: ReservationTable, t: float, motions: dict[int, Motion], first: set[int],
             goods_vehicle: Callable[[Cell], int | None], zone: frozenset[Cell] = frozenset(),
-            zone_until: float = -math.inf) -> Cascade:
+            zone_until: float = -math.inf,
+            goods_kept: Callable[[int], Iterable[Cell]] = lambda vehicle: ()) -> Cascade:
     """Freeze `first` at t, close `zone` over [t, zone_until) where no one stands at t, and
     freeze every forklift whose remaining plan then conflicts. `goods_vehicle(cell)` names
     the forklift whose delivery, not yet arrived, reserved goods on the cell (its delivery
-    is cancelled with it). `motions` covers every forklift that may be frozen; anybody else
-    (a forklift already down) keeps what it holds."""
+    is cancelled with it). `goods_kept(vehicle)` are the stack cells whose goods stay for
+    good once the forklift's deliveries not yet arrived are cancelled (an empty mission's
+    claims): whoever planned to cross them after the claim is frozen too. `motions` covers
+    every forklift that may be frozen; anybody else (a forklift already down) keeps what it
+    holds."""
     by_cell: dict[Cell, list[tuple[int, float, float]]] = defaultdict(list)
     occupied: set[Cell] = set()
     for r in table.reservations():
@@ -101,6 +106,10 @@ def cascade(table: ReservationTable, t: float, motions: dict[int, Motion], first
             todo += [_holder(owner, cell, motions, goods_vehicle)
                      for owner, _, _ in by_cell.get(cell, ())
                      if owner != vehicle and owner not in freezes]
+        for cell in sorted(goods_kept(vehicle)):  # the goods' own hold ends with the claim
+            todo += [_holder(owner, cell, motions, goods_vehicle)
+                     for owner, _, _ in by_cell.get(cell, ())
+                     if owner not in (vehicle, GOODS) and owner not in freezes]
     return Cascade(freezes, closed)
 
 

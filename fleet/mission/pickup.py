@@ -1,4 +1,4 @@
-"""A restarted dispatcher picks a fill mission up: the state the engine starts from, from the
+"""A restarted dispatcher picks a mission up: the state the engine starts from, from the
 goods the reservation service holds and what each forklift's agent says it committed
 (dispatcher/pickup.py asks them; docs/faults.md)."""
 
@@ -6,8 +6,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fleet.planning.geometry import Cell
+from fleet.dispatching.decision import TaskKind
+from fleet.mission.work import MissionWork
 from fleet.planning.maneuvers import fork_target
+from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import Pose, Trajectory
 
 
@@ -25,7 +27,7 @@ class HeldLeg:
 
 @dataclass(frozen=True)
 class Recovered:
-    """A fill mission picked up mid-way: what the engine starts from."""
+    """A mission picked up mid-way: what the engine starts from."""
 
     done: tuple[tuple[str, int, float], ...]  # stacks done: cluster, index, t_done
     undelivered: tuple[tuple[str, int, float, int], ...]  # committed, goods not reserved yet
@@ -36,30 +38,32 @@ class Recovered:
     t: float  # the clock's last instant: nothing is decided before it
 
 
-def recovered_state(stacks, goods: dict[Cell, float], held: list[HeldLeg], t: float,
-                    t_claim: float, t_unload: float) -> Recovered:
-    """`stacks`: the layout's (cluster, index, cell); `goods`: stack cells holding goods from
-    an instant on (the store's GOODS reservations). A forklift whose last leg is a committed
+def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float,
+                    work: MissionWork) -> Recovered:
+    """`stacks`: the layout's (cluster, index, cell); `goods`: the store's GOODS reservations,
+    which say the stacks done (`work.done_at`). A forklift whose last leg is a committed
     delivery arrives whatever happened to the dispatcher: its stack is done, and if its
     goods are not reserved yet (the dispatcher died in between) they are to be."""
     by_cell = {cell: (cluster, index) for cluster, index, cell in stacks}
-    done = [(*by_cell[c], t0 + t_unload) for c, t0 in goods.items() if c in by_cell]
+    done_at = {iv.cell: work.done_at(iv) for iv in goods if iv.cell in by_cell}
+    done = [(*by_cell[c], t_done) for c, t_done in done_at.items() if t_done is not None]
     undelivered = []
     poses, t_free, delivers_next, legs = {}, {}, {}, {}
     for h in held:
         poses[h.vehicle] = h.pose
         end = h.leg.t_end if h.leg else 0.0
-        if h.leg is None:  # never moved: it claimed goods at its station
-            delivers_next[h.vehicle], handling = True, t_claim
+        if h.leg is None:  # never moved: ready when the mission's first subtask is
+            delivers_next[h.vehicle], end, handling = True, work.ready_at, 0.0
         elif h.kind == "deliver":
-            delivers_next[h.vehicle], handling = False, t_unload
+            delivers_next[h.vehicle], handling = False, work.handling(TaskKind.DELIVER)
             stack = fork_target(h.pose.cell, h.pose.heading)
-            if stack in by_cell and stack not in goods:
+            if stack in by_cell and done_at.get(stack) is None:
                 undelivered.append((*by_cell[stack], end, h.vehicle))
         elif h.kind == "return":
-            delivers_next[h.vehicle], handling = True, t_claim
-        else:  # cut short, or sent aside: carrying goods (a delivery next) or not
-            delivers_next[h.vehicle], handling = h.loaded, 0.0
+            delivers_next[h.vehicle], handling = True, work.handling(TaskKind.RETURN)
+        else:  # cut short, or sent aside: goods on board or not, a delivery next or not
+            delivers_next[h.vehicle] = h.loaded == work.loaded(TaskKind.DELIVER)
+            handling = 0.0
         t_free[h.vehicle] = max(end + handling, t)
         if h.leg is not None:
             legs[h.vehicle] = h.leg

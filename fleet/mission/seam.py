@@ -150,11 +150,13 @@ FreezeChange = tuple[int, list[Interval], float | None, list[Cell] | None]
 def freeze_changes(t: float, freezes: list[Freeze], goods: list[Cell], zone: frozenset[Cell],
                    zone_until: float) -> list[FreezeChange]:
     """The table changes of a freeze, in an order each is valid in: first every release
-    (the frozen forklifts' plans after t, the cancelled goods), then the frozen cells to
-    infinity, then the zone. (owner, intervals to add, release from, only these cells)."""
+    (the frozen forklifts' plans after t, the cancelled deliveries' goods reservations, whole:
+    goods a fill would have placed, or the claim an empty mission would have ended), then the
+    frozen cells to infinity, then the zone. (owner, intervals to add, release from, only
+    these cells)."""
     out: list[FreezeChange] = [(f.vehicle, [], t, None) for f in freezes]
     if goods:
-        out.append((GOODS, [], t, sorted(goods)))
+        out.append((GOODS, [], 0.0, sorted(goods)))
     out += [(f.vehicle, [Interval(c, t, math.inf) for c in sorted(f.cells)], None, None)
             for f in freezes]
     if zone:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.mission.spec import MissionKind
@@ -72,6 +72,17 @@ class MissionWork(Protocol):
     def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
         """A decided subtask was committed: the work it does is no longer left."""
 
+    @property
+    def goods_off_table(self) -> frozenset[Cell]:
+        """Cells whose goods only the planners' static map holds, not the reservation table
+        (a zone never closes them: nobody could enter them anyway)."""
+
+    @property
+    def goods_stay_if_cancelled(self) -> bool:
+        """What a delivery cancelled before it arrived leaves on its stack: True if the goods
+        it was to take stay there (their cell is an obstacle again from the cancel on); False
+        if the goods it was to place never come (their reservation goes)."""
+
     def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
         """Every pose the vehicle's next subtask could end at, whoever stands where: what the
         wait-for graph (fleet/mission/deadlock.py) asks its way to."""
@@ -80,8 +91,12 @@ class MissionWork(Protocol):
         """Cells a vehicle sent aside should not stop on (where the work still goes)."""
 
     def reopen(self, cluster: str, index: int) -> Cell:
-        """A delivery was cut short before it arrived: its stack is to do again. Returns the
-        stack's cell."""
+        """A delivery was cut short before it arrived: its stack is to do again, its goods as
+        they were before the delivery was decided. Returns the stack's cell."""
+
+    def done_at(self, goods: Interval) -> float | None:
+        """When the stack under a goods reservation of the table was done, as a restarted
+        dispatcher reads it (None: the goods say it is not)."""
 
     def pick_up(self, cluster: str, index: int) -> None:
         """A restarted dispatcher found the stack done."""
@@ -119,9 +134,15 @@ class StackWork(ABC):
         self.far = _far_clusters(layout)
 
     # what a kind says
+    goods_stay_if_cancelled: ClassVar[bool]
+
     @property
     @abstractmethod
     def ready_at(self) -> float: ...
+
+    @property
+    @abstractmethod
+    def goods_off_table(self) -> frozenset[Cell]: ...
 
     @abstractmethod
     def order(self, stack: Stack) -> int:
@@ -141,8 +162,15 @@ class StackWork(ABC):
         """The goods' hold on a served stack's cell."""
 
     @abstractmethod
+    def done_at(self, goods: Interval) -> float | None: ...
+
+    @abstractmethod
     def _served(self, cell: Cell) -> None:
         """The goods on a served stack's cell as they are once it is served."""
+
+    @abstractmethod
+    def _unserved(self, cell: Cell) -> None:
+        """The goods on a reopened stack's cell as they were before it was served."""
 
     def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
                    ) -> list[Pose]:
@@ -204,7 +232,7 @@ class StackWork(ABC):
         queue = self.queue[cluster]
         queue.append(stack)
         queue.sort(key=self.order)
-        self.present.discard(stack.cell)
+        self._unserved(stack.cell)
         return stack.cell
 
     def pick_up(self, cluster: str, index: int) -> None:
@@ -215,6 +243,8 @@ class StackWork(ABC):
 
 class FillWork(StackWork):
     """Goods claimed at a station go to the stacks in each cluster's fill order."""
+
+    goods_stay_if_cancelled = False  # the goods a cancelled delivery carried never arrive
 
     @property
     def ready_at(self) -> float:
@@ -235,8 +265,18 @@ class FillWork(StackWork):
     def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
         return Interval(cell, t_end, math.inf)  # placed on arrival, for good
 
+    def done_at(self, goods: Interval) -> float | None:
+        return goods.t0 + self.params.t_unload if goods.t1 == math.inf else None
+
+    @property
+    def goods_off_table(self) -> frozenset[Cell]:
+        return frozenset()  # every placed goods' cell is reserved from its delivery on
+
     def _served(self, cell: Cell) -> None:
         self.present.add(cell)
+
+    def _unserved(self, cell: Cell) -> None:
+        self.present.discard(cell)
 
     def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
                    ) -> list[Pose]:
@@ -278,6 +318,8 @@ class FillWork(StackWork):
 class EmptyWork(StackWork):
     """Goods taken from the stacks in reverse fill order go to a station."""
 
+    goods_stay_if_cancelled = True  # a cancelled claim leaves the goods on their stack
+
     @property
     def ready_at(self) -> float:
         return 0.0
@@ -297,8 +339,18 @@ class EmptyWork(StackWork):
     def goods_after(self, cell: Cell, t_end: float, t_done: float) -> Interval:
         return Interval(cell, 0.0, t_done)  # there until claimed
 
+    def done_at(self, goods: Interval) -> float | None:
+        return goods.t1 if goods.t1 < math.inf else None  # claimed when the hold ends
+
+    @property
+    def goods_off_table(self) -> frozenset[Cell]:
+        return frozenset(self.present)  # goods not yet claimed: the static map has them
+
     def _served(self, cell: Cell) -> None:
         self.present.discard(cell)
+
+    def _unserved(self, cell: Cell) -> None:
+        self.present.add(cell)
 
 
 WORK_KINDS: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,

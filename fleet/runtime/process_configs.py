@@ -275,7 +275,7 @@ class DispatcherConfig(ProcessConfig):
                        "killed and restarted misses nothing that happened meanwhile")
         p.add_argument("--recover", action="store_true",
                        help="a restarted dispatcher: pick the mission up from what the "
-                       "reservation service and the forklifts hold (fill missions)")
+                       "reservation service and the forklifts hold")
         p.add_argument("--exit-when-done", action="store_true",
                        help="exit after publishing the result (once the recorder has it, with "
                        "--recorded) instead of waiting to be stopped")
