@@ -20,7 +20,9 @@ from fleet.analysis.safety import (
     double_bookings,
     outside_reservation,
     overlaps,
+    placed,
     replay,
+    shrunk_cells,
 )
 from fleet.params import VehicleDims
 from fleet.planning.geometry import body_corners, cells_under
@@ -28,6 +30,8 @@ from fleet.planning.geometry import body_corners, cells_under
 DIMS = VehicleDims()
 BODY = Body(DIMS.front, DIMS.rear, DIMS.width, 2.0, (0.0, 0.0))
 INF = math.inf
+MAX_SPEED = 4.0  # seed 000's forklift: one cell in 0.5 s
+REACH = math.hypot(DIMS.front, DIMS.width / 2)
 
 
 @settings(max_examples=400, deadline=None)
@@ -72,12 +76,46 @@ def test_double_bookings_are_found_and_back_to_back_is_not_one():
 def test_overlaps_and_excursions_at_shared_instants():
     a = Sample(1, 2.0, 4.0, 6.0, 0.0)  # cells (2, 3), (3, 3)
     b = Sample(2, 2.0, 8.0, 6.0, math.pi)  # cells (4, 3), (3, 3)
-    far = Sample(2, 2.5, 8.0, 6.0, math.pi)  # another instant: not compared with a
-    (o,) = overlaps([a, b, far], BODY)
-    assert (o.t, o.vehicles, o.cells) == (2.0, (1, 2), ((3, 3),))
+    far = Sample(2, 2.5, 8.0, 6.0, math.pi)  # another instant, and a has no state then
+    (o,) = overlaps([a, b, far], BODY, MAX_SPEED, 0.75)
+    assert (o.t, o.vehicles, o.cells, o.between) == (2.0, (1, 2), ((3, 3),), False)
     held = [Held(1, (2, 3), 0.0, INF), Held(1, (3, 3), 0.0, 2.0)]  # (3, 3) given up at 2.0
     (out,) = outside_reservation([a], held, BODY)
     assert (out.t, out.vehicle, out.cells) == (2.0, 1, ((3, 3),))
+
+
+def test_two_bodies_never_seen_at_one_instant_are_compared_between_their_states():
+    """Forklift 2's states fall between forklift 1's: where both stood still on the same
+    cells, the interpolated bodies meet."""
+    one = [Sample(1, t, 4.0, 6.0, 0.0) for t in (0.0, 0.5, 1.0)]
+    two = [Sample(2, t, 4.0, 6.0, 0.0) for t in (0.25, 0.75)]
+    found = overlaps(one + two, BODY, MAX_SPEED, 0.75)
+    assert found and all(o.between and o.vehicles == (1, 2) for o in found)
+    assert {c for o in found for c in o.cells} <= {(2, 3), (3, 3)}
+    assert not overlaps(one + [Sample(2, t, 12.0, 6.0, 0.0) for t in (0.25, 0.75)], BODY,
+                        MAX_SPEED, 0.75)
+
+
+@settings(max_examples=300, deadline=None)
+@given(x=st.floats(-10, 10), y=st.floats(-10, 10), theta=st.floats(-math.pi, math.pi),
+       v0=st.floats(-4, 4), dv=st.floats(-1, 1), spin=st.floats(-0.5, 0.5),
+       switch=st.floats(0, 0.5), when=st.floats(0.001, 0.499))
+def test_an_interpolated_body_shrunk_by_its_bound_lies_inside_the_real_one(
+        x, y, theta, v0, dv, spin, switch, when):
+    """The tolerance between instants (docs/metrics.md): a forklift driving straight at one
+    speed, then at another (velocity changing by at most its maximum speed), and turning
+    at a steady rate: between two states 0.5 s apart, the cells of its interpolated body
+    shrunk by the bound are cells its real body enters."""
+    v1 = max(-MAX_SPEED, min(MAX_SPEED, v0 + dv * 2.5))
+
+    def real(t: float) -> Sample:
+        ahead = v0 * min(t, switch) + v1 * max(0.0, t - switch)
+        heading = theta + spin * t
+        return Sample(1, t, x + ahead * math.cos(theta), y + ahead * math.sin(theta), heading)
+
+    pose = placed(([0.0, 0.5], [real(0.0), real(0.5)]), when, MAX_SPEED, 0.75, REACH)
+    truth = real(when)
+    assert shrunk_cells(BODY, pose) <= covered_cells(BODY, truth.x, truth.y, truth.theta)
 
 
 def test_the_verifier_imports_neither_planner_nor_table_nor_their_geometry():

@@ -1,8 +1,10 @@
-"""`fleet analyze`: what a recording says about its run, and two verdicts.
+"""`fleet analyze`: what a recording says about its run, and three verdicts.
 
 Safety (fleet/analysis/safety.py, independent of the planner and the table): no two
-forklifts on one cell at one instant, no forklift outside its own reservation, no cell held
-by two owners at once. Work: every stack of the layout filled (or emptied) exactly once.
+forklifts on one cell at one instant or between two instants, no forklift outside its own
+reservation, no cell held by two owners at once. Work: the mission finished, and every stack
+of the layout was physically served exactly once, each cluster in its order, by forklifts
+whose states are physically possible (fleet/analysis/served.py, fleet/analysis/motion.py).
 Messages: every stream's sequence numbers are complete (a gap is a lost message,
 fleet/analysis/streams.py).
 
@@ -21,6 +23,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import TypeVar
 
+from fleet.analysis.motion import at_rest, grid_pose, impossible_states
 from fleet.analysis.report import Report
 from fleet.analysis.safety import (
     Body,
@@ -29,6 +32,14 @@ from fleet.analysis.safety import (
     outside_reservation,
     overlaps,
     replay,
+)
+from fleet.analysis.served import (
+    Announced,
+    Delivery,
+    NotServed,
+    Standing,
+    out_of_order,
+    services,
 )
 from fleet.analysis.streams import (
     LOSS_NOTICED_WALL_S,
@@ -47,12 +58,15 @@ from fleet.analysis.windows import (
     reservations_unknown,
     silent_windows,
     stacks_not_recorded,
+    states_unknown,
     unverified_windows,
 )
 from fleet.mission.driving import state_period
-from fleet.mission.spec import ClockMode
+from fleet.mission.record import MissionSummary, SubtaskRecord
+from fleet.mission.spec import ClockMode, MissionKind
+from fleet.params import DispatchParams
 from fleet.recording.format import NS
-from fleet.recording.mission_record import dispatcher_restarts, summary_of
+from fleet.recording.mission_record import dispatcher_restarts, final_record, summary_of
 from fleet.recording.reader import Recording, RecordingError
 from fleet.wire.protocol import (
     Halt,
@@ -67,6 +81,11 @@ from fleet.wire.protocol import (
 from fleet.wire.topics import message_type
 
 Finding = TypeVar("Finding")
+# A vehicle's states further apart than this many state periods leave a hole between them:
+# nothing is interpolated across it, and a stack's handling over it is not seen.
+STATE_GAP_PERIODS = 1.5
+DELIVERY = "deliver"  # the kind of a subtask to a stack (SubtaskEvent)
+IN_PROCESS = "inprocess"  # the clock of a `fleet run --inprocess` recording (MissionInfo)
 
 
 def analyze(recording: Recording) -> Report:
@@ -77,13 +96,16 @@ def analyze(recording: Recording) -> Report:
                              f"after the mission?)")
     layout = recording.layout()
     record = summary_of(recording)
-    outline = layout.vehicle_kind.outline  # numbers only: the verifier has its own geometry
+    kind = layout.vehicle_kind
+    outline = kind.outline  # numbers only: the verifier has its own geometry
     body = Body(outline.front, outline.rear, outline.width, layout.cell_size, layout.origin)
+    period = state_period(info.clock, info.speed)
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
     usable = [(t, m) for t, m in states
               if all(math.isfinite(v) for v in (t, m.x, m.y, m.theta))]
     samples = [Sample(m.vehicle, t, m.x, m.y, m.theta) for t, m in usable]
-    samples += standing_samples(recording, sorted({s.t for s in samples}))
+    standing = standing_samples(recording, sorted({s.t for s in samples}))
+    samples += standing
     held = replay(_unique_revisions(recording))
     done = [m for _, m in recording.of(MissionDone)]
     holes = sequence_holes(recording)
@@ -96,19 +118,31 @@ def analyze(recording: Recording) -> Report:
     gaps = stream_gaps(lost)
     downs = {g: recorder_down(recording, g) for g in recording.gaps}
     unverified = unverified_windows(recording, unrecorded, downs) + \
-        silent_windows(states, down_halts, state_period(info.clock, info.speed)) + \
-        _cut_off_windows(cut_off)
+        silent_windows(states, down_halts, period) + _cut_off_windows(cut_off)
     outside, outside_unknown = _judged(
         outside_reservation(samples, held, body),
         lambda o: reservations_unknown(unverified, o.vehicle, o.t, o.t))
     bookings, bookings_unknown = _judged(
         double_bookings(held),
         lambda d: any(reservations_unknown(unverified, v, d.t0, d.t1) for v in d.vehicles))
-    stacks = Counter((m.cluster, m.index) for _, m in recording.of(StackDone))
-    stacks -= Counter((m.cluster, m.index) for _, m in recording.of(StackReopened))
-    expected = {(s.cluster, s.index) for s in layout.stacks}
-    seen = set(stacks) & expected
-    from_record = stacks_not_recorded(done, unrecorded, expected - seen, any(
+    announced = announced_stacks(recording)
+    stacks = Counter((a.cluster, a.index) for a in announced)
+    cells = {(s.cluster, s.index): s.cell for s in layout.stacks}
+    clusters: dict[str, list[int]] = {}
+    for s in layout.stacks:
+        clusters.setdefault(s.cluster, []).append(s.index)
+    expected = set(cells)
+    fill = info.kind == MissionKind.FILL.value
+    params = DispatchParams()  # seed 000's Table 3: the parameters every mission runs with
+    where = [Standing(m.vehicle, t, grid_pose(body, m.x, m.y, m.theta)
+                      if at_rest(m, kind.is_wait) else None) for t, m in usable]
+    where += [Standing(s.vehicle, s.t, grid_pose(body, s.x, s.y, s.theta)) for s in standing]
+    judged = services([a for a in announced if (a.cluster, a.index) in expected], cells, where,
+                      params.t_unload if fill else params.t_claim,
+                      STATE_GAP_PERIODS * period, kind.handled_cell,
+                      lambda v, t0, t1: states_unknown(unverified, v, t0, t1))
+    served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
+    from_record = stacks_not_recorded(done, unrecorded, expected - set(stacks), any(
         x.unrecorded for x in dispatcher_restarts(recording)))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
@@ -119,9 +153,19 @@ def analyze(recording: Recording) -> Report:
         end_time_s=record.end_time_s,
         all_parked_s=record.all_parked_s,
         stacks_expected=len(expected),
-        stacks_done=len(seen | from_record),
+        stacks_done=len(served | from_record),
+        stacks_announced=len((set(stacks) & expected) | from_record),
         stacks_duplicated=sorted(f"{c}#{i}" for (c, i), n in stacks.items() if n > 1),
-        stacks_lost=sorted(f"{c}#{i}" for c, i in expected - seen - from_record),
+        stacks_lost=sorted(f"{c}#{i}" for c, i in expected - served - from_record),
+        stacks_not_served=[NotServed(j.announced.stack, j.announced.vehicle, j.announced.t,
+                                     j.why) for j in judged if not j.served],
+        stacks_unverified=sorted(j.announced.stack for j in judged if j.unverified),
+        stacks_out_of_order=out_of_order(
+            clusters, (lambda i: i) if fill else (lambda i: -i),
+            [Delivery(s.target, s.stack, s.t_i) for s in decision_order(recording, record)
+             if s.kind == DELIVERY and s.stack is not None],
+            [(m.cluster, m.index) for _, m in recording.of(StackReopened)]),
+        impossible_states=impossible_states(usable, body, kind.max_speed_mps, kind.is_wait),
         subtasks=len(record.subtasks),
         decision_failures=record.decision_failures,
         plans_failed=sum(f.stage == "plan" for f in record.failures),
@@ -138,7 +182,7 @@ def analyze(recording: Recording) -> Report:
         malformed=sum(r.envelope is None for r in recording.messages)
         + len(states) - len(usable),
         foreign=len(recording.foreign),
-        overlaps=overlaps(samples, body),
+        overlaps=overlaps(samples, body, kind.max_speed_mps, STATE_GAP_PERIODS * period),
         outside_reservation=outside,
         double_bookings=bookings,
         segments=[SegmentRead(str(s.path), s.messages, s.complete, s.problem,
@@ -200,6 +244,31 @@ def standing_samples(recording: Recording, instants: list[float]) -> list[Sample
         out += [Sample(halt.vehicle, t, halt.x, halt.y, halt.theta)
                 for t in instants[first:last]]
     return out
+
+
+def decision_order(recording: Recording, record: MissionSummary) -> list[SubtaskRecord]:
+    """The subtasks whose order of decision is known, in that order: those of the last
+    dispatcher's final record (it lists them as decided) and, of a run of processes, those
+    recorded as published. An in-process recording holds the events in sim-time order (a
+    subtask at its start, which may come after a later decision's): there, only the final
+    record's."""
+    final = final_record(recording, dispatcher_restarts(recording))
+    own = set(final.subtasks) if final is not None else set()
+    return [s for s in record.subtasks if s in own or recording.info.clock != IN_PROCESS]
+
+
+def announced_stacks(recording: Recording) -> list[Announced]:
+    """The stacks the dispatcher announced done, without those it reopened: a reopening
+    (a forklift cut off before it arrived) takes back that forklift's first announcement
+    of the stack whose handling was to end after the reopening."""
+    left = [Announced(m.cluster, m.index, m.vehicle, m.t) for _, m in recording.of(StackDone)]
+    for m in sorted((m for _, m in recording.of(StackReopened)), key=lambda m: m.t):
+        taken = min((a for a in left if (a.cluster, a.index, a.vehicle) ==
+                     (m.cluster, m.index, m.vehicle) and a.t > m.t),
+                    key=lambda a: a.t, default=None)
+        if taken is not None:
+            left.remove(taken)
+    return left
 
 
 def _unique_revisions(recording: Recording) -> list[tuple]:

@@ -9,6 +9,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fleet.analysis.motion import Impossible
+from fleet.analysis.served import NotServed, OutOfOrder
 from fleet.analysis.streams import Gap
 from fleet.analysis.time_use import VehicleStats
 from fleet.analysis.windows import SILENT, NotRecorded, RecorderDown, SegmentRead, Unverified
@@ -31,9 +33,10 @@ class Report:
     end_time_s: float
     all_parked_s: float  # the last trajectory's end
     stacks_expected: int
-    stacks_done: int
+    stacks_done: int  # physically served (fleet.analysis.served), or known done from the record
+    stacks_announced: int  # announced done by the dispatcher (at commit), not taken back
     stacks_duplicated: list[str]
-    stacks_lost: list[str]
+    stacks_lost: list[str]  # not done
     subtasks: int
     # The dispatcher's count (docs/metrics.md): a chosen forklift given no goal it accepts, or
     # a decided trajectory that could not be planned. Only the latter and the dispatches that
@@ -52,6 +55,13 @@ class Report:
     overlaps: list = field(default_factory=list)
     outside_reservation: list = field(default_factory=list)
     double_bookings: list = field(default_factory=list)
+    # The work as the forklifts' states show it: announced stacks they did not serve, stacks
+    # taken on the dispatcher's word (their forklift's states then not recorded), stacks
+    # served out of their cluster's order, and states no vehicle of the kind can be in.
+    stacks_not_served: list[NotServed] = field(default_factory=list)
+    stacks_unverified: list[str] = field(default_factory=list)
+    stacks_out_of_order: list[OutOfOrder] = field(default_factory=list)
+    impossible_states: list[Impossible] = field(default_factory=list)
     # A run recorded in segments (docs/recording.md): the files, the windows without a
     # recorder, what was sent then, and what the verdicts could not check because of it.
     segments: list[SegmentRead] = field(default_factory=list)
@@ -76,8 +86,9 @@ class Report:
 
     @property
     def work_done(self) -> bool:
-        return (self.stacks_done == self.stacks_expected and not self.stacks_duplicated
-                and not self.stacks_lost)
+        return (self.finished and self.stacks_done == self.stacks_expected
+                and not (self.stacks_duplicated or self.stacks_lost or self.stacks_not_served
+                         or self.stacks_out_of_order or self.impossible_states))
 
     @property
     def passed(self) -> bool:
@@ -86,9 +97,11 @@ class Report:
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
         for name in ("overlaps", "outside_reservation", "double_bookings",
-                     "outside_reservation_unverified", "double_bookings_unverified"):
+                     "outside_reservation_unverified", "double_bookings_unverified",
+                     "stacks_not_served", "stacks_out_of_order", "impossible_states"):
             data[name] = len(getattr(self, name))
             data[f"{name}_first"] = [_jsonable(asdict(x)) for x in getattr(self, name)[:20]]
+        data["overlaps_between"] = sum(o.between for o in self.overlaps)
         data.update(safe=self.safe, work_done=self.work_done, passed=self.passed)
         return _jsonable(data)
 
@@ -112,10 +125,21 @@ class Report:
             f"{len(self.outside_reservation)} moments outside a reservation, "
             f"{len(self.double_bookings)} double-booked cells{unchecked}",
             f"work               {mark(self.work_done)}: {self.stacks_done} of "
-            f"{self.stacks_expected} stacks, {len(self.stacks_duplicated)} twice, "
-            f"{len(self.stacks_lost)} lost"
+            f"{self.stacks_expected} stacks served"
+            + (f" ({self.stacks_announced} announced)"
+               if self.stacks_announced != self.stacks_done else "")
+            + f", {len(self.stacks_duplicated)} twice, {len(self.stacks_lost)} lost"
             + (f" ({len(self.stacks_not_recorded)} known done from the dispatcher's record "
-               f"only)" if self.stacks_not_recorded else ""),
+               f"only)" if self.stacks_not_recorded else "")
+            + (f", {len(self.stacks_not_served)} announced but not served"
+               if self.stacks_not_served else "")
+            + f", {len(self.stacks_out_of_order)} out of order, "
+            f"{len(self.impossible_states)} impossible states"
+            + (f"; {len(self.stacks_unverified)} served on the dispatcher's word (their "
+               f"forklift's states not recorded)" if self.stacks_unverified else "")
+            + ("" if self.finished else "; the mission did not finish"
+               + (f" ({self.mission_error})" if self.mission_error
+                  else " (no result recorded)")),
             f"messages           {mark(self.messages_lost == 0)}: "
             f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
             + (f"{self.messages_cut_off} sent while cut off, " if self.messages_cut_off
@@ -134,7 +158,9 @@ class Report:
         return [
             f"  end time           {self.end_time_s:.2f} s (last stack done); every forklift "
             f"parked at {self.all_parked_s:.2f} s",
-            f"  stacks             {self.stacks_done} of {self.stacks_expected}",
+            f"  stacks             {self.stacks_done} of {self.stacks_expected}"
+            + (f" ({self.stacks_announced} announced)"
+               if self.stacks_announced != self.stacks_done else ""),
             f"  subtasks           {self.subtasks}",
             f"  decision failures  {self.decision_failures}: {self.plans_failed} plans failed, "
             f"{no_goal} choices without a goal"
@@ -248,12 +274,18 @@ FINDINGS = (
     Listing("double_bookings_unverified", "not judged", lambda d: f"cell {d.cell} by "
             f"{d.vehicles} over [{d.t0:.2f}, {d.t1:.2f}): the reservations then are not known"),
     Listing("overlaps", "overlap", lambda o: f"t={o.t:.2f} s forklifts {o.vehicles} on "
-            f"{list(o.cells)}"),
+            f"{list(o.cells)}" + (" (between their states)" if o.between else "")),
     Listing("outside_reservation", "outside", lambda o: f"t={o.t:.2f} s forklift {o.vehicle} "
             f"on {list(o.cells)}"),
     Listing("double_bookings", "double-booked", lambda d: f"cell {d.cell} by {d.vehicles} "
             f"over [{d.t0:.2f}, {d.t1:.2f})"),
     Listing("stacks_duplicated", "done twice", str),
+    Listing("stacks_not_served", "not served", lambda n: f"{n.stack}, announced done by "
+            f"forklift {n.vehicle} at t={n.t:.2f} s: {n.why}", more="stacks"),
+    Listing("stacks_out_of_order", "out of order", lambda o: f"{o.cluster}#{o.taken} taken up "
+            f"at t={o.t:.2f} s, before {o.cluster}#{o.first}"),
+    Listing("impossible_states", "impossible", lambda i: f"t={i.t:.2f} s forklift "
+            f"{i.vehicle} {i.why}", more="states"),
 )
 
 

@@ -144,6 +144,13 @@ def reservations_unknown(unverified: list[Unverified], vehicle: int, t0: float, 
 
 
 
+def states_unknown(unverified: list[Unverified], vehicle: int, t0: float, t1: float) -> str:
+    """Why the forklift's states over [t0, t1) are not known, if they are not ("": known)."""
+    return next((u.why for u in unverified if u.check == "states" and u.vehicle == vehicle
+                 and u.sim_from_s < t1 and t0 < u.sim_to_s), "")
+
+
+
 def stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
                         unseen: set[tuple[str, int]], tail_unrecorded: bool = False
                         ) -> set[tuple[str, int]]:

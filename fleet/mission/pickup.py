@@ -21,7 +21,7 @@ class HeldLeg:
     pose: Pose  # where it stands once everything committed is driven
     leg: Trajectory | None  # its last committed leg
     loaded: bool
-    kind: str  # what the leg was for: "deliver", "return", or "" (none, or cut short)
+    kind: str  # what the leg was for: "deliver", "return", "aside", or "" (none, or cut short)
     down: bool
 
 
@@ -61,7 +61,7 @@ def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float
                 undelivered.append((*by_cell[stack], end, h.vehicle))
         elif h.kind == "return":
             delivers_next[h.vehicle], handling = True, work.handling(TaskKind.RETURN)
-        else:  # cut short: goods on board or not, a delivery's or a return's
+        else:  # cut short, or sent aside: goods on board or not, a delivery next or not
             delivers_next[h.vehicle] = h.loaded == work.loaded(TaskKind.DELIVER)
             handling = 0.0
         t_free[h.vehicle] = max(end + handling, t)

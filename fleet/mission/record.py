@@ -110,7 +110,7 @@ class SubtaskRecord:
     (dispatch/subtask): its whole trajectory, step by step, and the cells it reserved."""
 
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     target: str  # cluster or station
     stack: int | None  # stack index in the cluster, for deliveries
     t_i: float

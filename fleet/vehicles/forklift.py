@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
-from fleet.params import VehicleDims
+from fleet.params import ManeuverTimes, VehicleDims
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.maneuvers import (
@@ -49,6 +49,12 @@ class Forklift:
     @property
     def outline(self) -> Outline:
         return Outline(self.dims.front, self.dims.rear, self.dims.width)
+
+    @property
+    def max_speed_mps(self) -> float:
+        # One straight cell at v_high (Table 1's T5); a turn's outer corner or a lane change
+        # moves a point at most 1.6 m/s.
+        return self.cell_size / ManeuverTimes().T5
 
     def body_cells_at_rest(self, pose: Pose) -> tuple[Cell, ...]:
         return body_cells_at_rest(pose.cell, pose.heading)

@@ -120,6 +120,12 @@ class VehicleKind(Protocol):
     @property
     def outline(self) -> Outline: ...
 
+    @property
+    def max_speed_mps(self) -> float:
+        """The fastest any point of its body moves, in metres per second: the analysis bounds
+        a vehicle's motion between two of its recorded states by it."""
+        ...
+
     # -- the motion model ----------------------------------------------------------------------
     def body_cells_at_rest(self, pose: Pose) -> tuple[Cell, ...]:
         """The cells the body covers standing at `pose` (what parking reserves)."""

@@ -150,7 +150,7 @@ class TaskRequest(Message):
     TYPE: ClassVar[str] = "dispatch.task"
     task_id: str
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     start: str  # pose "col,row,H" where the dispatcher believes the forklift stands
     t_i: float
     goals: list[str]
@@ -280,7 +280,7 @@ class SubtaskEvent(Message):
 
     TYPE: ClassVar[str] = "dispatch.subtask"
     vehicle: int
-    kind: str  # "deliver" or "return"
+    kind: str  # "deliver", "return" or "aside" (out of another's way)
     target: str  # cluster or station
     stack: int | None  # stack index in the cluster, for deliveries
     t_i: float
@@ -373,7 +373,7 @@ class VehicleStatus(Message):
     vehicle: int
     pose: PoseText  # where it stands once everything committed is driven
     loaded: bool  # on its last leg (or at rest)
-    kind: str  # "deliver", "return" or "" (no leg yet)
+    kind: str  # "deliver", "return", "aside" or "" (no leg yet)
     start: str = ""
     steps: list[WireStep] = field(default_factory=list)
     down: bool = False
