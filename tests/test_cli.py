@@ -101,7 +101,7 @@ def test_run_then_plot(tmp_path, capsys):
     assert "mission fill on small with 2 forklifts, strategy comprehensive" in out
     assert "stacks             24" in out
     assert "safety             pass: 0 overlaps, 0 moments outside a reservation" in out
-    assert "work               pass: 24 of 24 stacks, 0 twice, 0 lost" in out
+    assert "work               pass: 24 of 24 stacks served, 0 twice, 0 lost" in out
     assert "messages           pass" in out and "0 lost, 0 malformed" in out
     wide = [line for line in out.splitlines() if len(line) > 80 and str(tmp_path) not in line]
     assert wide == []  # an 80-column terminal shows it as printed (a long path stays whole)

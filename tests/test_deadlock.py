@@ -6,16 +6,13 @@ from __future__ import annotations
 
 from mission_check import mission_problems
 
-from fleet.analysis.analyze import analyze
-from fleet.dispatching.decision import Strategy, TaskKind
+from fleet.dispatching.decision import Strategy
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks, stuck
-from fleet.mission.engine import Engine, EngineOptions
+from fleet.mission.engine import Engine
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.blockage import Blockage
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
-from fleet.recording.inprocess import recorded_run, write_recording
-from fleet.recording.reader import read_recording
 from fleet.world.generator import Shape, generate_layout
 from fleet.world.layout_file import load_layout
 
@@ -97,22 +94,6 @@ def test_a_move_out_of_a_pose_crossing_a_parked_vehicle_names_it():
     everything = [(x, y) for x in range(8) for y in range(8)
                   if (x, y) not in layout.vehicle_kind.body_cells_at_rest(other)]
     assert planner.exit_blockers(2, other, table, also_held=everything) != frozenset()
-
-
-def test_an_idle_forklift_in_the_way_is_sent_aside_and_the_mission_completes(tmp_path):
-    """`small`, traffic strategy, emptying: forklift 2 is left with nothing to do across
-    forklift 1's way, and is sent aside; every verdict passes on the recording."""
-    layout = load_layout("small")
-    mission = Mission("small", MissionKind.EMPTY, Strategy.TRAFFIC, 2, 0)
-    done, stream = recorded_run(mission, layout, EngineOptions())
-    assert done.ok
-    seen = done.record["deadlocks"]
-    assert seen and all(d["moved"] is not None for d in seen)
-    asides = [s for s in done.record["subtasks"] if s["kind"] == TaskKind.ASIDE.value]
-    assert [s["vehicle"] for s in asides] == [d["moved"] for d in seen]
-    write_recording(tmp_path / "run.mcap", stream, layout)
-    report = analyze(read_recording(tmp_path / "run.mcap"))
-    assert report.passed and report.stacks_done == len(layout.stacks)
 
 
 def test_a_generated_floor_that_wedged_completes_without_a_trap():

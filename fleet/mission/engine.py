@@ -359,8 +359,9 @@ class Engine:
     def _send_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
         """Plan and commit the vehicle's move to the nearest siding it can reach."""
         v = self.fleet[vehicle]
-        t0 = max(v.t_free, self.now)
-        t_i = self.pacer.before_decision(t0, {vehicle: t0})[vehicle]
+        if v.t_free > self.now:
+            return None  # busy until later: deciding for it now would move the clock ahead
+        t_i = self.pacer.before_decision(self.now, {vehicle: self.now})[vehicle]
         try:
             result = self.executor.execute(Task(vehicle, TaskKind.ASIDE, v.pose, t_i, sidings,
                                                 self.work.filled,
