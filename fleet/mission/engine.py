@@ -142,7 +142,8 @@ class Engine:
                              f"{len(starts)} start poses")
         self.work = mission_work(mission.kind, self.layout, self.options.params,
                                  self.executor.store, self.planners)
-        self.fleet = {i + 1: VehicleSlot(i + 1, pose, self.work.ready_at, TaskKind.DELIVER)
+        self.fleet = {i + 1: VehicleSlot(i + 1, pose, self.work.ready_at, TaskKind.DELIVER,
+                                         t_still=self.work.ready_at)
                       for i, pose in enumerate(starts[:n])}
         self.record = MissionRecord(mission, self.layout.name, tuple(self.fleet),
                                     tuple(starts[:n]))
@@ -188,6 +189,7 @@ class Engine:
         done, the legs committed."""
         for v in self.fleet.values():
             v.pose, v.t_free = r.poses[v.vehicle], r.t_free[v.vehicle]
+            v.t_still = v.t_free
             v.next_task = TaskKind.DELIVER if r.delivers_next[v.vehicle] else TaskKind.RETURN
         t_unload = self.work.handling(TaskKind.DELIVER)
         for cluster, index, t_done in (*r.done, *((c, i, t + t_unload)
@@ -359,8 +361,8 @@ class Engine:
     def _send_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
         """Plan and commit the vehicle's move to the nearest siding it can reach."""
         v = self.fleet[vehicle]
-        if v.t_free > self.now:
-            return None  # busy until later: deciding for it now would move the clock ahead
+        if v.t_still > self.now:
+            return None  # driving or handling until later: it can go from then, not now
         t_i = self.pacer.before_decision(self.now, {vehicle: self.now})[vehicle]
         try:
             result = self.executor.execute(Task(vehicle, TaskKind.ASIDE, v.pose, t_i, sidings,
