@@ -22,7 +22,7 @@ from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 from fleet.dispatching.algorithm1 import MlpFn
-from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
+from fleet.dispatching.decision import Decision, DispatchOutcome, Target, TaskKind, VehicleView
 from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks
@@ -250,14 +250,11 @@ class Engine:
         remaining = self.work.remaining()
         outcome = self.policy.decide([v.view() for v in active], self.streak.failed,
                                      self.targets_for, remaining)
-        self.record.decision_failures += outcome.failures
+        self._choices_failed(outcome)
         for vehicle, t_free in outcome.postponements.items():
             self.fleet[vehicle].wait_until(t_free)
         self.streak.forget(outcome.postponements)
         if outcome.decision is None:
-            self._failed(FailureEvent(
-                min(v.t_free for v in active), None, "dispatch",
-                f"no solid decision within iter_dispatch={self.options.params.iter_dispatch}"))
             self.streak.undecided()
             self._break_deadlocks()
         else:
@@ -291,7 +288,6 @@ class Engine:
             self.waiting_since.pop(decision.vehicle, None)
         else:
             self.streak.plan_failed(decision.vehicle, decision.target.name)
-            self.record.decision_failures += 1
             self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
                                       result.reason.value))
             self._break_deadlocks()
@@ -392,7 +388,17 @@ class Engine:
         if self.options.events is not None:
             self.options.events(message, t)
 
+    def _choices_failed(self, outcome: DispatchOutcome) -> None:
+        """Each choice of the policy that came to nothing, a decision failure of its own; the
+        last of a dispatch that ended without a decision says so (stage "dispatch")."""
+        last = len(outcome.failures) - 1 if outcome.decision is None else -1
+        for k, f in enumerate(outcome.failures):
+            self._failed(FailureEvent(f.t_i, f.vehicle, "score", f.why) if k != last else
+                         FailureEvent(f.t_i, f.vehicle, "dispatch", f"{f.why}; no solid decision "
+                                      f"within iter_dispatch={self.options.params.iter_dispatch}"))
+
     def _failed(self, failure: FailureEvent) -> None:
+        """A decision failure: counted, and announced (dispatch/failure)."""
         self.record.failures.append(failure)
         self._emit(DecisionFailure(failure.t, failure.vehicle, failure.stage, failure.reason),
                    failure.t)
