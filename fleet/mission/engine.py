@@ -155,6 +155,7 @@ class Engine:
         self.streak = FailureStreak()
         self.waits: dict[int, Wait] = {}  # the wait-for graph, as of the table's revision
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
+        self.failed_at: dict[int, float] = {}  # the instant each vehicle last failed at
         self.asides = 0  # vehicles sent aside since the last subtask of the work
         self.said_walled: set[tuple[int, int]] = set()  # (vehicle, revision) reported
         self.now = 0.0  # the instant the clock was last moved to
@@ -254,15 +255,23 @@ class Engine:
         for vehicle, t_free in outcome.postponements.items():
             self.fleet[vehicle].wait_until(t_free)
         self.streak.forget(outcome.postponements)
+        for f in outcome.failures:
+            self._failed_again(f.vehicle, f.t_i)
         if outcome.decision is None:
             self.streak.undecided()
             self._break_deadlocks()
         else:
             self._carry_out(outcome.decision, remaining)
-        if self.streak.count > self.options.max_consecutive_failures:
+        if self.streak.count > self.options.max_consecutive_failures and self._at_rest():
             raise MissionStuck(self.standstill(Cause.STUCK, (
                 f"{self.streak.count} decisions in a row failed by t={self.now:.2f} s; the "
                 f"last: {failure_text(self.record.failures[-1])}")))
+
+    def _at_rest(self) -> bool:
+        """Whether every forklift that is up stands still by now: while one still drives or
+        handles goods, the ways it holds open up once it is decided for again."""
+        return all(v.t_still <= self.now for v in self.fleet.values()
+                   if v.vehicle not in self.faults.down)
 
     def standstill(self, cause: Cause, reason: str) -> Standstill:
         """How far the mission got, as it stops now (fleet/mission/standstill.py)."""
@@ -290,6 +299,7 @@ class Engine:
             self.streak.plan_failed(decision.vehicle, decision.target.name)
             self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
                                       result.reason.value))
+            self._failed_again(decision.vehicle, decision.t_i)
             self._break_deadlocks()
 
     # -- deadlocks (fleet/mission/deadlock.py, fleet/mission/step_aside.py) -------------------
@@ -306,9 +316,13 @@ class Engine:
         def movable(owner: int) -> bool:
             return owner in self.fleet and owner not in self.faults.down
 
-        idle = {v for v in self.fleet if v not in self.faults.down}
+        # Still driving or handling: it moves by itself, and is decided for again after.
+        idle = {v.vehicle for v in self.fleet.values()
+                if v.vehicle not in self.faults.down and v.t_still <= self.now}
         self.waits = {v: w for v, w in self.waits.items() if w.revision == store.revision}
         for v in active:
+            if v.vehicle not in idle:
+                continue
             if not self.work.targets(v.view(), poses):
                 continue  # offered nothing to do now: it cannot move by itself
             idle.discard(v.vehicle)
@@ -396,6 +410,20 @@ class Engine:
             self._failed(FailureEvent(f.t_i, f.vehicle, "score", f.why) if k != last else
                          FailureEvent(f.t_i, f.vehicle, "dispatch", f"{f.why}; no solid decision "
                                       f"within iter_dispatch={self.options.params.iter_dispatch}"))
+
+    def _failed_again(self, vehicle: int, t_i: float) -> None:
+        """A vehicle that fails twice at the instant it is free from is tried again Δt later,
+        as the backup state postpones: else one whose way stays closed while the others work
+        pins the mission's clock (the earliest free time) and what is due later, a forklift
+        coming back up, never comes."""
+        v = self.fleet[vehicle]
+        if t_i != v.t_free:
+            return  # postponed already
+        if self.failed_at.get(vehicle) == t_i:
+            v.wait_until(t_i + self.options.params.dt_postpone)
+            self.streak.forget({vehicle})
+        else:
+            self.failed_at[vehicle] = t_i
 
     def _failed(self, failure: FailureEvent) -> None:
         """A decision failure: counted, and announced (dispatch/failure)."""
