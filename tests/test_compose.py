@@ -12,6 +12,7 @@ import queue
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -31,7 +32,10 @@ from fleet.world.layout_file import load_layout
 ROOT = Path(__file__).resolve().parent.parent
 IMAGE = "forklift-fleet:test"
 MISSION_TIMEOUT_S = 600
-KILLED, CUT = 4, 2  # the forklifts the fault test disturbs
+# The forklifts the fault test disturbs: any pair, drawn from a seed (FLEET_FAULT_SEED to
+# draw another; every ordered pair completes in process, docs/reliability.md).
+FAULT_SEED = int(os.environ.get("FLEET_FAULT_SEED", "2025"))
+KILLED, CUT = (int(v) for v in np.random.default_rng(FAULT_SEED).permutation(4)[:2] + 1)
 
 
 def docker_ready() -> bool:
@@ -168,18 +172,8 @@ def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(
     """Mid-mission one forklift's container is killed and another's is cut off its network;
     once the dispatcher has halted each, the killed one is started again (it claims its
     forklift back under its host name) and the other connected again. The mission completes
-    with no overlap and every stack exactly once, and both forklifts worked again.
-
-    Halted where they stand, forklifts can still wall each other in (issue 25's deadlock:
-    the dispatcher then fails after 400 decisions in a row). Until that is mended, a run
-    that ends so, and only so, is tried once more on a fresh deployment; its recording is
-    still judged safe before the second try."""
+    with no overlap and every stack exactly once, and both forklifts worked again."""
     outcome = disturbed_mission(deployment())
-    if outcome[0] != [0, 0] and WEDGED in outcome[-1]:
-        report = analyze(outcome[3])
-        assert (len(report.overlaps), len(report.outside_reservation)) == (0, 0), report
-        outcome[4].down()
-        outcome = disturbed_mission(deployment())
     codes, fixes, resumed, recording, _d, logs = outcome
     assert codes == [0, 0], logs
     assert all(f == [] for f in fixes.values()) and len(fixes) == 2, "not both seen down"
@@ -189,9 +183,6 @@ def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(
     assert (len(report.overlaps), len(report.outside_reservation), report.stacks_done,
             report.stacks_duplicated, report.stacks_lost) == (0, 0, 136, [], []), report
     assert report.passed, report
-
-
-WEDGED = "decisions in a row failed"  # the dispatcher's words for issue 25's deadlock
 
 
 def disturbed_mission(d: Deployment) -> tuple:
@@ -211,7 +202,7 @@ def disturbed_mission(d: Deployment) -> tuple:
     try:
         while not isinstance(message := events.get(timeout=MISSION_TIMEOUT_S), MissionDone):
             if not fixes and isinstance(message, Progress) and message.done >= 30:
-                # every forklift has claimed its id by now: forklift 4 is killed, 2 cut off
+                # every forklift has claimed its id by now: one is killed, another cut off
                 by_id = {forklift_id(c): c for c in d.containers("vehicle")}
                 killed, cut = by_id[KILLED], by_id[CUT]
                 fixes = {KILLED: ["docker", "start", killed],
