@@ -2,10 +2,18 @@
 instant, so that a run that keeps up decides what the fast clock would, and the one clock
 every process computes from the ticks."""
 
+import itertools
+
 import pytest
 
 from dispatcher.pacing import RealtimePacing
+from fleet.dispatching.decision import TaskKind
+from fleet.mission.engine import Engine
+from fleet.mission.freeze import BREAKDOWN, Disruption, VehicleDown, VehicleUp
+from fleet.mission.spec import Mission
+from fleet.runtime.args import engine_options
 from fleet.wire.protocol import ClockTick
+from fleet.world.layout_file import load_layout
 from vehicle_agent import clock as agent_clock
 from vehicle_agent.clock import SimClock
 
@@ -73,3 +81,44 @@ def test_an_agent_computes_the_dispatchers_now_from_its_ticks(monkeypatch, wall)
     monkeypatch.setattr(agent_clock.time, "time", lambda: wall)
     assert agent.now() == pytest.approx(p.now(wall))
     assert agent.wall_at(105.0) == pytest.approx(p.wall_at(105.0))
+
+
+class NewsComesLate:
+    """The engine's pacer in process, with each disruption heard only once the engine
+    decides `lag` after its instant: as on the real-time clock, which decides a lead ahead
+    of now and freezes a margin after now, before subtasks it has already decided."""
+
+    def __init__(self, disruptions: list[Disruption], lag: float) -> None:
+        self.pending, self.lag = list(disruptions), lag
+
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        return t_free
+
+    def finish(self, t_end: float) -> None:
+        pass
+
+    def instant(self, t: float) -> float:
+        return t
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        due = [d for d in self.pending if d.t + self.lag <= t_next]
+        self.pending = [d for d in self.pending if d not in due]
+        return due
+
+
+def test_a_freeze_before_subtasks_decided_undoes_them_but_not_the_handling_before():
+    """Forklift 1 of `small` unloads at b from 29.75 s to 34.75 s, and its return from
+    34.75 s is decided before its breakdown at 31 s is heard: the return is undone, and
+    after the repair the forklift moves no sooner than its unloading is over."""
+    mission = Mission("small")
+    layout = load_layout("small")
+    news = NewsComesLate([VehicleDown(1, 31.0, BREAKDOWN), VehicleUp(1, 32.0)], lag=10.0)
+    record = Engine(mission, engine_options(mission, layout, None), layout, pacer=news).run()
+    assert news.pending == [] and record.halts[0][:2] == (1, 31.0)
+    undone = [record.subtasks[i] for i in record.cut_subtasks]
+    assert [(s.vehicle, s.kind, s.t_i) for s in undone] == [(1, TaskKind.RETURN, 34.75)]
+    for vehicle in (1, 2):
+        kept = [s for i, s in enumerate(record.subtasks)
+                if s.vehicle == vehicle and i not in record.cut_subtasks]
+        assert all(b.t_i >= a.t_done for a, b in itertools.pairwise(kept)), vehicle
+    assert len(record.stacks_done) == 24

@@ -129,7 +129,9 @@ class FaultResponse:
             v.next_task, v.linked_cluster, v.linked_kind = \
                 before.next_task, before.linked_cluster, before.linked_kind
             v.busy_s, v.wait_s = before.busy_s, before.wait_s
-            v.t_free = freeze.t_stand
+            # Not before it was free for the first subtask undone: one decided ahead, not
+            # started by t, waited for the handling before it to end.
+            v.t_free = max(freeze.t_stand, before.t_free)
         else:
             v.t_free = max(v.t_free, freeze.t_stand)
         for i in undone:
