@@ -266,7 +266,7 @@ def run_row(index: int, kind: MissionKind, scenario: Scenario, outcome: Outcome,
     report = outcome.report
     verdicts = None if report is None else {
         "safety": report.safe, "work": report.work_done,
-        "messages": report.messages_lost == 0, "passed": report.passed}
+        "messages": report.messages_whole, "passed": report.passed}
     end = report.end_time_s if report is not None and outcome.completed else None
     return {
         "index": index,

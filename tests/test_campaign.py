@@ -120,3 +120,14 @@ def test_a_mission_that_gets_stuck_is_wedged_with_its_recording(tmp_path):
     assert (outcome.completed, outcome.wedged) == (False, True)
     assert "decisions in a row failed" in outcome.error
     assert outcome.report is not None and not outcome.report.passed
+
+
+@pytest.mark.parametrize("seed", [101, 202])
+def test_random_small_missions_with_random_faults_always_complete(capsys, tmp_path, seed):
+    """The property the campaigns measure at scale: whatever faults the seed draws (2 to 4 of
+    them, on fill and empty missions), every mission completes and passes every verdict."""
+    code = main(["bench", "campaign", "--layout", "small", "--runs", "8", "--seed", str(seed),
+                 "--out", str(tmp_path / "out"), "--json"])
+    result = json.loads(capsys.readouterr().out)
+    failed = [(r["index"], r["kind"], r["error"]) for r in result["per_run"] if r["failed"]]
+    assert (code, result["completed"], result["verdict_failures"], failed) == (0, 8, 0, [])

@@ -80,6 +80,11 @@ def test_a_stuck_engine_says_how_far_it_got_and_where_each_forklift_stands(walle
     stopped = stuck.value.standstill
     assert stopped.cause is Cause.STUCK and stopped.reason == str(stuck.value)
     assert stopped.t == engine.now and stopped.failures_in_a_row == 41
+    # The last failure, a forklift's choice that ended a dispatch without a decision; the
+    # count in all is that of the failures announced.
+    assert re.search(r"the last: dispatch of forklift \d for t=[\d.]+ s: no target offered; "
+                     r"no solid decision within iter_dispatch=10$", str(stuck.value))
+    assert stopped.decision_failures == len(engine.record.failures) > 41
     assert (stopped.stacks_done, stopped.stacks_total) == (6, 7)  # b#1 is walled in
     assert [(v.vehicle, v.pose, v.t_free, v.next_task) for v in stopped.vehicles] == \
         [(s.vehicle, s.pose, s.t_free, s.next_task) for s in engine.fleet.values()]
@@ -91,14 +96,14 @@ def test_a_stuck_engine_says_how_far_it_got_and_where_each_forklift_stands(walle
 
 
 def test_a_standstill_travels_and_reads_back_as_it_was():
-    stopped = Standstill(Cause.LOST, "forklift 2 lost", 12.5, 3, 24, 0, (
+    stopped = Standstill(Cause.LOST, "forklift 2 lost", 12.5, 3, 24, 0, 7, (
         VehicleStanding(1, Pose((4, 6), 3), 14.0, TaskKind.RETURN, False, ("p1", "p2"),
                         "plan for t=12.00 s: no path"),
         VehicleStanding(2, Pose((5, 6), 1), 12.5, TaskKind.DELIVER, True, (), "")))
     message = decode(encode(stopped.message(), "dispatcher", 1, 12.5)).message
     assert Standstill.of_message(message) == stopped
     with pytest.raises(ProtocolError, match=r"dispatch\.stopped: 'hung' is not a valid Cause"):
-        Standstill.of_message(MissionStopped("hung", "", 0.0, 0, 1, 0, []))
+        Standstill.of_message(MissionStopped("hung", "", 0.0, 0, 1, 0, 0, []))
 
 
 def test_an_inprocess_run_asked_to_stop_ends_whole_between_two_decisions(tmp_path):
@@ -148,6 +153,10 @@ def test_a_stuck_mission_leaves_its_recording_in_process_and_with_processes(wall
         assert kept["finished"] is False and kept["stopped"]["cause"] == "stuck"
         assert [v["vehicle"] for v in kept["stopped"]["vehicles"]] == [1, 2]
         stopped[name] = kept["stopped"]
+        # Every failure it counted, to the last, is announced (docs/metrics.md).
+        report = analyze(read_recording(out))
+        assert report.messages_whole and report.decision_failures == \
+            report.messages["dispatch.failure"] == kept["stopped"]["decision_failures"]
     assert stopped["processes"] == stopped["inprocess"]  # the fast clock agrees, stuck too
 
     out, t = tmp_path / "processes", stopped["processes"]["t"]

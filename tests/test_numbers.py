@@ -274,13 +274,24 @@ def test_a_window_without_a_recorder_takes_the_dispatchers_record(greedy_small, 
         *(f"                     {why}" for why in unfinished.incomplete)]
 
 
+def restart_point(items: list[Item]) -> int:
+    """Just after the first progress report, after the third failure, that counts the failures
+    before it: a dispatcher announces each before reporting it, but an in-process recording
+    holds a failure at the later instant it was decided for (sim-time order)."""
+    return next(k + 1 for k, (o, _, _) in enumerate(items)
+                if k > position(items, DecisionFailure, 2) and isinstance(o.message, Progress)
+                and o.message.failures == sum(isinstance(i.message, DecisionFailure)
+                                              for i, _, _ in items[:k]))
+
+
 def restarted(items: list[Item], at: int) -> tuple[list[Item], int]:
     """The dispatcher killed just before position `at` and a new one picking the mission up
     (docs/faults.md): its messages numbered from 1 again on every key after its own mission
     message; its record holds what it announced only (in the order it decided it), its count
-    of decision failures starts at 0. With the old one's count when it died."""
+    of decision failures starts at 0. With the old one's count when it died (the failures it
+    announced)."""
     info = items[0][0]
-    old = [o.message.failures for o, _, _ in items[:at] if isinstance(o.message, Progress)]
+    old = sum(isinstance(o.message, DecisionFailure) for o, _, _ in items[:at])
     count: Counter = Counter({info.key: 1})
     new: list[Item] = [(info, 1, items[at][2] - 1)]
     for o, seq, log_ns in items[at:]:
@@ -289,25 +300,24 @@ def restarted(items: list[Item], at: int) -> tuple[list[Item], int]:
             seq = count[o.key]
         if isinstance(o.message, Progress):
             o = dataclasses.replace(o, message=dataclasses.replace(
-                o.message, failures=max(0, o.message.failures - max(old))))
+                o.message, failures=max(0, o.message.failures - old)))
         new.append((o, seq, log_ns))
     announced = [o.message for o, _, _ in new[1:] if o.sender == "dispatcher"]
     done = announced[-1]
     own = [SubtaskRecord.of_event(m).to_dict() for m in announced if isinstance(m, SubtaskEvent)]
+    failures = [{"t": m.t, "vehicle": m.vehicle, "stage": m.stage, "reason": m.reason}
+                for m in announced if isinstance(m, DecisionFailure)]
     record = dict(done.record, subtasks=[s for s in done.record["subtasks"] if s in own],
-                  failures=[{"t": m.t, "vehicle": m.vehicle, "stage": m.stage,
-                             "reason": m.reason} for m in announced
-                            if isinstance(m, DecisionFailure)],
-                  decision_failures=done.record["decision_failures"] - max(old))
+                  failures=failures, decision_failures=len(failures))
     o, seq, log_ns = new[-1]
     new[-1] = (dataclasses.replace(o, message=dataclasses.replace(done, record=record)), seq,
                log_ns)
-    return items[:at] + new, max(old)
+    return items[:at] + new, old
 
 
 def test_a_restarted_dispatchers_figures_are_added(greedy_small, tmp_path):
     items = greedy_small
-    at = position(items, Progress, 0, position(items, DecisionFailure, 2)) + 1
+    at = restart_point(items)
     run, old_count = restarted(items, at)
     whole = recorded(tmp_path / "whole", items)
     (restart,) = dispatcher_restarts(read_recording(write(tmp_path / "run.mcap", run)))
@@ -315,6 +325,11 @@ def test_a_restarted_dispatchers_figures_are_added(greedy_small, tmp_path):
     both = recorded(tmp_path / "both", run)
     assert 0 < old_count < whole.decision_failures
     assert figures(both) == figures(whole) and both.incomplete == []
+    # Each counted its own failures and announced each (the old one to its last report).
+    new_count = whole.decision_failures - old_count
+    assert [(c.dispatcher, c.announced, c.final) for c in both.failure_counts] == \
+        [(1, old_count, False), (2, new_count, True)]
+    assert both.failure_counts[1].counted == new_count and both.messages_whole
 
 
 def test_a_dispatcher_that_died_while_no_recorder_ran_leaves_its_figures_incomplete(
@@ -322,7 +337,7 @@ def test_a_dispatcher_that_died_while_no_recorder_ran_leaves_its_figures_incompl
     """The old dispatcher's last subtask and the new one's first messages, its first
     progress report (number 1) among them, were sent while no recorder ran."""
     items = greedy_small
-    at = position(items, Progress, 0, position(items, DecisionFailure, 2)) + 1
+    at = restart_point(items)
     run, old_count = restarted(items, at)
     last_old = max(k for k, (o, _, _) in enumerate(run[:at])
                    if isinstance(o.message, SubtaskEvent))
@@ -333,11 +348,16 @@ def test_a_dispatcher_that_died_while_no_recorder_ran_leaves_its_figures_incompl
     assert report.incomplete == ["dispatcher 1 of 2 died while no recorder ran"]
     whole = recorded(tmp_path / "whole", items)
     assert report.subtasks == whole.subtasks - 1  # the old one's last: in no record
-    # Each dispatcher's count is its own, though the new one's first report went unheard.
-    new_count = whole.decision_failures - old_count
-    assert seen_count > 0 and report.decision_failures == seen_count + new_count
+    # The failures announced as recorded or in the new one's record: not the old one's
+    # unheard; its count is not judged (what it sent last is unknown), the new one's is.
     old_unheard = sum(isinstance(o.message, DecisionFailure) for o, _, _ in run[last_old:at])
-    assert report.plans_failed == whole.plans_failed - old_unheard
+    assert report.decision_failures == whole.decision_failures - old_unheard
+    assert report.plans_failed == whole.plans_failed - sum(
+        isinstance(o.message, DecisionFailure) and o.message.stage == "plan"
+        for o, _, _ in run[last_old:at])
+    assert seen_count > 0 and [c.known for c in report.failure_counts] == [False, True]
+    assert report.failure_counts[1].counted == whole.decision_failures - old_count
+    assert report.messages_whole
     assert report.work_done  # every stack is in the new record
     text = "\n".join(report.numbers_lines())
     assert "incomplete         these figures miss" in text and "dispatcher 1 of 2 died" in text

@@ -6,7 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from fleet.dispatching.decision import Decision, DispatchOutcome, Strategy, TaskKind
+from fleet.dispatching.decision import (
+    Decision,
+    DispatchOutcome,
+    FailedChoice,
+    Strategy,
+    TaskKind,
+)
 from fleet.dispatching.policy import POLICIES
 from fleet.mission.engine import run_mission
 from fleet.mission.spec import Mission, MissionKind
@@ -80,9 +86,10 @@ class EarliestToFirstTarget:
             if targets:
                 self.decisions += 1
                 return DispatchOutcome(Decision(v.vehicle, v.t_free, v.next_task, targets[0],
-                                                False), 0)
+                                                False))
         first = min(vehicles, key=lambda v: (v.t_free, v.vehicle))
-        return DispatchOutcome(None, 1, {first.vehicle: first.t_free + 10.0})
+        return DispatchOutcome(None, [FailedChoice(first.vehicle, first.t_free, "none offered")],
+                               {first.vehicle: first.t_free + 10.0})
 
 
 @pytest.mark.parametrize("kind", list(MissionKind))

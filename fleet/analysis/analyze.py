@@ -6,7 +6,8 @@ reservation, no cell held by two owners at once. Work: the mission finished, and
 of the layout was physically served exactly once, each cluster in its order, by forklifts
 whose states are physically possible (fleet/analysis/served.py, fleet/analysis/motion.py).
 Messages: every stream's sequence numbers are complete (a gap is a lost message,
-fleet/analysis/streams.py).
+fleet/analysis/streams.py), and every decision failure a dispatcher counted was announced
+(fleet/analysis/failure_count.py).
 
 A run recorded in segments (a recorder killed and restarted) has windows in which no
 recorder ran: what was sent then is reported as not recorded, apart from what was lost in
@@ -23,6 +24,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import TypeVar
 
+from fleet.analysis.failure_count import failure_counts
 from fleet.analysis.motion import at_rest, grid_pose, impossible_states
 from fleet.analysis.report import Report
 from fleet.analysis.safety import (
@@ -142,8 +144,9 @@ def analyze(recording: Recording) -> Report:
                       STATE_GAP_PERIODS * period, kind.handled_cell,
                       lambda v, t0, t1: states_unknown(unverified, v, t0, t1))
     served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
+    restarts = dispatcher_restarts(recording)
     from_record = stacks_not_recorded(done, unrecorded, expected - set(stacks), any(
-        x.unrecorded for x in dispatcher_restarts(recording)))
+        x.unrecorded for x in restarts))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
@@ -170,6 +173,7 @@ def analyze(recording: Recording) -> Report:
         decision_failures=record.decision_failures,
         plans_failed=sum(f.stage == "plan" for f in record.failures),
         undecided=sum(f.stage == "dispatch" for f in record.failures),
+        failure_counts=failure_counts(recording, restarts, final_record(recording, restarts)),
         commit_conflicts=len(done[-1].rejections) if done else 0,
         vehicles=time_use(record.subtasks, [m for _, m in recording.of(Halt)],
                           [m for _, m in recording.of(Resume)], info.vehicles,

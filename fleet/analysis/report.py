@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fleet.analysis.failure_count import FailureCount
 from fleet.analysis.motion import Impossible
 from fleet.analysis.served import NotServed, OutOfOrder
 from fleet.analysis.streams import Gap
@@ -39,11 +40,12 @@ class Report:
     stacks_lost: list[str]  # not done
     subtasks: int
     # The dispatcher's count (docs/metrics.md): a chosen forklift given no goal it accepts, or
-    # a decided trajectory that could not be planned. Only the latter and the dispatches that
-    # ended with no decision at all are announced, one dispatch.failure message each.
-    decision_failures: int
+    # a decided trajectory that could not be planned; each announced as a dispatch.failure.
+    decision_failures: int  # those announced
     plans_failed: int
     undecided: int  # dispatches without a decision (each iter_dispatch choices without a goal)
+    # Each dispatcher's count against its announcements: they must agree (messages verdict).
+    failure_counts: list[FailureCount]
     commit_conflicts: int
     vehicles: list[VehicleStats]  # fleet.analysis.time_use: where each forklift's time went
     messages: dict[str, int]  # per message type
@@ -91,8 +93,17 @@ class Report:
                          or self.stacks_out_of_order or self.impossible_states))
 
     @property
+    def failures_unannounced(self) -> list[FailureCount]:
+        """The dispatchers whose count of decision failures is not the number announced."""
+        return [c for c in self.failure_counts if not c.agrees]
+
+    @property
+    def messages_whole(self) -> bool:
+        return self.messages_lost == 0 and not self.failures_unannounced
+
+    @property
     def passed(self) -> bool:
-        return self.safe and self.work_done and self.messages_lost == 0
+        return self.safe and self.work_done and self.messages_whole
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
@@ -102,7 +113,8 @@ class Report:
             data[name] = len(getattr(self, name))
             data[f"{name}_first"] = [_jsonable(asdict(x)) for x in getattr(self, name)[:20]]
         data["overlaps_between"] = sum(o.between for o in self.overlaps)
-        data.update(safe=self.safe, work_done=self.work_done, passed=self.passed)
+        data.update(safe=self.safe, work_done=self.work_done,
+                    messages_whole=self.messages_whole, passed=self.passed)
         return _jsonable(data)
 
     def verdict_lines(self) -> list[str]:
@@ -140,13 +152,14 @@ class Report:
             + ("" if self.finished else "; the mission did not finish"
                + (f" ({self.mission_error})" if self.mission_error
                   else " (no result recorded)")),
-            f"messages           {mark(self.messages_lost == 0)}: "
+            f"messages           {mark(self.messages_whole)}: "
             f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
             + (f"{self.messages_cut_off} sent while cut off, " if self.messages_cut_off
                else "")
             + (f"{self.messages_not_recorded} not recorded (no recorder running), "
                if self.recorder_gaps else "")
-            + f"{self.malformed} malformed, {self.foreign} foreign",
+            + f"{self.malformed} malformed, {self.foreign} foreign"
+            + "".join(f"; {c.line()}" for c in self.failures_unannounced),
         ]
 
     def numbers_lines(self) -> list[str]:

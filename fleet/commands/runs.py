@@ -84,7 +84,7 @@ def summary_of(report, run_id: str | None, segments: dict[str, int],
     """What `fleet runs` keeps of a judged run (a fleet.analysis.report.Report), and of one
     that did not finish how far it got (`stopped`, as its recording says)."""
     verdicts = {"safety": report.safe, "work": report.work_done,
-                "messages": report.messages_lost == 0}
+                "messages": report.messages_whole}
     return {"run_id": run_id, "judged": _utc(time.time()), "mission": report.mission,
             "finished": report.finished, "end_time_s": report.end_time_s,
             "stopped": stopped.to_dict() if stopped is not None else None,

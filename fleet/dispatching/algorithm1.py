@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from fleet.dispatching.decision import (
     Decision,
     DispatchOutcome,
+    FailedChoice,
     Strategy,
     Target,
     TaskKind,
@@ -53,6 +54,31 @@ class ScoredDecision(Decision):
     training learns from, fleet/mission/training.py)."""
 
     scores: tuple[Score, ...]
+
+
+# A refusal names this many targets, then how many more.
+NAMED_TARGETS = 3
+
+
+def refusal(scores: Sequence[Score]) -> str:
+    """Why no target was accepted, briefly: those the preliminary A* did not reach, and the
+    best of those it did, whose score was not positive."""
+    if not scores:
+        return "no target offered"
+    unreached = [s.target.name for s in scores if not s.found]
+    found = [s for s in scores if s.found]
+    parts = [f"no preliminary path to {_names(unreached)}"] if unreached else []
+    if found:
+        best = max(found, key=lambda s: s.value)
+        parts.append(f"best {best.target.name} scored S0={best.S0:.2f}, not above 0")
+    return "; ".join(parts)
+
+
+def _names(names: Sequence[str]) -> str:
+    """"a, b, c and 2 more"."""
+    shown = ", ".join(names[:NAMED_TARGETS])
+    return shown + (f" and {len(names) - NAMED_TARGETS} more" if len(names) > NAMED_TARGETS
+                    else "")
 
 
 def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = ()) -> list[int]:
@@ -167,7 +193,7 @@ class Algorithm1:
         by_id = {v.vehicle: v for v in vehicles}
         order = rank(vehicles, failed)
         selected: set[int] = set(failed)
-        failures = 0
+        failures: list[FailedChoice] = []
         postponements: dict[int, float] = {}
         u = mlp_inputs(self.cluster_names, vehicles, remaining)
         for _ in range(self.params.iter_dispatch):
@@ -193,5 +219,5 @@ class Algorithm1:
                 return DispatchOutcome(ScoredDecision(current, t_i, view.next_task,
                                                       best.target, postponed, tuple(scores)),
                                        failures, postponements)
-            failures += 1
+            failures.append(FailedChoice(current, t_i, refusal(scores)))
         return DispatchOutcome(None, failures, postponements)

@@ -62,8 +62,20 @@ class Decision:
     postponed: bool  # decided for a later instant than the vehicle was free at
 
 
+@dataclass(frozen=True)
+class FailedChoice:
+    """A vehicle chosen for the instant t_i and given no target it accepts: one decision
+    failure (the seed's count), which the engine announces as it is."""
+
+    vehicle: int
+    t_i: float
+    why: str  # which targets were refused, briefly
+
+
 @dataclass
 class DispatchOutcome:
     decision: Decision | None
-    failures: int  # times n_current or t_i changed without a decision (the seed's count)
+    # Each time n_current or t_i changed without a decision (the seed's count), in order; at
+    # least one when there is no decision.
+    failures: list[FailedChoice] = field(default_factory=list)
     postponements: dict[int, float] = field(default_factory=dict)  # vehicle -> new t_free

@@ -3,11 +3,12 @@ gives a mission the policy its strategy names.
 
 A policy sees the vehicles that have something left to do and asks the mission's work state
 (fleet/mission/work.py) where each may go; it answers with one decision (which vehicle, from
-which instant, to which target) or none, and how often it changed its mind on the way. It keeps
-no state of the mission between calls: the engine owns that, so the in-process run and the
-dispatcher process (which builds its engine the same way) decide the same. Seed 000's Algorithm
-1 with its five strategies is the first policy; another (seeds 002 and 004: nearest pair, round
-robin) is a class with `decide` and an entry in POLICIES for the strategies that name it.
+which instant, to which target) or none, and each choice it made on the way that came to
+nothing. It keeps no state of the mission between calls: the engine owns that, so the
+in-process run and the dispatcher process (which builds its engine the same way) decide the
+same. Seed 000's Algorithm 1 with its five strategies is the first policy; another (seeds
+002 and 004: nearest pair, round robin) is a class with `decide` and an entry in POLICIES
+for the strategies that name it.
 """
 
 from __future__ import annotations
@@ -32,7 +33,9 @@ class DispatchPolicy(Protocol):
         """The next decision for one of `vehicles` (those with work left), with the targets
         `targets_for` offers each and the work `remaining` per group of targets (per
         cluster); `failed` are the vehicles whose decided trajectory could not be planned
-        since the last success, in order. None in the outcome: no solid decision."""
+        since the last success, in order. None in the outcome: no solid decision; each
+        choice that came to nothing is one of the outcome's failures (at least one when
+        there is no decision), and the engine announces each."""
 
 
 @dataclass(frozen=True)

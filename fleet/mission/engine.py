@@ -22,7 +22,7 @@ from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 from fleet.dispatching.algorithm1 import MlpFn
-from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
+from fleet.dispatching.decision import Decision, DispatchOutcome, Target, TaskKind, VehicleView
 from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks
@@ -142,7 +142,8 @@ class Engine:
                              f"{len(starts)} start poses")
         self.work = mission_work(mission.kind, self.layout, self.options.params,
                                  self.executor.store, self.planners)
-        self.fleet = {i + 1: VehicleSlot(i + 1, pose, self.work.ready_at, TaskKind.DELIVER)
+        self.fleet = {i + 1: VehicleSlot(i + 1, pose, self.work.ready_at, TaskKind.DELIVER,
+                                         t_still=self.work.ready_at)
                       for i, pose in enumerate(starts[:n])}
         self.record = MissionRecord(mission, self.layout.name, tuple(self.fleet),
                                     tuple(starts[:n]))
@@ -154,6 +155,7 @@ class Engine:
         self.streak = FailureStreak()
         self.waits: dict[int, Wait] = {}  # the wait-for graph, as of the table's revision
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
+        self.failed_at: dict[int, float] = {}  # the instant each vehicle last failed at
         self.asides = 0  # vehicles sent aside since the last subtask of the work
         self.said_walled: set[tuple[int, int]] = set()  # (vehicle, revision) reported
         self.now = 0.0  # the instant the clock was last moved to
@@ -188,6 +190,7 @@ class Engine:
         done, the legs committed."""
         for v in self.fleet.values():
             v.pose, v.t_free = r.poses[v.vehicle], r.t_free[v.vehicle]
+            v.t_still = v.t_free
             v.next_task = TaskKind.DELIVER if r.delivers_next[v.vehicle] else TaskKind.RETURN
         t_unload = self.work.handling(TaskKind.DELIVER)
         for cluster, index, t_done in (*r.done, *((c, i, t + t_unload)
@@ -248,22 +251,27 @@ class Engine:
         remaining = self.work.remaining()
         outcome = self.policy.decide([v.view() for v in active], self.streak.failed,
                                      self.targets_for, remaining)
-        self.record.decision_failures += outcome.failures
+        self._choices_failed(outcome)
         for vehicle, t_free in outcome.postponements.items():
             self.fleet[vehicle].wait_until(t_free)
         self.streak.forget(outcome.postponements)
+        for f in outcome.failures:
+            self._failed_again(f.vehicle, f.t_i)
         if outcome.decision is None:
-            self._failed(FailureEvent(
-                min(v.t_free for v in active), None, "dispatch",
-                f"no solid decision within iter_dispatch={self.options.params.iter_dispatch}"))
             self.streak.undecided()
             self._break_deadlocks()
         else:
             self._carry_out(outcome.decision, remaining)
-        if self.streak.count > self.options.max_consecutive_failures:
+        if self.streak.count > self.options.max_consecutive_failures and self._at_rest():
             raise MissionStuck(self.standstill(Cause.STUCK, (
                 f"{self.streak.count} decisions in a row failed by t={self.now:.2f} s; the "
                 f"last: {failure_text(self.record.failures[-1])}")))
+
+    def _at_rest(self) -> bool:
+        """Whether every forklift that is up stands still by now: while one still drives or
+        handles goods, the ways it holds open up once it is decided for again."""
+        return all(v.t_still <= self.now for v in self.fleet.values()
+                   if v.vehicle not in self.faults.down)
 
     def standstill(self, cause: Cause, reason: str) -> Standstill:
         """How far the mission got, as it stops now (fleet/mission/standstill.py)."""
@@ -289,9 +297,9 @@ class Engine:
             self.waiting_since.pop(decision.vehicle, None)
         else:
             self.streak.plan_failed(decision.vehicle, decision.target.name)
-            self.record.decision_failures += 1
             self._failed(FailureEvent(decision.t_i, decision.vehicle, "plan",
                                       result.reason.value))
+            self._failed_again(decision.vehicle, decision.t_i)
             self._break_deadlocks()
 
     # -- deadlocks (fleet/mission/deadlock.py, fleet/mission/step_aside.py) -------------------
@@ -308,9 +316,13 @@ class Engine:
         def movable(owner: int) -> bool:
             return owner in self.fleet and owner not in self.faults.down
 
-        idle = {v for v in self.fleet if v not in self.faults.down}
+        # Still driving or handling: it moves by itself, and is decided for again after.
+        idle = {v.vehicle for v in self.fleet.values()
+                if v.vehicle not in self.faults.down and v.t_still <= self.now}
         self.waits = {v: w for v, w in self.waits.items() if w.revision == store.revision}
         for v in active:
+            if v.vehicle not in idle:
+                continue
             if not self.work.targets(v.view(), poses):
                 continue  # offered nothing to do now: it cannot move by itself
             idle.discard(v.vehicle)
@@ -359,8 +371,8 @@ class Engine:
     def _send_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
         """Plan and commit the vehicle's move to the nearest siding it can reach."""
         v = self.fleet[vehicle]
-        if v.t_free > self.now:
-            return None  # busy until later: deciding for it now would move the clock ahead
+        if v.t_still > self.now:
+            return None  # driving or handling until later: it can go from then, not now
         t_i = self.pacer.before_decision(self.now, {vehicle: self.now})[vehicle]
         try:
             result = self.executor.execute(Task(vehicle, TaskKind.ASIDE, v.pose, t_i, sidings,
@@ -390,7 +402,31 @@ class Engine:
         if self.options.events is not None:
             self.options.events(message, t)
 
+    def _choices_failed(self, outcome: DispatchOutcome) -> None:
+        """Each choice of the policy that came to nothing, a decision failure of its own; the
+        last of a dispatch that ended without a decision says so (stage "dispatch")."""
+        last = len(outcome.failures) - 1 if outcome.decision is None else -1
+        for k, f in enumerate(outcome.failures):
+            self._failed(FailureEvent(f.t_i, f.vehicle, "score", f.why) if k != last else
+                         FailureEvent(f.t_i, f.vehicle, "dispatch", f"{f.why}; no solid decision "
+                                      f"within iter_dispatch={self.options.params.iter_dispatch}"))
+
+    def _failed_again(self, vehicle: int, t_i: float) -> None:
+        """A vehicle that fails twice at the instant it is free from is tried again Δt later,
+        as the backup state postpones: else one whose way stays closed while the others work
+        pins the mission's clock (the earliest free time) and what is due later, a forklift
+        coming back up, never comes."""
+        v = self.fleet[vehicle]
+        if t_i != v.t_free:
+            return  # postponed already
+        if self.failed_at.get(vehicle) == t_i:
+            v.wait_until(t_i + self.options.params.dt_postpone)
+            self.streak.forget({vehicle})
+        else:
+            self.failed_at[vehicle] = t_i
+
     def _failed(self, failure: FailureEvent) -> None:
+        """A decision failure: counted, and announced (dispatch/failure)."""
         self.record.failures.append(failure)
         self._emit(DecisionFailure(failure.t, failure.vehicle, failure.stage, failure.reason),
                    failure.t)

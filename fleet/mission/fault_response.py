@@ -134,6 +134,7 @@ class FaultResponse:
             v.t_free = max(freeze.t_stand, before.t_free)
         else:
             v.t_free = max(v.t_free, freeze.t_stand)
+        v.t_still = freeze.t_stand
         for i in undone:
             self.record.cut_subtasks.append(i)
             s = self.record.subtasks[i]
@@ -165,6 +166,7 @@ class FaultResponse:
             self.driven[up.vehicle].append(Trajectory(up.vehicle, step.start, step.end,
                                                       step.t0, (step,), (), 0))
         v.t_free = max(v.t_free, t_stand)
+        v.t_still = t_stand
         self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task))
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))

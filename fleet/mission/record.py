@@ -48,9 +48,11 @@ class Subtask:
 
 @dataclass(frozen=True)
 class FailureEvent:
+    """One decision failure (docs/metrics.md): at t_i, the vehicle chosen or decided for."""
+
     t: float
-    vehicle: int | None
-    stage: str  # "dispatch" or "plan"
+    vehicle: int
+    stage: str  # "score" (no target accepted), "dispatch" (the same, ending a dispatch), "plan"
     reason: str
 
 
@@ -61,8 +63,7 @@ class MissionRecord:
     vehicles: tuple[int, ...]
     starts: tuple[Pose, ...]
     subtasks: list[Subtask] = field(default_factory=list)
-    failures: list[FailureEvent] = field(default_factory=list)
-    decision_failures: int = 0
+    failures: list[FailureEvent] = field(default_factory=list)  # each counted, each announced
     end_time: float = 0.0  # the last stack done
     all_parked_time: float = 0.0  # every vehicle at rest for good
     stacks_done: list[tuple[str, int, float]] = field(default_factory=list)
@@ -72,6 +73,10 @@ class MissionRecord:
     resumes: list[tuple[int, float]] = field(default_factory=list)
     cut_subtasks: list[int] = field(default_factory=list)  # indices of subtasks cut short
     deadlocks: list[DeadlockSeen] = field(default_factory=list)  # found, and how each broke
+
+    @property
+    def decision_failures(self) -> int:
+        return len(self.failures)
 
     @property
     def total_wait_s(self) -> float:
@@ -197,11 +202,11 @@ class MissionSummary:
     starts: tuple[str, ...]  # start pose of forklift 1..N
     end_time_s: float  # the last stack done
     all_parked_s: float  # every forklift at rest for good
-    decision_failures: int  # the dispatcher's count, announced or not
+    decision_failures: int  # the dispatcher's count: its failures, each announced
     wait_s: dict[int, float]  # per forklift: stop maneuvers and postponements
     busy_s: dict[int, float]  # per forklift: driving
     stacks_done: tuple[StackRecord, ...]  # in the order done
-    failures: tuple[DecisionFailure, ...]  # those announced (dispatch/failure)
+    failures: tuple[DecisionFailure, ...]  # as announced (dispatch/failure)
     subtasks: tuple[SubtaskRecord, ...]  # in the order decided
     # What faults did (nothing at all in a run without faults, so its record and digest are
     # those of a run before faults existed).

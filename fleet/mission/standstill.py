@@ -55,6 +55,7 @@ class Standstill:
     stacks_done: int  # done by t
     stacks_total: int
     failures_in_a_row: int  # decisions that came to nothing since the last committed subtask
+    decision_failures: int  # in all: the dispatcher's count (each announced)
     vehicles: tuple[VehicleStanding, ...]
 
     def headline(self) -> str:
@@ -72,6 +73,7 @@ class Standstill:
     def message(self) -> MissionStopped:
         return MissionStopped(self.cause.value, self.reason, self.t, self.stacks_done,
                               self.stacks_total, self.failures_in_a_row,
+                              self.decision_failures,
                               [(v.vehicle, str(v.pose), v.t_free, v.next_task.value, v.down,
                                 list(v.unreached), v.failure) for v in self.vehicles])
 
@@ -86,13 +88,14 @@ class Standstill:
         except ValueError as exc:
             raise ProtocolError(f"{MissionStopped.TYPE}: {exc}") from None
         return cls(cause, m.reason, m.t, m.stacks_done, m.stacks_total, m.failures_in_a_row,
-                   vehicles)
+                   m.decision_failures, vehicles)
 
     def to_dict(self) -> dict:
         """As JSON has it (the run's summary.json, `fleet run --json`)."""
         return {"cause": self.cause.value, "reason": self.reason, "t": self.t,
                 "stacks_done": self.stacks_done, "stacks_total": self.stacks_total,
                 "failures_in_a_row": self.failures_in_a_row,
+                "decision_failures": self.decision_failures,
                 "vehicles": [{"vehicle": v.vehicle, "pose": str(v.pose), "t_free": v.t_free,
                               "next_task": v.next_task.value, "down": v.down,
                               "unreached": list(v.unreached), "failure": v.failure}
@@ -114,7 +117,7 @@ def standstill(cause: Cause, reason: str, t: float, fleet: Iterable[VehicleSlot]
     since = {s.vehicle: s.t_done for s in record.subtasks}  # each one's last subtask
     last: dict[int, FailureEvent] = {}
     for f in record.failures:
-        if f.vehicle is not None and f.t >= since.get(f.vehicle, -math.inf):
+        if f.t >= since.get(f.vehicle, -math.inf):
             last[f.vehicle] = f
     vehicles = tuple(VehicleStanding(
         v.vehicle, v.pose, v.t_free, v.next_task, v.vehicle in down,
@@ -122,11 +125,11 @@ def standstill(cause: Cause, reason: str, t: float, fleet: Iterable[VehicleSlot]
         failure_text(last[v.vehicle], named=False) if v.vehicle in last else "")
         for v in fleet)
     return Standstill(cause, reason, t, sum(t_done <= t for *_, t_done in record.stacks_done),
-                      total, streak.count, vehicles)
+                      total, streak.count, record.decision_failures, vehicles)
 
 
 def failure_text(f: FailureEvent, named: bool = True) -> str:
     """A decision failure in words: "plan of forklift 2 for t=12.00 s: no path" (`named`:
     with the forklift; t is the instant the decision was for)."""
-    who = f" of forklift {f.vehicle}" if named and f.vehicle is not None else ""
+    who = f" of forklift {f.vehicle}" if named else ""
     return f"{f.stage}{who} for t={f.t:.2f} s: {f.reason}"

@@ -19,6 +19,7 @@ class VehicleSlot:
     linked_kind: TaskKind | None = None
     busy_s: float = 0.0  # driving (maneuvers other than stop)
     wait_s: float = 0.0  # stop maneuvers and postponements
+    t_still: float = 0.0  # from when it stands at `pose`, driven and handled (t_free may be later)
 
     def view(self) -> VehicleView:
         return VehicleView(self.vehicle, self.pose, self.t_free, self.next_task,
@@ -30,12 +31,13 @@ class VehicleSlot:
         self.t_free = t
 
     def step_aside(self, traj: Trajectory, waited: float) -> None:
-        """Sent out of another's way: it stands at the siding from the arrival on, with the
-        same subtask next (and the goods it carried)."""
+        """Sent out of another's way, standing still since before traj.t_start (perhaps
+        postponed beyond): it stands at the siding from the arrival on, with the same subtask
+        next (and the goods it carried)."""
         self.busy_s += traj.t_end - traj.t_start - waited
-        self.wait_s += waited
+        self.wait_s += waited - max(0.0, self.t_free - traj.t_start)  # postponed no longer
         self.pose = traj.goal
-        self.t_free = max(self.t_free, traj.t_end)
+        self.t_free = self.t_still = traj.t_end
 
     def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float,
               waited: float) -> None:
@@ -44,7 +46,7 @@ class VehicleSlot:
         self.busy_s += traj.t_end - traj.t_start - waited
         self.wait_s += waited
         self.pose = traj.goal
-        self.t_free = t_done
+        self.t_free = self.t_still = t_done
         deliver = kind is TaskKind.DELIVER
         self.next_task = TaskKind.RETURN if deliver else TaskKind.DELIVER
         if deliver:

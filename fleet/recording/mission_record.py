@@ -127,8 +127,7 @@ def summary_of(recording: Recording) -> MissionSummary:
         tuple(info.starts),
         end_time_s=max((s.t for s in stacks), default=0.0),
         all_parked_s=max((s.t_end for s in subtasks), default=0.0),
-        decision_failures=decision_failures(
-            recording, restarts, account.decision_failures if account else None, failures),
+        decision_failures=len(failures),  # each counted failure is announced
         wait_s=wait, busy_s=busy, stacks_done=tuple(stacks), failures=tuple(failures),
         subtasks=tuple(subtasks), deadlocks=tuple(m for _, m in recording.of(DeadlockSeen)),
         incomplete=tuple(incomplete))
@@ -197,22 +196,6 @@ def _counted(n: int, noun: str) -> str:
     """"1 stack done", "2 stacks done": the noun's first word in the plural."""
     first, *rest = noun.split(" ")
     return " ".join([str(n), first if n == 1 else first + "s", *rest])
-
-
-def decision_failures(recording: Recording, restarts: list[Restart], final: int | None,
-                      failures: list[DecisionFailure]) -> int:
-    """The dispatcher's count of decision failures (docs/metrics.md). Failures inside a
-    decision are counted, not announced one by one: each progress report has the count so
-    far, the dispatcher's result (`final`) the last one. A restarted dispatcher counts from 0
-    again: the counts of each are added (at least the plans that failed, of `failures`)."""
-    starts = [x.at_ns for x in restarts]
-    counts = [0] * (len(starts) + 1)
-    for r, m in recording.of(Progress):
-        life = bisect.bisect_right(starts, r.log_ns)
-        counts[life] = max(counts[life], m.failures)
-    if final is not None:
-        counts[-1] = max(counts[-1], final)
-    return max(sum(counts), sum(f.stage == "plan" for f in failures))
 
 
 def _events(recording: Recording) -> list[tuple[Recorded, Any]]:

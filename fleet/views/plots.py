@@ -127,7 +127,8 @@ def gantt(record: MissionSummary) -> Figure:
         for st in s.steps:
             if st[0] == "stop":
                 ax.barh(y, st[4] - st[3], left=st[3], color="black", height=0.25)
-    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures if f.vehicle in row]
+    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures
+                if f.stage == "plan" and f.vehicle in row]
     if failures:
         ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
     ax.set_yticks(range(len(vehicles)), [f"forklift {v}" for v in vehicles])

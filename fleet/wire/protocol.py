@@ -239,7 +239,8 @@ class MissionStopped(Message):
     """How far a mission that did not finish got, published just before the dispatcher's
     result: why it stopped (`cause`: "stuck", "stopped" by a signal, "lost" a participant,
     "failed" otherwise; `reason` says it in words), the sim time it reached, the stacks done
-    of the total, the decisions that failed in a row, and where each forklift stood."""
+    of the total, the decisions that failed in a row and in all (the dispatcher's count at
+    its end, docs/metrics.md), and where each forklift stood."""
 
     TYPE: ClassVar[str] = "dispatch.stopped"
     cause: str
@@ -248,6 +249,7 @@ class MissionStopped(Message):
     stacks_done: int
     stacks_total: int
     failures_in_a_row: int
+    decision_failures: int
     vehicles: list[WireStanding]
 
 
@@ -304,10 +306,15 @@ class StackDone(Message):
 
 @dataclass(frozen=True)
 class DecisionFailure(Message):
+    """One decision failure the dispatcher counts (each is announced, docs/metrics.md): at
+    t, the instant decided for, the vehicle chosen (stage "score": no target it accepts;
+    "dispatch": the same, the last choice of a dispatch that ended without a decision) or
+    decided for ("plan": no trajectory to its goal could be planned), and why."""
+
     TYPE: ClassVar[str] = "dispatch.failure"
     t: float
-    vehicle: int | None  # None: no solid decision at all
-    stage: str  # "dispatch" or "plan"
+    vehicle: int
+    stage: str  # "score", "dispatch" or "plan"
     reason: str
 
 
