@@ -132,9 +132,10 @@ class FaultResponse:
             # Not before it was free for the first subtask undone: one decided ahead, not
             # started by t, waited for the handling before it to end.
             v.t_free = max(freeze.t_stand, before.t_free)
+            v.t_still = max(freeze.t_stand, before.t_still)
         else:
             v.t_free = max(v.t_free, freeze.t_stand)
-        v.t_still = freeze.t_stand
+            v.t_still = freeze.t_stand
         for i in undone:
             self.record.cut_subtasks.append(i)
             s = self.record.subtasks[i]
