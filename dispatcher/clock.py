@@ -10,10 +10,11 @@ then for the fault to be detected the way it would be anyway (a liveliness token
 back, a forklift's own report): sim time stands still meanwhile, so a fault run is as
 reproducible as any other and detection costs no sim time (docs/faults.md).
 Real time: sim time = speed x wall time since the start; ticks carry the wall anchor so every
-process computes the same "now". The dispatcher decides a subtask a little ahead of the
-forklift's free time; a forklift whose free time has already passed waits until the next
-instant a plan can still be ready for. Faults are noticed as they come, and frozen a margin
-ahead of now, so that every forklift that can move hears of the freeze before it.
+process computes the same "now". The dispatcher decides each subtask a lead ahead of its
+instant (dispatcher/pacing.py), so a run that keeps up decides what the fast clock would; a
+forklift whose free time has already passed waits until the next instant a plan can still
+be ready for, and the dispatcher's log says so. Faults are noticed as they come, and frozen
+a margin ahead of now, so that every forklift that can move hears of the freeze before it.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from contextlib import ExitStack
 import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.pacing import LEAD_WALL_S, Late, RealtimePacing
 from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
 from fleet.mission.freeze import (
     BREAKDOWN,
@@ -222,17 +224,18 @@ def _who(late: list[int]) -> str:
 
 
 class RealtimeClock(_Clock):
-    """Sim time = speed x wall time since the start. Faults are not waited for: the clock
-    notices them as they come (a liveliness token gone or back, a forklift's report, a zone
-    whose time has come) and the engine freezes at the first instant every forklift that can
-    move can still be told of: now + `margin` (docs/faults.md)."""
+    """Sim time = speed x wall time since the start (a lead after the clock is made:
+    dispatcher/pacing.py). Faults are not waited for: the clock notices them as they come
+    (a liveliness token gone or back, a forklift's report, a zone whose time has come) and
+    the engine freezes at the first instant every forklift that can move can still be told
+    of: now + `margin` (docs/faults.md)."""
 
     TICK_PERIOD_S = 0.5
 
     def __init__(self, session: zenoh.Session, keys: Keys, speed: float, vehicles: list[int],
                  liveness: Liveness, scenario: Scenario | None = None, tick: int = 0,
                  t: float = 0.0, wall: float = 0.0, closed: frozenset = frozenset(),
-                 lead_wall_s: float = 0.3, margin_wall_s: float = 0.5) -> None:
+                 lead_wall_s: float = LEAD_WALL_S, margin_wall_s: float = 0.5) -> None:
         """`tick`, `t` and `wall`: the last tick a restarted dispatcher's forklifts heard
         (the clock goes on from its anchor; they refuse a tick numbered before it);
         `closed`: the cells the store holds as a closed zone (zones closed before it)."""
@@ -240,8 +243,11 @@ class RealtimeClock(_Clock):
             raise ValueError(f"--speed must be positive, not {speed}")
         super().__init__(session, keys, vehicles, liveness)
         self.speed = speed
-        self.lead = lead_wall_s * speed  # decide this much sim time ahead
+        self.pacing = RealtimePacing.going_on(speed, t, wall, lead_wall_s) if wall else \
+            RealtimePacing.starting(speed, time.time(), lead_wall_s)
+        self.lead = self.pacing.lead
         self.margin = margin_wall_s * speed  # a freeze this much ahead reaches everyone
+        self.late: list[Late] = []  # the decisions taken too late for their instant
         self.zones = sorted((f for f in scenario.faults if f.kind is FaultKind.CLOSE_ZONE
                              and f.until > t and not set(f.cells) & closed),
                             key=lambda f: f.at) if scenario else []
@@ -251,7 +257,6 @@ class RealtimeClock(_Clock):
         self.generation: dict[int, int] = dict(liveness.appeared)
         self.reports: dict[int, list[str]] = {}  # "broken" / "repaired", in order, not acted on
         self.broken: set[int] = set()  # down because broken: back when repaired
-        self.wall0 = wall - t / speed if wall else time.time()
         self.tick = tick
         self.publishing = threading.Lock()  # ticks go out numbered in order, from two threads
         self.stopping = threading.Event()
@@ -261,16 +266,15 @@ class RealtimeClock(_Clock):
         self.ticker.start()
 
     def now(self) -> float:
-        return (time.time() - self.wall0) * self.speed
+        return self.pacing.now(time.time())
 
     def instant(self, t: float) -> float:
-        return max(t, self.now() + self.margin)
+        return self.now() + self.margin  # not t: the engine decides a lead ahead of now
 
     def _publish(self) -> None:
         with self.publishing:
             self.tick += 1
-            wall = time.time()
-            t = (wall - self.wall0) * self.speed
+            t, wall = self.pacing.anchor(time.time())
             self._send(ClockTick(self.tick, ClockMode.REALTIME.value, t, self.speed, wall,
                                  down=sorted(self.down)))
 
@@ -288,17 +292,30 @@ class RealtimeClock(_Clock):
     def _reported(self, vehicle: int, state: str) -> None:
         self.reports.setdefault(vehicle, []).append(state)  # in order: _noticed acts on them
 
+    def _wall_until(self, t: float) -> float:
+        """Wall seconds until sim time t (0 once it has come)."""
+        return max(0.0, self.pacing.wall_at(t) - time.time())
+
     def wait_until(self, t: float) -> None:
-        while (ahead := t - self.now()) > 0:
-            self.stopping.wait(min(ahead / self.speed, 0.5))
+        while (ahead := self._wall_until(t)) > 0:
+            self.stopping.wait(min(ahead, 0.5))
 
     def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
         self.wait_until(t_next - self.lead)
-        floor = self.now() + self.lead / 2
-        return {v: max(t, floor) for v, t in t_free.items()}
+        paced, late = self.pacing.paced(t_free, time.time())
+        if late is not None:
+            self.late.append(late)
+            log.info("decided late for t=%.2f: %s moved to t=%.2f", t_next,
+                     ", ".join(f"forklift {v} (free at t={t:.2f})"
+                               for v, t in sorted(late.moved.items())), late.until)
+        return paced
 
     def finish(self, t_end: float) -> None:
         self.wait_until(t_end)
+        if self.late:
+            log.warning("%d decisions were taken too late for their instant (the first for "
+                        "t=%.2f): from there on this run is not the fast clock's",
+                        len(self.late), min(self.late[0].moved.values()))
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         """Wait for the next decision's time, returning early with whatever happens
@@ -310,10 +327,10 @@ class RealtimeClock(_Clock):
             max(self.last_instant, self.now()) + DETECT_TIMEOUT_S * self.speed
         with self.liveness.changed:  # liveliness and fault reports notify it
             while not (found := self._noticed(down)):
-                ahead = min([target, *(z.at for z in self.zones)]) - self.now()
-                if target <= self.now():
+                if self._wall_until(target) <= 0:
                     return []
-                self.liveness.changed.wait(min(max(ahead, 0.0) / self.speed, 0.5))
+                ahead = self._wall_until(min([target, *(z.at for z in self.zones)]))
+                self.liveness.changed.wait(min(ahead, 0.5))
         # The new ones are down from now on; one back stays listed until it is resumed.
         self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:

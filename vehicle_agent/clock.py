@@ -1,6 +1,7 @@
 """The agent's view of the run's one clock: the last tick it heard from the dispatcher, and
 which ticks it takes. On the fast clock a tick's sim time is "now" until the next one; on the
-real-time clock every process computes "now" from the tick's wall anchor and speed."""
+real-time clock every process computes "now" from the tick's wall anchor and speed (an
+anchor still to come, before the clock has started: now stands at the tick's sim time)."""
 
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ class SimClock:
         if tick is None:
             return 0.0
         if tick.mode == ClockMode.REALTIME:
-            return tick.t + tick.speed * (time.time() - tick.wall)
+            return tick.t + tick.speed * max(0.0, time.time() - tick.wall)
         return tick.t
 
     def wall_at(self, t: float) -> float | None:

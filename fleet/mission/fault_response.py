@@ -129,10 +129,13 @@ class FaultResponse:
             v.next_task, v.linked_cluster, v.linked_kind = \
                 before.next_task, before.linked_cluster, before.linked_kind
             v.busy_s, v.wait_s = before.busy_s, before.wait_s
-            v.t_free = freeze.t_stand
+            # Not before it was free for the first subtask undone: one decided ahead, not
+            # started by t, waited for the handling before it to end.
+            v.t_free = max(freeze.t_stand, before.t_free)
+            v.t_still = max(freeze.t_stand, before.t_still)
         else:
             v.t_free = max(v.t_free, freeze.t_stand)
-        v.t_still = freeze.t_stand
+            v.t_still = freeze.t_stand
         for i in undone:
             self.record.cut_subtasks.append(i)
             s = self.record.subtasks[i]

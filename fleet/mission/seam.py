@@ -93,8 +93,10 @@ class Pacer(Protocol):
         the forklifts the engine holds as down: nobody waits for them."""
 
     def instant(self, t: float) -> float:
-        """The first sim instant, not before t, at which a change decided now can still take
-        effect (a freeze every forklift must hear of before it)."""
+        """The first sim instant at which a change decided now, while deciding for t, can
+        still take effect (a freeze every forklift must hear of before it): t where sim
+        time stands still at the decision; in real time a margin after now, which may come
+        before t (decisions are taken a lead ahead: those beyond it are undone with it)."""
 
 
 class LocalExecutor:

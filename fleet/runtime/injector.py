@@ -111,7 +111,7 @@ class Injector:
             if last is None:
                 continue
             fast = last.mode == ClockMode.FAST
-            now = last.t if fast else last.t + last.speed * (time.time() - last.wall)
+            now = last.t if fast else last.t + last.speed * max(0.0, time.time() - last.wall)
             while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
                 if action.vehicle is not None and fast:  # what it said is on its way first

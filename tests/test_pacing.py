@@ -1,0 +1,124 @@
+"""The real-time clock's arithmetic (dispatcher/pacing.py): decisions a lead ahead of their
+instant, so that a run that keeps up decides what the fast clock would, and the one clock
+every process computes from the ticks."""
+
+import itertools
+
+import pytest
+
+from dispatcher.pacing import RealtimePacing
+from fleet.dispatching.decision import TaskKind
+from fleet.mission.engine import Engine
+from fleet.mission.freeze import BREAKDOWN, Disruption, VehicleDown, VehicleUp
+from fleet.mission.spec import Mission
+from fleet.runtime.args import engine_options
+from fleet.wire.protocol import ClockTick
+from fleet.world.layout_file import load_layout
+from vehicle_agent import clock as agent_clock
+from vehicle_agent.clock import SimClock
+
+START = 1_800_000_000.0  # the Unix time the clock is made
+SPEED = 20.0
+
+
+def pacing() -> RealtimePacing:
+    return RealtimePacing.starting(SPEED, START, lead_wall_s=2.0, reach_wall_s=0.3)
+
+
+def test_sim_time_starts_a_lead_after_the_clock_and_stands_at_0_until_then():
+    p = pacing()
+    assert (p.lead, p.reach) == (40.0, 6.0)
+    assert p.wall_at(0.0) == START + 2.0
+    assert p.now(START) == p.now(START + 1.9) == 0.0
+    assert p.now(START + 3.0) == pytest.approx(20.0)
+    # A tick before the start says so: sim time 0, at the start to come.
+    assert p.anchor(START + 0.5) == (0.0, START + 2.0)
+    t, wall = p.anchor(START + 7.25)
+    assert t == pytest.approx(105.0) and p.wall_at(t) == pytest.approx(wall)
+
+
+def test_the_first_instants_are_decided_a_whole_lead_ahead_like_every_later_one():
+    p = pacing()
+    assert p.decision_wall(5.0) == pytest.approx(START + 0.25)  # the mission's first instant
+    assert p.decision_wall(1005.0) == pytest.approx(p.wall_at(1005.0) - 2.0)
+
+
+def test_a_decision_on_time_keeps_every_free_time():
+    p = pacing()
+    free = {1: 400.0, 2: 400.0, 3: 431.25}
+    # Taken at its wall instant, or later as long as the plan still has its reach.
+    for wall in (p.decision_wall(400.0), p.wall_at(400.0) - 0.35):
+        paced, late = p.paced(free, wall)
+        assert paced == free and late is None
+    # The first instants, decided before sim time 0 has come.
+    assert p.paced({1: 5.0, 2: 5.0}, START + 1.0) == ({1: 5.0, 2: 5.0}, None)
+
+
+def test_a_late_decision_moves_the_free_times_already_too_near_and_says_which():
+    p = pacing()
+    paced, late = p.paced({1: 400.0, 2: 401.0, 3: 431.25}, p.wall_at(400.0) - 0.1)
+    assert late is not None and late.until == pytest.approx(404.0)  # 0.3 s after now
+    assert late.moved == {1: 400.0, 2: 401.0}
+    assert paced == {1: late.until, 2: late.until, 3: 431.25}
+
+
+def test_a_restarted_dispatchers_clock_goes_on_from_the_tick_heard():
+    p = pacing()
+    t, wall = p.anchor(START + 50.0)
+    again = RealtimePacing.going_on(SPEED, t, wall, lead_wall_s=2.0, reach_wall_s=0.3)
+    assert again.wall0 == pytest.approx(p.wall0)
+    assert again.now(START + 60.0) == pytest.approx(p.now(START + 60.0))
+
+
+@pytest.mark.parametrize("wall", [START + 0.5, START + 2.0, START + 9.5])
+def test_an_agent_computes_the_dispatchers_now_from_its_ticks(monkeypatch, wall):
+    """Before the start too: an agent told of a start to come does not run its clock
+    backwards (it stands at 0, as the dispatcher's)."""
+    p = pacing()
+    t, anchor = p.anchor(START + 0.1)  # the first tick, heard before the start
+    agent = SimClock()
+    agent.tick = ClockTick(1, "realtime", t, SPEED, anchor)
+    monkeypatch.setattr(agent_clock.time, "time", lambda: wall)
+    assert agent.now() == pytest.approx(p.now(wall))
+    assert agent.wall_at(105.0) == pytest.approx(p.wall_at(105.0))
+
+
+class NewsComesLate:
+    """The engine's pacer in process, with each disruption heard only once the engine
+    decides `lag` after its instant: as on the real-time clock, which decides a lead ahead
+    of now and freezes a margin after now, before subtasks it has already decided."""
+
+    def __init__(self, disruptions: list[Disruption], lag: float) -> None:
+        self.pending, self.lag = list(disruptions), lag
+
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        return t_free
+
+    def finish(self, t_end: float) -> None:
+        pass
+
+    def instant(self, t: float) -> float:
+        return t
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
+        due = [d for d in self.pending if d.t + self.lag <= t_next]
+        self.pending = [d for d in self.pending if d not in due]
+        return due
+
+
+def test_a_freeze_before_subtasks_decided_undoes_them_but_not_the_handling_before():
+    """Forklift 1 of `small` unloads at b from 29.75 s to 34.75 s, and its return from
+    34.75 s is decided before its breakdown at 31 s is heard: the return is undone, and
+    after the repair the forklift moves no sooner than its unloading is over."""
+    mission = Mission("small")
+    layout = load_layout("small")
+    news = NewsComesLate([VehicleDown(1, 31.0, BREAKDOWN), VehicleUp(1, 32.0)], lag=10.0)
+    record = Engine(mission, engine_options(mission, layout, None), layout, pacer=news).run()
+    assert news.pending == [] and record.halts[0][:2] == (1, 31.0)
+    undone = [record.subtasks[i] for i in record.cut_subtasks]
+    assert [(s.vehicle, s.kind, s.t_i) for s in undone] == [(1, TaskKind.RETURN, 34.75)]
+    for vehicle in (1, 2):
+        kept = [s for i, s in enumerate(record.subtasks)
+                if s.vehicle == vehicle and i not in record.cut_subtasks]
+        assert all(b.t_i >= a.t_done for a, b in itertools.pairwise(kept)), vehicle
+    assert len(record.stacks_done) == 24
