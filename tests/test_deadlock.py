@@ -104,3 +104,49 @@ def test_a_generated_floor_that_wedged_completes_without_a_trap():
     record = engine.run()
     assert len(record.stacks_done) == len(layout.stacks)
     assert mission_problems(record, layout) == []
+
+
+def fault_run(kind: MissionKind, fault: str, at: float, duration: float, tmp_path):
+    """The paper ANN mission in process with one fault of forklift 1: its record, and the
+    analysis of its recording."""
+    from fleet.analysis.analyze import analyze
+    from fleet.mission.faults import parse_scenario
+    from fleet.recording.inprocess import recorded_run, write_recording
+    from fleet.recording.reader import read_recording
+    from fleet.runtime.args import engine_options
+
+    layout = load_layout("paper")
+    mission = Mission("paper", kind, Strategy.ANN)
+    scenario = parse_scenario(f'name = "{fault}-{at}"\ndescription = "constructed"\n'
+                              f'[[fault]]\nkind = "{fault}"\nat = {at}\nvehicle = 1\n'
+                              f'duration = {duration}\n', "constructed")
+    done, stream = recorded_run(mission, layout, engine_options(mission, layout, None),
+                                scenario=scenario)
+    write_recording(tmp_path / "run.mcap", stream, layout)
+    report = analyze(read_recording(tmp_path / "run.mcap"))
+    assert done.ok and report.finished and report.passed, report.verdict_lines()
+    assert report.stacks_done == len(layout.stacks)
+    return done.record, report
+
+
+def test_a_forklift_cut_off_on_the_next_stack_while_the_others_hold_the_docks_completes(
+        tmp_path):
+    """Paper, forklift 1's link cut at 240.3 s instead of the shipped 300.3 s: it came back to
+    stand on cluster s6's next stack, forklift 3 behind it, while forklifts 2 and 4, carrying
+    goods for s6, drove long legs to the docks. They were taken for idle forklifts that
+    could be sent aside and could not, and the mission was called stuck at t = 2251 s while
+    they still drove. Now it waits for them, and completes."""
+    record, _ = fault_run(MissionKind.FILL, "cut_link", 240.3, 40.0, tmp_path)
+    assert record["end_time_s"] < 2100.0
+
+
+def test_a_forklift_failing_while_the_others_work_does_not_hold_the_clock_back(tmp_path):
+    """Paper, emptying, forklift 1 killed at 153.1 s for 9.8 s: forklifts 2 and 4 failed at
+    153.2 s in every dispatch forklift 3 won, so the clock (the earliest free instant) stood
+    at 153.2 s and forklift 1, due back at 162.9 s, never came back: forklift 3 did nearly all
+    the work, ending thousands of seconds late. A forklift failing twice at its free instant
+    is now tried again 10 s later."""
+    record, _ = fault_run(MissionKind.EMPTY, "kill_vehicle", 153.1, 9.8, tmp_path)
+    assert record["end_time_s"] < 2100.0
+    worked = {s["vehicle"] for s in record["subtasks"] if s["t_i"] > 200.0}
+    assert worked == {1, 2, 3, 4}
