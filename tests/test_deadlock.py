@@ -4,6 +4,9 @@ now complete with a vehicle sent aside, judged from their recordings."""
 
 from __future__ import annotations
 
+import itertools
+
+import pytest
 from mission_check import mission_problems
 
 from fleet.dispatching.decision import Strategy
@@ -106,9 +109,9 @@ def test_a_generated_floor_that_wedged_completes_without_a_trap():
     assert mission_problems(record, layout) == []
 
 
-def fault_run(kind: MissionKind, fault: str, at: float, duration: float, tmp_path):
-    """The paper ANN mission in process with one fault of forklift 1: its record, and the
-    analysis of its recording."""
+def fault_run(kind: MissionKind, faults: list[tuple[str, float, int, float]], tmp_path):
+    """The paper ANN mission in process with these faults (kind, instant, forklift,
+    duration): its record, and the analysis of its recording, which must pass."""
     from fleet.analysis.analyze import analyze
     from fleet.mission.faults import parse_scenario
     from fleet.recording.inprocess import recorded_run, write_recording
@@ -117,9 +120,9 @@ def fault_run(kind: MissionKind, fault: str, at: float, duration: float, tmp_pat
 
     layout = load_layout("paper")
     mission = Mission("paper", kind, Strategy.ANN)
-    scenario = parse_scenario(f'name = "{fault}-{at}"\ndescription = "constructed"\n'
-                              f'[[fault]]\nkind = "{fault}"\nat = {at}\nvehicle = 1\n'
-                              f'duration = {duration}\n', "constructed")
+    scenario = parse_scenario('name = "constructed"\ndescription = "constructed"\n' + "".join(
+        f'[[fault]]\nkind = "{k}"\nat = {at}\nvehicle = {v}\nduration = {d}\n'
+        for k, at, v, d in faults), "constructed")
     done, stream = recorded_run(mission, layout, engine_options(mission, layout, None),
                                 scenario=scenario)
     write_recording(tmp_path / "run.mcap", stream, layout)
@@ -136,7 +139,7 @@ def test_a_forklift_cut_off_on_the_next_stack_while_the_others_hold_the_docks_co
     goods for s6, drove long legs to the docks. They were taken for idle forklifts that
     could be sent aside and could not, and the mission was called stuck at t = 2251 s while
     they still drove. Now it waits for them, and completes."""
-    record, _ = fault_run(MissionKind.FILL, "cut_link", 240.3, 40.0, tmp_path)
+    record, _ = fault_run(MissionKind.FILL, [("cut_link", 240.3, 1, 40.0)], tmp_path)
     assert record["end_time_s"] < 2100.0
 
 
@@ -146,7 +149,16 @@ def test_a_forklift_failing_while_the_others_work_does_not_hold_the_clock_back(t
     at 153.2 s and forklift 1, due back at 162.9 s, never came back: forklift 3 did nearly all
     the work, ending thousands of seconds late. A forklift failing twice at its free instant
     is now tried again 10 s later."""
-    record, _ = fault_run(MissionKind.EMPTY, "kill_vehicle", 153.1, 9.8, tmp_path)
+    record, _ = fault_run(MissionKind.EMPTY, [("kill_vehicle", 153.1, 1, 9.8)], tmp_path)
     assert record["end_time_s"] < 2100.0
     worked = {s["vehicle"] for s in record["subtasks"] if s["t_i"] > 200.0}
     assert worked == {1, 2, 3, 4}
+
+
+@pytest.mark.parametrize("killed,cut", list(itertools.permutations(range(1, 5), 2)))
+def test_any_pair_of_forklifts_disturbed_completes(killed, cut, tmp_path):
+    """The compose fault test's faults, scheduled: one forklift killed, another cut off 7.3 s
+    later, whichever the pair (the compose test draws one from a seed). Halted where they
+    stand, they once walled each other or the others in for some pairs."""
+    fault_run(MissionKind.FILL, [("kill_vehicle", 400.3, killed, 150.0),
+                                 ("cut_link", 407.6, cut, 150.0)], tmp_path)

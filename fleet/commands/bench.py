@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from fleet.commands.progress import ProgressBar
+from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
 from fleet.recording.rundir import RUNS, default_name
@@ -135,6 +136,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="sim seconds per wall second with --clock realtime (default 20)")
     campaign.add_argument("--layout", default="paper", type=layout_arg,
                           help="layout name or TOML file (default paper)")
+    campaign.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
+                          help="the dispatch strategy of every run (default ann: it needs "
+                          "weights shipped for the layout)")
     campaign.add_argument("--kind", choices=["fill", "empty", "both"], default="both",
                           help="the missions: fill and empty in turn (both, the default) "
                           "or one of them")
@@ -285,7 +289,7 @@ def run_campaign(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
     kinds = tuple(MissionKind) if args.kind == "both" else (MissionKind(args.kind),)
     spec = campaign.CampaignSpec(args.layout, args.runs, args.seed, ClockMode(args.clock),
-                                 args.speed, kinds)
+                                 args.speed, kinds, Strategy(args.strategy))
     out = campaign_dir(args.out, layout.name)
     runs = ProgressBar(args.runs, "campaign", unit="runs", enabled=not args.json)
 

@@ -11,7 +11,7 @@ import textwrap
 # One line each, for `fleet run --help` (docs/dispatching.md has the equations).
 STRATEGIES = {
     "ann": "comprehensive, plus a trained network's estimate of the traffic each cluster "
-           "will meet (seed 000's best; weights ship for paper and small)",
+           "will meet (seed 000's best; weights ship for paper, small and hall)",
     "comprehensive": "balance and traffic together: clusters with much work left, reached "
                      "soon, with their target free",
     "greedy": "the cluster reached soonest (travel time only; the far clusters get a bonus)",
