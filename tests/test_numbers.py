@@ -264,10 +264,11 @@ def test_a_window_without_a_recorder_takes_the_dispatchers_record(greedy_small, 
     lost = {cls: sum(isinstance(o.message, cls) for o, _, _ in items[unheard.start:unheard.stop])
             for cls in (SubtaskEvent, DecisionFailure, StackDone)}
     unfinished = recorded(tmp_path / "unfinished", cut, unheard)
-    assert lost[DecisionFailure] == 1 and lost[SubtaskEvent] > 1 and lost[StackDone] > 1
+    assert lost[DecisionFailure] == 1 and lost[SubtaskEvent] > 1 and lost[StackDone] >= 1
     assert unfinished.incomplete == [f"{lost[SubtaskEvent]} subtasks not recorded",
                                      "1 announced decision failure not recorded",
-                                     f"{lost[StackDone]} stacks done not recorded"]
+                                     f"{lost[StackDone]} stack{'s' * (lost[StackDone] > 1)} "
+                                     "done not recorded"]
     assert unfinished.subtasks == whole.subtasks - lost[SubtaskEvent]
     assert unfinished.numbers_lines()[-4:] == [
         "  incomplete         these figures miss what no recorder or record kept:",

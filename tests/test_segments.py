@@ -265,7 +265,9 @@ def test_a_window_without_a_recorder_is_not_recorded_rather_than_lost(clean_stre
                      if isinstance(o.message, StackDone))
     assert unheard and report.stacks_not_recorded == unheard
     assert report.stacks_lost == [] and report.work_done and report.passed, report.lines()
-    assert lost.stacks_lost == unheard
+    # Lost in transit, they are lost, as are stacks served while the states went unheard
+    # (announced at commit, before the window: nothing shows they were served).
+    assert set(unheard) <= set(lost.stacks_lost)
     status, out = report_json(run, capsys)
     assert status == 0 and out["messages_not_recorded"] == lost.messages_lost
     assert out["not_recorded"][0]["wall_from_s"] == down.wall_from_s

@@ -263,15 +263,21 @@ def decision_order(recording: Recording, record: MissionSummary) -> list[Subtask
 
 def announced_stacks(recording: Recording) -> list[Announced]:
     """The stacks the dispatcher announced done, without those it reopened: a reopening
-    (a forklift cut off before it arrived) takes back that forklift's first announcement
-    of the stack whose handling was to end after the reopening."""
-    left = [Announced(m.cluster, m.index, m.vehicle, m.t) for _, m in recording.of(StackDone)]
-    for m in sorted((m for _, m in recording.of(StackReopened)), key=lambda m: m.t):
-        taken = min((a for a in left if (a.cluster, a.index, a.vehicle) ==
-                     (m.cluster, m.index, m.vehicle) and a.t > m.t),
-                    key=lambda a: a.t, default=None)
-        if taken is not None:
-            left.remove(taken)
+    (a forklift cut off before it arrived) takes back that forklift's last announcement of
+    the stack before it whose handling was to end after the reopening. A delivery decided
+    again after the reopening is announced after it, and stays."""
+    left: list[Announced] = []
+    for r in recording.messages:
+        if not r.genuine:
+            continue
+        m = r.envelope.message
+        if isinstance(m, StackDone):
+            left.append(Announced(m.cluster, m.index, m.vehicle, m.t))
+        elif isinstance(m, StackReopened):
+            taken = [a for a in left if (a.cluster, a.index, a.vehicle) ==
+                     (m.cluster, m.index, m.vehicle) and a.t > m.t]
+            if taken:
+                left.remove(taken[-1])
     return left
 
 

@@ -446,7 +446,9 @@ class Engine:
         if served is not None:
             self.executor.reserve_goods([served.goods])
             self.record.stacks_done.append((served.cluster, served.index, t_done))
-            self._emit(StackDone(served.cluster, served.index, v.vehicle, t_done), t_done)
+            # Announced as it is committed (the clock at `now`), as a dispatcher of processes
+            # publishes it: a reopening then follows the announcement it takes back.
+            self._emit(StackDone(served.cluster, served.index, v.vehicle, t_done), self.now)
             self.record.end_time = max(self.record.end_time, t_done)
         self.faults.committed(dataclasses.replace(v), traj)
         waited = sum(s.t1 - s.t0 for s in traj.steps
