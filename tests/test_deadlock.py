@@ -162,3 +162,55 @@ def test_any_pair_of_forklifts_disturbed_completes(killed, cut, tmp_path):
     stand, they once walled each other or the others in for some pairs."""
     fault_run(MissionKind.FILL, [("kill_vehicle", 400.3, killed, 150.0),
                                  ("cut_link", 407.6, cut, 150.0)], tmp_path)
+
+
+# Two rooms joined by a corridor one forklift wide: stations on the left, a lane of five
+# stacks on the right.
+CORRIDOR = """name = "corridor"
+description = "two rooms joined by a corridor one forklift wide"
+cell_size = 2.0
+starts = ["1,3,S", "2,3,S"]
+
+[bounds]
+x = [0.0, 24.0]
+y = [0.0, 10.0]
+
+[[cluster]]
+name = "c"
+fill = ["11,4..11,0"]
+
+[[obstacle]]
+name = "walls"
+kind = "wall"
+cells = ["4,0..7,1", "4,3..7,4"]
+
+[[station]]
+name = "p1"
+cell = "1,4"
+dock = "1,3,S"
+
+[[station]]
+name = "p2"
+cell = "2,4"
+dock = "2,3,S"
+"""
+
+
+def test_two_forklifts_face_to_face_in_a_corridor_one_backs_out():
+    """Forklift 1, loaded, drives east to the stacks; forklift 2, empty, west to the
+    stations; they meet face to face in the corridor, each parked in the other's way. The
+    cycle is found and one is sent aside into the room behind it; every stack is filled."""
+    from fleet.mission.engine import EngineOptions
+    from fleet.mission.pickup import Recovered
+    from fleet.world.layout_file import parse_layout
+
+    layout = parse_layout(CORRIDOR, "corridor.toml")
+    mission = Mission("corridor", MissionKind.FILL, Strategy.GREEDY, 2, 0)
+    poses = {1: Pose.parse("4,2,E"), 2: Pose.parse("7,2,W")}
+    first_two_done = tuple((s.cluster, s.index, 50.0) for s in layout.stacks if s.index <= 2)
+    met = Recovered(first_two_done, (), poses, dict.fromkeys(poses, 100.0),
+                    {1: True, 2: False}, {}, 100.0)
+    record = Engine(mission, EngineOptions(), layout, recovered=met).run()
+    assert record.deadlocks[0].kind == "cycle" and record.deadlocks[0].moved in (1, 2)
+    assert sorted(index for _, index, _ in record.stacks_done) == [1, 2, 3, 4, 5]
+    assert mission_problems(record, layout) == []

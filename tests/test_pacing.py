@@ -9,7 +9,7 @@ import pytest
 from dispatcher.pacing import RealtimePacing
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.engine import Engine
-from fleet.mission.freeze import BREAKDOWN, Disruption, VehicleDown, VehicleUp
+from fleet.mission.freeze import BREAKDOWN, Disruption, ScheduledPacer, VehicleDown, VehicleUp
 from fleet.mission.spec import Mission
 from fleet.runtime.args import engine_options
 from fleet.wire.protocol import ClockTick
@@ -83,22 +83,13 @@ def test_an_agent_computes_the_dispatchers_now_from_its_ticks(monkeypatch, wall)
     assert agent.wall_at(105.0) == pytest.approx(p.wall_at(105.0))
 
 
-class NewsComesLate:
+class NewsComesLate(ScheduledPacer):
     """The engine's pacer in process, with each disruption heard only once the engine
     decides `lag` after its instant: as on the real-time clock, which decides a lead ahead
     of now and freezes a margin after now, before subtasks it has already decided."""
 
     def __init__(self, disruptions: list[Disruption], lag: float) -> None:
         self.pending, self.lag = list(disruptions), lag
-
-    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
-        return t_free
-
-    def finish(self, t_end: float) -> None:
-        pass
-
-    def instant(self, t: float) -> float:
-        return t
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         due = [d for d in self.pending if d.t + self.lag <= t_next]
