@@ -68,7 +68,12 @@ from fleet.mission.record import MissionSummary, SubtaskRecord
 from fleet.mission.spec import ClockMode, MissionKind
 from fleet.params import DispatchParams
 from fleet.recording.format import NS
-from fleet.recording.mission_record import dispatcher_restarts, final_record, summary_of
+from fleet.recording.mission_record import (
+    dispatcher_restarts,
+    final_record,
+    summary_of,
+    uncounted_tails,
+)
 from fleet.recording.reader import Recording, RecordingError
 from fleet.wire.protocol import (
     Halt,
@@ -145,8 +150,9 @@ def analyze(recording: Recording) -> Report:
                       lambda v, t0, t1: states_unknown(unverified, v, t0, t1))
     served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
     restarts = dispatcher_restarts(recording)
+    final = final_record(recording, restarts)
     from_record = stacks_not_recorded(done, unrecorded, expected - set(stacks), any(
-        x.unrecorded for x in restarts))
+        cls is StackDone for _, cls in uncounted_tails(recording, restarts, final is not None)))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
@@ -173,7 +179,7 @@ def analyze(recording: Recording) -> Report:
         decision_failures=record.decision_failures,
         plans_failed=sum(f.stage == "plan" for f in record.failures),
         undecided=sum(f.stage == "dispatch" for f in record.failures),
-        failure_counts=failure_counts(recording, restarts, final_record(recording, restarts)),
+        failure_counts=failure_counts(recording, restarts, final),
         commit_conflicts=len(done[-1].rejections) if done else 0,
         vehicles=time_use(record.subtasks, [m for _, m in recording.of(Halt)],
                           [m for _, m in recording.of(Resume)], info.vehicles,

@@ -156,8 +156,9 @@ def stacks_not_recorded(done: list[MissionDone], unrecorded: list[Hole],
                         ) -> set[tuple[str, int]]:
     """Stacks the dispatcher's final record lists as done whose dispatch/stack message was
     not recorded (all of them, if no more than the messages not recorded; else none).
-    `tail_unrecorded`: a dispatcher died while no recorder ran, so the last messages it sent
-    are missing without a number to count them by (its successor's record has every stack)."""
+    `tail_unrecorded`: a dispatcher with no record of its own may have announced its last
+    stacks while no recorder ran, with no later number to count them by (it died then, or
+    announced no stack after the window; its successor's record has every stack)."""
     missing = math.inf if tail_unrecorded else \
         sum(h.missing for h in unrecorded if message_type(h.key) is StackDone)
     if not (missing and unseen and done and isinstance(done[-1].record, dict)):

@@ -54,9 +54,10 @@ EVENTS = (MissionInfo, Progress, SubtaskEvent, StackDone, DecisionFailure, Deadl
 # time and a stack reopened are in the recording only.
 IN_RECORD = (SubtaskEvent, DecisionFailure, StackDone)
 RECORDING_ONLY = (Halt, Resume, StackReopened)
-NOUNS = {SubtaskEvent: "subtask", DecisionFailure: "announced decision failure",
-         StackDone: "stack done", Halt: "halt", Resume: "resume",
-         StackReopened: "stack reopened"}
+NOUNS = {SubtaskEvent: ("subtask", "subtasks"),
+         DecisionFailure: ("announced decision failure", "announced decision failures"),
+         StackDone: ("stack done", "stacks done"), Halt: ("halt", "halts"),
+         Resume: ("resume", "resumes"), StackReopened: ("stack reopened", "stacks reopened")}
 
 
 @dataclass(frozen=True)
@@ -171,8 +172,9 @@ def dispatcher_restarts(recording: Recording) -> list[Restart]:
 
 def unknown(recording: Recording, restarts: list[Restart], final: bool) -> list[str]:
     """What the figures miss: numbers missing from a dispatcher's keys (announced while no
-    recorder ran, or lost), unless its final record has them, and the last words of one that
-    died while no recorder ran. `final`: the last dispatcher's record is in the recording."""
+    recorder ran, or lost), unless its final record has them, and what a dispatcher with no
+    record sent while no recorder ran with no later number to count it by (its last words,
+    if it died then). `final`: the last dispatcher's record is in the recording."""
     lives = len(restarts) + 1
     numbers: dict[tuple[int, type, str], set[int]] = defaultdict(set)
     starts = [x.at_ns for x in restarts]
@@ -181,6 +183,7 @@ def unknown(recording: Recording, restarts: list[Restart], final: bool) -> list[
     missing: dict[tuple[int, type], int] = defaultdict(int)
     for (life, cls, _), seen in numbers.items():
         missing[life, cls] += max(seen) - len(seen)
+    tails = uncounted_tails(recording, restarts, final)
     out = []
     for life in range(lives):
         kept = RECORDING_ONLY if final and life == lives - 1 else IN_RECORD + RECORDING_ONLY
@@ -189,13 +192,38 @@ def unknown(recording: Recording, restarts: list[Restart], final: bool) -> list[
                 for cls in kept if missing[life, cls]]
         if life < lives - 1 and restarts[life].unrecorded:
             out.append(f"dispatcher {life + 1} of {lives} died while no recorder ran")
+        elif tail := [NOUNS[cls][1] for cls in IN_RECORD if (life, cls) in tails]:
+            out.append(f"any {' and '.join(tail)} sent after the last recorded, while no "
+                       f"recorder ran, are not counted{whose}")
     return out
 
 
-def _counted(n: int, noun: str) -> str:
-    """"1 stack done", "2 stacks done": the noun's first word in the plural."""
-    first, *rest = noun.split(" ")
-    return " ".join([str(n), first if n == 1 else first + "s", *rest])
+def uncounted_tails(recording: Recording, restarts: list[Restart], final: bool
+                    ) -> set[tuple[int, type]]:
+    """(dispatcher, kind of event) pairs, each dispatcher by its index among those that ran,
+    of the events the figures are made of (IN_RECORD) whose last may have been sent while no
+    recorder ran: a window without a recorder began in that dispatcher's life and no event
+    of the kind was recorded from it after the window. Numbers count only what falls between
+    two recorded messages, so those are not counted. The last dispatcher's, when its final
+    record is in the recording (`final`), are in it, and are left out."""
+    starts = [x.at_ns for x in restarts]
+    last: dict[tuple[int, type], int] = {}
+    for r, m in _events(recording):
+        life = bisect.bisect_right(starts, r.log_ns)
+        last[life, type(m)] = max(last.get((life, type(m)), r.log_ns), r.log_ns)
+    out = set()
+    for gap in recording.gaps:
+        life = bisect.bisect_right(starts, gap.start_ns)
+        if final and life == len(restarts):
+            continue
+        out |= {(life, cls) for cls in IN_RECORD
+                if last.get((life, cls), gap.start_ns) <= gap.start_ns}
+    return out
+
+
+def _counted(n: int, noun: tuple[str, str]) -> str:
+    """"1 stack done", "2 stacks done"."""
+    return f"{n} {noun[0] if n == 1 else noun[1]}"
 
 
 def _events(recording: Recording) -> list[tuple[Recorded, Any]]:
