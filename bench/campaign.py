@@ -77,6 +77,7 @@ class CampaignSpec:
     speed: float = 20.0  # sim seconds per wall second, real time only
     kinds: tuple[MissionKind, ...] = (MissionKind.FILL, MissionKind.EMPTY)  # taken in turn
     strategy: Strategy = Strategy.ANN
+    weights: Path | None = None  # the ANN strategy's MLP (None: the layout's shipped weights)
 
 
 @dataclass(frozen=True)
@@ -165,10 +166,10 @@ def _overlap(a: Fault, b: Fault) -> bool:
 
 # -- running one mission ---------------------------------------------------------------------------
 def run_inprocess(mission: Mission, layout: Layout, scenario: Scenario | None, folder: Path,
-                  progress: Callable[[int, float], None]) -> Outcome:
+                  weights: Path | None, progress: Callable[[int, float], None]) -> Outcome:
     """The fast-clock reference in this process, its recording (up to where it stopped, if
     it did not finish) written to `folder`."""
-    options = engine_options(mission, layout, None,
+    options = engine_options(mission, layout, weights,
                              lambda done, total, t, failures: progress(done, t))
     try:
         done, stream = recorded_run(mission, layout, options, "fleet bench campaign", scenario)
@@ -179,7 +180,7 @@ def run_inprocess(mission: Mission, layout: Layout, scenario: Scenario | None, f
 
 
 def run_with_processes(mission: Mission, vehicles: int, scenario: Scenario | None,
-                       folder: Path, clock: ClockMode, speed: float,
+                       folder: Path, clock: ClockMode, speed: float, weights: Path | None,
                        progress: Callable[[int, float], None]) -> Outcome:
     """The mission as processes (what `fleet run` starts) in `folder`, the scenario read from
     a file there as `fleet run --faults FILE` reads it."""
@@ -187,8 +188,9 @@ def run_with_processes(mission: Mission, vehicles: int, scenario: Scenario | Non
     if scenario is not None:
         source = str(folder.parent / f"{folder.name}.toml")
         Path(source).write_text(scenario_toml(scenario))
-    outcome = run_processes(RunSpec(mission, vehicles, folder, clock, speed, faults=scenario,
-                                    faults_source=source), lambda p: progress(p.done, p.t))
+    outcome = run_processes(RunSpec(mission, vehicles, folder, clock, speed, weights,
+                                    faults=scenario, faults_source=source),
+                            lambda p: progress(p.done, p.t))
     ok = outcome.done is not None and outcome.done.ok
     digest = outcome.done.digest if ok and outcome.done is not None else ""
     recording = read_recording(folder) if (folder / "run.mcap").exists() else None
@@ -228,9 +230,9 @@ def run(spec: CampaignSpec, out: Path, progress: Callable[[str, int, int], None]
                 progress(f"{name}: {kind.value}, t={t:.0f} s", done, total)
 
             if spec.clock is ClockMode.FAST:
-                return run_inprocess(mission, layout, scenario, folder, stacks)
+                return run_inprocess(mission, layout, scenario, folder, spec.weights, stacks)
             return run_with_processes(mission, vehicles, scenario, folder, spec.clock,
-                                      spec.speed, stacks)
+                                      spec.speed, spec.weights, stacks)
 
         for kind in dict.fromkeys(spec.kinds):
             say(f"fault-free {kind.value} on {layout.name} ({spec.clock} clock) ...")
@@ -301,7 +303,9 @@ def write_replay(out: Path, spec: CampaignSpec, kind: MissionKind, scenario: Sce
                  row: dict[str, Any]) -> Path:
     """The failing run's scenario, with how to replay it in its header."""
     path = out / f"{scenario.name}.toml"
-    strategy = "" if spec.strategy is Strategy.ANN else f" --strategy {spec.strategy.value}"
+    strategy = f" --weights {spec.weights}" if spec.weights else ""
+    if spec.strategy is not Strategy.ANN:
+        strategy = f" --strategy {spec.strategy.value}"
     clock = " --inprocess" if spec.clock is ClockMode.FAST else \
         f" --clock realtime --speed {spec.speed:g}"
     outcome = "wedged" if row["wedged"] else row["error"] or \

@@ -2,6 +2,7 @@
 verdicts; a failing run's scenario is written out and replays bit for bit."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -74,11 +75,11 @@ def test_a_wedged_run_counts_as_wedged_and_leaves_its_scenario(capsys, tmp_path,
     scenario is written out with how to replay it, and what it recorded beside it."""
     real = campaign.run_inprocess
 
-    def wedging(mission, layout, scenario, folder, progress):
+    def wedging(mission, layout, scenario, folder, weights, progress):
         if scenario is not None and scenario.name.endswith("-1"):
             return campaign.Outcome(False, True, "401 decisions in a row failed at t=9 s", "",
                                     None, None, [])
-        return real(mission, layout, scenario, folder, progress)
+        return real(mission, layout, scenario, folder, weights, progress)
 
     monkeypatch.setattr(campaign, "run_inprocess", wedging)
     code, result = campaign_json(capsys, tmp_path, "--kind", "empty")
@@ -93,6 +94,29 @@ def test_a_wedged_run_counts_as_wedged_and_leaves_its_scenario(capsys, tmp_path,
     assert "# replay: fleet run --inprocess --layout small --mission empty --faults" in text
     assert load_scenario(replay).name == "campaign-11-1"
 
+
+
+def test_a_campaign_takes_the_weights_of_a_floor_without_shipped_ones(capsys, tmp_path):
+    """--weights as fleet run takes it: the ANN strategy scores with that file, and a
+    failing run's replay line passes it on."""
+    from fleet.dispatching.weights import __file__ as shipped
+
+    weights = tmp_path / "mine.json"
+    weights.write_text((Path(shipped).parent / "small.json").read_text())
+    assert main(["bench", "campaign", "--layout", "small", "--runs", "1", "--kind", "fill",
+                 "--weights", str(weights), "--out", str(tmp_path / "out"), "--json"]) in (0, 1)
+    mine = json.loads(capsys.readouterr().out)
+    reference = main(["run", "--inprocess", "--layout", "small", "--json",
+                      "--out", str(tmp_path / "reference")])
+    assert reference == 0
+    assert mine["fault_free_end_s"]["fill"] == json.loads(capsys.readouterr().out)["end_time_s"]
+    spec = campaign.CampaignSpec("small", 1, 11, weights=weights)
+    scenario = campaign.draw_scenario(11, 0, SMALL, 2, MissionKind.FILL, 500.0, ClockMode.FAST)
+    path = campaign.write_replay(tmp_path, spec, MissionKind.FILL, scenario, mine["per_run"][0])
+    assert f"--mission fill --weights {weights} --faults {path}" in path.read_text()
+    with pytest.raises(SystemExit) as refused:  # argparse refuses it, naming the file
+        main(["bench", "campaign", "--layout", "small", "--weights", str(tmp_path / "none.json")])
+    assert refused.value.code == 2 and "none.json' does not exist" in capsys.readouterr().err
 
 
 def test_a_campaign_writes_only_in_a_new_or_empty_directory(capsys, tmp_path):
@@ -116,7 +140,7 @@ def test_a_mission_that_gets_stuck_is_wedged_with_its_recording(tmp_path):
     layout = parse_layout(WALLED, "walled.toml")
     mission = Mission(str(tmp_path / "walled.toml"), MissionKind.FILL, Strategy.GREEDY)
     outcome = campaign.run_inprocess(mission, layout, None, claim(tmp_path / "run").path,
-                                     lambda done, t: None)
+                                     None, lambda done, t: None)
     assert (outcome.completed, outcome.wedged) == (False, True)
     assert "decisions in a row failed" in outcome.error
     assert outcome.report is not None and not outcome.report.passed

@@ -138,7 +138,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                           help="layout name or TOML file (default paper)")
     campaign.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
                           help="the dispatch strategy of every run (default ann: it needs "
-                          "weights shipped for the layout)")
+                          "--weights or weights shipped for the layout)")
+    campaign.add_argument("--weights", type=text_file, metavar="FILE",
+                          help="MLP weights for the ANN strategy (default: shipped)")
     campaign.add_argument("--kind", choices=["fill", "empty", "both"], default="both",
                           help="the missions: fill and empty in turn (both, the default) "
                           "or one of them")
@@ -289,7 +291,7 @@ def run_campaign(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
     kinds = tuple(MissionKind) if args.kind == "both" else (MissionKind(args.kind),)
     spec = campaign.CampaignSpec(args.layout, args.runs, args.seed, ClockMode(args.clock),
-                                 args.speed, kinds, Strategy(args.strategy))
+                                 args.speed, kinds, Strategy(args.strategy), args.weights)
     out = campaign_dir(args.out, layout.name)
     runs = ProgressBar(args.runs, "campaign", unit="runs", enabled=not args.json)
 
