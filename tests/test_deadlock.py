@@ -4,6 +4,7 @@ now complete with a vehicle sent aside, judged from their recordings."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import pytest
@@ -11,8 +12,9 @@ from mission_check import mission_problems
 
 from fleet.dispatching.decision import Strategy
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks, stuck
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.spec import Mission, MissionKind
+from fleet.params import DispatchParams
 from fleet.planning.blockage import Blockage
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
@@ -107,6 +109,31 @@ def test_a_generated_floor_that_wedged_completes_without_a_trap():
     record = engine.run()
     assert len(record.stacks_done) == len(layout.stacks)
     assert mission_problems(record, layout) == []
+
+
+def test_a_forklift_passed_over_by_a_dispatch_does_not_pin_the_clock():
+    """More forklifts than a dispatch has choices (iter_dispatch, here 1 for 2 forklifts; 10
+    for 24 on a generated floor): one whose plan failed is passed over, the backup state that
+    would postpone it is never reached, and the clock stood at its free instant for good
+    while the others were postponed without end. It is tried again dt_postpone later."""
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    options = EngineOptions(params=dataclasses.replace(DispatchParams(), iter_dispatch=1))
+    engine = Engine(mission, options)
+    record = engine.run()
+    assert len(record.stacks_done) == len(engine.layout.stacks)
+    assert mission_problems(record, engine.layout) == []
+
+
+def test_a_clock_that_stands_still_ends_the_mission_stuck_rather_than_hanging():
+    """The last resort: were the clock pinned again, the mission ends stuck once it stood at
+    one instant for max_consecutive_failures decisions, even while forklifts are said to
+    move after it."""
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    options = EngineOptions(params=dataclasses.replace(DispatchParams(), iter_dispatch=1))
+    engine = Engine(mission, options)
+    engine._passed_over = lambda active, outcome: None  # the pin, as it was
+    with pytest.raises(MissionStuck, match="decisions in a row failed"):
+        engine.run()
 
 
 def fault_run(kind: MissionKind, faults: list[tuple[str, float, int, float]], tmp_path):

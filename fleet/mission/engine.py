@@ -159,6 +159,7 @@ class Engine:
         self.asides = 0  # vehicles sent aside since the last subtask of the work
         self.said_walled: set[tuple[int, int]] = set()  # (vehicle, revision) reported
         self.now = 0.0  # the instant the clock was last moved to
+        self.decisions_at_now = 0  # decisions taken since the clock last moved
         self.undelivered: tuple[tuple[str, int, float, int], ...] = ()
         if recovered is not None:  # a restarted dispatcher: where the forklifts really are
             self._pick_up(recovered)
@@ -244,6 +245,7 @@ class Engine:
     def _decide(self, active: list[VehicleSlot]) -> None:
         """One decision at the earliest free time, planned and committed if it can be."""
         t_next = min(v.t_free for v in active)
+        self.decisions_at_now = self.decisions_at_now + 1 if t_next == self.now else 0
         self.now = t_next
         paced = self.pacer.before_decision(t_next, {v.vehicle: v.t_free for v in active})
         for v in active:
@@ -259,10 +261,14 @@ class Engine:
             self._failed_again(f.vehicle, f.t_i)
         if outcome.decision is None:
             self.streak.undecided()
+            self._passed_over(active, outcome)
             self._break_deadlocks()
         else:
             self._carry_out(outcome.decision, remaining)
-        if self.streak.count > self.options.max_consecutive_failures and self._at_rest():
+        # Stuck once every forklift stands still, or (the last resort against a hang) once
+        # the clock stood at one instant for as many decisions.
+        limit = self.options.max_consecutive_failures
+        if self.streak.count > limit and (self._at_rest() or self.decisions_at_now > limit):
             raise MissionStuck(self.standstill(Cause.STUCK, (
                 f"{self.streak.count} decisions in a row failed by t={self.now:.2f} s; the "
                 f"last: {failure_text(self.record.failures[-1])}")))
@@ -424,6 +430,18 @@ class Engine:
             self.streak.forget({vehicle})
         else:
             self.failed_at[vehicle] = t_i
+
+    def _passed_over(self, active: list[VehicleSlot], outcome: DispatchOutcome) -> None:
+        """Vehicles due now that a dispatch without a decision never chose (their plan failed
+        since the last success, so they wait for the others' choices) are tried again Δt
+        later, as the backup state would have postponed them: with more vehicles than
+        iter_dispatch choices it is never reached, and one passed over pinned the clock at
+        its free instant for good (24 forklifts, docs/dispatching.md)."""
+        tried = {f.vehicle for f in outcome.failures}
+        for v in active:
+            if v.t_free == self.now and v.vehicle not in tried:
+                v.wait_until(self.now + self.options.params.dt_postpone)
+                self.streak.forget({v.vehicle})
 
     def _failed(self, failure: FailureEvent) -> None:
         """A decision failure: counted, and announced (dispatch/failure)."""
