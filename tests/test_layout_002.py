@@ -119,7 +119,7 @@ def test_a_lane_that_is_not_straight_or_overlaps_is_named():
 
 def cut_channel() -> str:
     """micro-channel with its bottom channel's lanes shortened off both vertical channels:
-    they still lead out (west onto V0's northbound lane) but nothing leads in."""
+    no lane leads in or out, so its four slots are cut off from the four above."""
     text = without_drawing(source("micro-channel"))
     return (text.replace('cells = "0,0..7,0"', 'cells = "2,0..5,0"', 1)
             .replace('cells = "7,1..0,1"', 'cells = "5,1..2,1"', 1))
@@ -128,8 +128,9 @@ def cut_channel() -> str:
 def test_a_lane_set_that_cuts_a_slot_off_fails_check_naming_it():
     problems = [str(p) for p in lane_problems(parse_layout(cut_channel(), "t"))]
     assert problems[0] == "slot s-2-2: cannot be reached from slot s-2-3 along the lanes"
-    # the four slots above the bottom channel, then the four that cannot reach them
-    assert len(problems) == 8 and problems[4].endswith("cannot reach slot s-2-2 along the lanes")
+    # the four slots cut off, then the four above, which are cut off from them
+    assert len(problems) == 8
+    assert problems[4] == "slot s-2-3: cannot be reached from slot s-2-2 along the lanes"
 
 
 def test_a_slot_with_no_lane_beside_it_is_named():

@@ -3,9 +3,9 @@ a route into or out of a slot, packing station or pile begins and ends.
 
 A lane cell allows its lane's direction; a junction cell, where a horizontal and a vertical
 lane cross, allows both, so vehicles turn only at junctions. A move must land on a lane
-cell. A slot, station or pile is entered from an access cell beside it and left back to it
-(docs/layouts.md states the rule); these are pure functions of the layout, for the checks
-here and for the planner.
+cell that runs the move's way. A slot, station or pile is entered from an access cell
+beside it and left back to it (docs/layouts.md states the rule). These are pure functions
+of the layout, for the checks here and for the planner.
 """
 
 from __future__ import annotations
@@ -31,10 +31,11 @@ def direction_between(a: Cell, b: Cell) -> str:
 
 
 def allowed_moves(layout: Layout, cell: Cell) -> frozenset[str]:
-    """The directions a vehicle on `cell` may drive one cell in, onto another lane cell
-    (empty off the lanes)."""
+    """The directions a vehicle on `cell` may drive one cell in: its lanes' directions, onto
+    a lane cell that runs the same way (empty off the lanes). So a vehicle turns only on a
+    junction cell, never onto the side of a lane that merely ends beside another."""
     lanes = layout.lane_directions
-    return frozenset(d for d in lanes.get(cell, ()) if step(cell, d) in lanes)
+    return frozenset(d for d in lanes.get(cell, ()) if d in lanes.get(step(cell, d), ()))
 
 
 def diagonal_moves(layout: Layout, cell: Cell) -> frozenset[str]:
