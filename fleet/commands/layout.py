@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, positive_int, writable_file
 from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
-from fleet.world.layout import Layout
+from fleet.world.lane_reachability import lane_problems
+from fleet.world.layout import LANE_SYMBOLS, Layout
 from fleet.world.layout_file import MAX_MAP_CELLS, builtin_names, load_layout
 from fleet.world.reachability import reachability_problems
 
@@ -19,7 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Warehouse layouts are data: TOML files with the map's "
                        "bounds, clusters of stacks and their fill order, stations, obstacles, "
                        "passages and the forklifts' start poses, and a drawing the loader "
-                       "checks against them (docs/layouts.md). Built-in layouts go by name.")
+                       "checks against them; or, for a lane layout (seed 002), directed lanes, "
+                       "shelf areas, packing stations and charging piles (docs/layouts.md). "
+                       "Built-in layouts go by name.")
     which = p.add_subparsers(dest="layout_command", required=True, metavar="ACTION")
     which.add_parser("list", help="the built-in layouts",
                      description="List the built-in layouts: stacks, forklifts and what "
@@ -27,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     show = which.add_parser("show", help="print a layout's drawing and summary",
                             description="Print a layout's drawing (its legend is in "
                             "docs/layouts.md) and a summary of its clusters, stations and "
-                            "start poses.")
+                            "start poses, or of its lanes, junctions, shelves, packing "
+                            "stations and piles.")
     show.add_argument("name", type=layout_arg, help="built-in layout name or TOML file")
     show.set_defaults(handler=run_show)
     check = which.add_parser("check", help="validate a layout file: structure, drawing, and "
@@ -36,7 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "structure and drawing (the first error, naming the element), "
                              "that it has start poses, and that every stack can be served "
                              "from every station in fill order and every start reaches a "
-                             "dock (every problem, one a line). Exit 1 on problems, 2 on a "
+                             "dock; for a lane layout, that every slot, packing station and "
+                             "pile can be reached from every other along the lanes "
+                             "(every problem, one a line). Exit 1 on problems, 2 on a "
                              "structural error.")
     check.add_argument("file", type=layout_arg, help="TOML file (or built-in layout name)")
     check.set_defaults(handler=run_check)
@@ -64,7 +71,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_list(args: argparse.Namespace) -> int:
     for name in builtin_names():
         layout = load_layout(name)
-        print(f"{name:10} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
+        if layout.has_lanes:
+            print(f"{name:13} {len(layout.slots):5} slots   {len(layout.piles):3} piles     "
+                  f"{layout.description}")
+            continue
+        print(f"{name:13} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
               f"vehicles  {layout.description}")
     return 0
 
@@ -77,16 +88,66 @@ def run_show(args: argparse.Namespace) -> int:
     return 0
 
 
-def summary(layout: Layout) -> str:
-    """What `fleet layout show` prints under the drawing: the map's size and extent, the
-    clusters, stations, vehicles, obstacles and passages."""
+def _map_lines(layout: Layout) -> list[str]:
     x0 = layout.origin[0] - layout.cell_size / 2
     y0 = layout.origin[1] - layout.cell_size / 2
-    lines = [
+    return [
         f"layout {layout.name}: {layout.description}".rstrip(": "),
         f"  map      {layout.cols} x {layout.rows} cells of {layout.cell_size:g} m, "
         f"x [{x0:g}, {x0 + layout.cols * layout.cell_size:g}] m, "
         f"y [{y0:g}, {y0 + layout.rows * layout.cell_size:g}] m",
+    ]
+
+
+def _wrapped(head: str, items: list[str]) -> list[str]:
+    """The items after the head, as many a line as fit 92 columns, none broken."""
+    lines = [f"  {head:8} "]
+    for i, item in enumerate(items):
+        text = item + ("," if i < len(items) - 1 else "")
+        if len(lines[-1]) + len(text) > 92 and lines[-1].strip():
+            lines.append(" " * 11)
+        lines[-1] += text + " "
+    return [line.rstrip() for line in lines]
+
+
+def lane_summary(layout: Layout) -> str:
+    """What `fleet layout show` prints under a lane layout's drawing: the lanes with their
+    direction arrows, the junctions, shelves, packing stations, piles and the vehicle kind."""
+    kinds = Counter(j.kind for j in layout.junctions)
+    dwells = sorted({p.dwell for p in layout.packing})
+    lines = _map_lines(layout) + _wrapped(f"lanes {len(layout.lanes)}", [
+        f"{lane.name} {LANE_SYMBOLS[lane.direction]} {lane.cells[0]}..{lane.cells[-1]}"
+        for lane in layout.lanes])
+    lines.append(f"  junctions {len(layout.junctions)}: {kinds['crossroad']} crossroads (X), "
+                 f"{kinds['t']} T-crossroads (T), {kinds['corner']} corners (L); vehicles "
+                 f"turn only there")
+    lines.append(f"  shelves  {len(layout.slots)} in {len(layout.shelf_areas)} shelf areas, "
+                 f"one a slot at start, each named after its home slot (s-COL-ROW)")
+    if layout.access_cells:
+        lines.append(f"  access   {len(layout.access_cells)} cells, crossed straight between "
+                     f"a slot and its lane")
+    if layout.packing:
+        lines += _wrapped(f"packing {len(layout.packing)}", [
+            f"{p.name} {p.cell}" for p in layout.packing])
+        lines.append(f"           dwell {' / '.join(f'{d:g}' for d in dwells)} s")
+    if layout.piles:
+        lines += _wrapped(f"piles {len(layout.piles)}", [
+            f"{p.name} {p.cell}" for p in layout.piles])
+    lines.append(f"  vehicles {layout.vehicle.kind}s (no start poses: where they start is "
+                 f"the mission's)")
+    if layout.obstacles:
+        lines.append("  obstacles " + ", ".join(
+            f"{o.name} ({o.kind}, {len(o.cells)} cells)" for o in layout.obstacles))
+    return "\n".join(lines)
+
+
+def summary(layout: Layout) -> str:
+    """What `fleet layout show` prints under the drawing: the map's size and extent, the
+    clusters, stations, vehicles, obstacles and passages."""
+    if layout.has_lanes:
+        return lane_summary(layout)
+    lines = [
+        *_map_lines(layout),
         f"  stacks   {len(layout.stacks)} in {len(layout.clusters)} clusters: "
         + ", ".join(f"{c.name} {len(layout.cluster_stacks(c.name))}" for c in layout.clusters),
         f"  stations {len(layout.stations)}: "
@@ -105,6 +166,8 @@ def summary(layout: Layout) -> str:
 
 def run_check(args: argparse.Namespace) -> int:
     layout = load_layout(args.file)  # structural errors raise LayoutError naming the element
+    if layout.has_lanes:
+        return _check_lanes(args.file, layout)
     bar = ProgressBar(len(layout.stacks), "reachability", unit="stacks")
     problems = reachability_problems(layout, lambda done, total: bar.update(done))
     bar.close()
@@ -116,6 +179,20 @@ def run_check(args: argparse.Namespace) -> int:
     print(f"{args.file}: ok: {len(layout.stacks)} stacks in {len(layout.clusters)} clusters, "
           f"{len(layout.stations)} stations, {len(layout.vehicle_starts)} vehicles; every "
           f"stack can be served from every station in fill order")
+    return 0
+
+
+def _check_lanes(name: str, layout: Layout) -> int:
+    problems = lane_problems(layout)
+    if problems:
+        for problem in problems:
+            print(f"{name}: {problem}", file=sys.stderr)
+        print(f"{name}: {len(problems)} problem(s)", file=sys.stderr)
+        return 1
+    print(f"{name}: ok: {len(layout.slots)} slots, {len(layout.packing)} packing stations, "
+          f"{len(layout.piles)} piles, {len(layout.lanes)} lanes, {len(layout.junctions)} "
+          f"junctions; every slot, station and pile can be reached from every other along "
+          f"the lanes")
     return 0
 
 

@@ -33,6 +33,7 @@ from fleet.runtime.argtypes import port, port_problem, positive_float, scenario_
 from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import strategies_epilog
 from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.vehicles import registry
 from fleet.wire.protocol import MissionDone
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
@@ -185,6 +186,8 @@ def summary_json(report: Report, wall_s: float, digest: str,
 def run(args: argparse.Namespace) -> int:
     mission = mission_from_args(args)
     layout = load_layout(mission.layout)
+    if not registry.is_built(layout.vehicle.kind):  # a planned kind: nothing drives it yet
+        raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
     n = fleet_size(layout, mission.vehicles)
     if args.force and args.out is None:
         raise UserError("--force replaces the directory given with --out DIR; without --out "

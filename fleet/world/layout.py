@@ -1,5 +1,6 @@
 """Warehouse layouts as data: the map, its clusters of stacks in fill order, stations,
-obstacles, passages, the vehicle and its start poses, as frozen dataclasses.
+obstacles, passages, the vehicle and its start poses, as frozen dataclasses; or, for a lane
+layout (seed 002), its directed lanes, junctions, shelf slots, packing stations and piles.
 
 A layout comes from a TOML file (docs/layouts.md), read and checked by
 `fleet.world.layout_file`; whether every stack can be reached in fill order is a search on
@@ -22,6 +23,12 @@ from fleet.vehicles.kind import VehicleKind
 
 # The drawing's symbols (docs/layouts.md): clusters and obstacles bring their own.
 FREE, PASSAGE, NOTCH, STATION = ".", ":", "n", "P"
+SLOT, PILE, ACCESS = "S", "C", "a"  # a lane layout's; its packing stations are drawn P
+
+# Directions on the grid: x grows east with the column, y north with the row.
+DIRECTIONS: dict[str, Cell] = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), "S": (0, -1)}
+LANE_SYMBOLS = {"E": ">", "N": "^", "W": "<", "S": "v"}
+JUNCTION_SYMBOLS = {"crossroad": "X", "t": "T", "corner": "L"}
 
 
 class LayoutError(UserError):
@@ -65,6 +72,58 @@ class Passage:
 
 
 @dataclass(frozen=True)
+class Lane:
+    """A one-way lane: a straight run of cells driven in one direction."""
+
+    name: str
+    direction: str  # E, N, W or S
+    cells: tuple[Cell, ...]  # in driving order
+
+
+@dataclass(frozen=True)
+class Junction:
+    """Cells where a horizontal and a vertical lane cross: the only cells where a vehicle
+    turns. Derived from the lanes; its kind from how many sides lanes lead on to."""
+
+    name: str  # j-<col>-<row> of its first cell, bottom row first
+    kind: str  # "crossroad" (four sides), "t" (three) or "corner" (two, at right angles)
+    cells: frozenset[Cell]
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A shelf's home: it holds the shelf of its own name when the mission starts."""
+
+    name: str  # s-<col>-<row>, which is also the id of the shelf whose home it is
+    area: str
+    cell: Cell
+    access: tuple[Cell, ...]  # the neighbouring lane or access cells it is entered from
+
+
+@dataclass(frozen=True)
+class ShelfArea:
+    name: str
+    sides: tuple[str, ...]  # the sides (from a slot) its slots are entered from
+
+
+@dataclass(frozen=True)
+class PackingStation:
+    name: str
+    cell: Cell  # the vehicle drives onto it with the shelf and stands `dwell` seconds
+    dwell: float
+    access: tuple[Cell, ...]
+
+
+@dataclass(frozen=True)
+class Pile:
+    """A charging pile: one vehicle at a time stands on its cell to charge."""
+
+    name: str
+    cell: Cell
+    access: tuple[Cell, ...]
+
+
+@dataclass(frozen=True)
 class VehicleSpec:
     kind: str = "forklift"  # a name in fleet.vehicles.registry
     dims: VehicleDims = field(default_factory=VehicleDims)
@@ -87,6 +146,32 @@ class Layout:
     vehicle: VehicleSpec
     vehicle_starts: tuple[Pose, ...]
     drawing: str
+    # A lane layout's elements (docs/layouts.md); a forklift layout has none of them.
+    lanes: tuple[Lane, ...] = ()
+    junctions: tuple[Junction, ...] = ()
+    shelf_areas: tuple[ShelfArea, ...] = ()
+    slots: tuple[Slot, ...] = ()
+    packing: tuple[PackingStation, ...] = ()
+    piles: tuple[Pile, ...] = ()
+    access_cells: frozenset[Cell] = frozenset()  # crossed straight, element to lane only
+
+    @property
+    def has_lanes(self) -> bool:
+        return bool(self.lanes)
+
+    @cached_property
+    def lane_directions(self) -> dict[Cell, frozenset[str]]:
+        """Each lane cell's directions: its lane's, and at a junction the crossing lane's."""
+        found: dict[Cell, set[str]] = {}
+        for lane in self.lanes:
+            for cell in lane.cells:
+                found.setdefault(cell, set()).add(lane.direction)
+        return {cell: frozenset(d) for cell, d in found.items()}
+
+    @cached_property
+    def shelves(self) -> dict[str, Slot]:
+        """Every shelf by id, with its home slot: one shelf per slot, named after it."""
+        return {slot.name: slot for slot in self.slots}
 
     @cached_property
     def vehicle_kind(self) -> VehicleKind:
@@ -155,3 +240,17 @@ class Layout:
                 yield cell, obstacle.symbol
         for station in self.stations:
             yield station.cell, STATION
+        for lane in self.lanes:
+            for cell in lane.cells:
+                yield cell, LANE_SYMBOLS[lane.direction]
+        for junction in self.junctions:
+            for cell in junction.cells:
+                yield cell, JUNCTION_SYMBOLS[junction.kind]
+        for cell in self.access_cells:
+            yield cell, ACCESS
+        for slot in self.slots:
+            yield slot.cell, SLOT
+        for packing in self.packing:
+            yield packing.cell, STATION
+        for pile in self.piles:
+            yield pile.cell, PILE

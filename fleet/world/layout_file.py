@@ -22,6 +22,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose
 from fleet.vehicles import registry
 from fleet.vehicles.kind import VehicleKind
+from fleet.world.lane_file import LANE_TABLES, LaneParts
 from fleet.world.layout import (
     FREE,
     NOTCH,
@@ -117,17 +118,17 @@ def _finite(value: object) -> bool:
 
 
 _TOP_KEYS = {"name", "description", "cell_size", "bounds", "vehicle", "cluster", "station",
-             "obstacle", "passage", "starts", "drawing"}
+             "obstacle", "passage", "starts", "drawing", *LANE_TABLES}
 
 
-class _Builder:
+class _Builder(LaneParts):
     """Turns the parsed TOML into a Layout, raising LayoutError at the first problem."""
 
     def __init__(self, data: dict, where: str) -> None:
         self.data = data
         self.where = where
         self.owner: dict[Cell, str] = {}  # cell -> the element that claims it
-        self.kind: VehicleKind  # set by `vehicle`, before any pose is read
+        self.kind: VehicleKind | None  # set by `vehicle`; None for a kind not built yet
 
     def fail(self, message: str) -> LayoutError:
         return LayoutError(f"{self.where}: {message}")
@@ -175,6 +176,9 @@ class _Builder:
     def pose(self, text, element: str) -> Pose:
         if not isinstance(text, str):
             raise self.fail(f"{element}: pose {text!r} must be a string 'col,row,H'")
+        if self.kind is None:
+            raise self.fail(f"{element}: a pose is checked with the vehicle kind's body, and "
+                            f"the {self.data['vehicle']['kind']} vehicle kind is not built yet")
         try:
             pose = Pose.parse(text)
         except ValueError as exc:
@@ -217,6 +221,12 @@ class _Builder:
 
         vehicle = self.vehicle(data.get("vehicle", {}), cell_size)
         obstacles = [self.obstacle(t, i) for i, t in enumerate(self.tables("obstacle"))]
+        if self.is_lane_layout():
+            layout = self.lane_layout(Layout(name, description, self.cols, self.rows,
+                                             cell_size, origin, (), (), (), tuple(obstacles),
+                                             (), vehicle, (), ""))
+            drawing = self.drawing(data.get("drawing"), layout)
+            return dataclasses.replace(layout, drawing=drawing)
         stations = [self.station(t, i) for i, t in enumerate(self.tables("station"))]
         clusters, stacks = [], []
         for i, table in enumerate(self.tables("cluster")):
@@ -254,6 +264,8 @@ class _Builder:
             raise self.fail("vehicle: every dimension must be positive")
         try:
             self.kind = registry.vehicle_kind(kind, dims, cell_size)
+        except registry.KindNotBuilt:
+            self.kind = None  # the layout may still load, show and check (registry.PLANNED)
         except registry.UnknownVehicleKind as exc:
             raise self.fail(f"vehicle: {exc}") from None
         under = table.get("passes_under_shelves", False)
