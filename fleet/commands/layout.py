@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from collections import Counter
 
 from fleet.commands.progress import ProgressBar
@@ -172,23 +173,25 @@ def run_check(args: argparse.Namespace) -> int:
     problems = reachability_problems(layout, lambda done, total: bar.update(done))
     bar.close()
     if problems:
-        for problem in problems:
-            print(f"{args.file}: {problem}", file=sys.stderr)
-        print(f"{args.file}: {len(problems)} problem(s)", file=sys.stderr)
-        return 1
+        return _reported(args.file, problems)
     print(f"{args.file}: ok: {len(layout.stacks)} stacks in {len(layout.clusters)} clusters, "
           f"{len(layout.stations)} stations, {len(layout.vehicle_starts)} vehicles; every "
           f"stack can be served from every station in fill order")
     return 0
 
 
+def _reported(name: str, problems: Sequence[object]) -> int:
+    """Each problem on its own line, then how many: the check failed (1)."""
+    for problem in problems:
+        print(f"{name}: {problem}", file=sys.stderr)
+    print(f"{name}: {len(problems)} problem(s)", file=sys.stderr)
+    return 1
+
+
 def _check_lanes(name: str, layout: Layout) -> int:
     problems = lane_problems(layout)
     if problems:
-        for problem in problems:
-            print(f"{name}: {problem}", file=sys.stderr)
-        print(f"{name}: {len(problems)} problem(s)", file=sys.stderr)
-        return 1
+        return _reported(name, problems)
     print(f"{name}: ok: {len(layout.slots)} slots, {len(layout.packing)} packing stations, "
           f"{len(layout.piles)} piles, {len(layout.lanes)} lanes, {len(layout.junctions)} "
           f"junctions; every slot, station and pile can be reached from every other along "
