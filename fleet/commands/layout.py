@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
 from collections import Counter
+from collections.abc import Sequence
 
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
