@@ -241,3 +241,58 @@ def test_two_forklifts_face_to_face_in_a_corridor_one_backs_out():
     assert record.deadlocks[0].kind == "cycle" and record.deadlocks[0].moved in (1, 2)
     assert sorted(index for _, index, _ in record.stacks_done) == [1, 2, 3, 4, 5]
     assert mission_problems(record, layout) == []
+
+
+# A dead-end corridor with one station at its end and the room with the stacks and the other
+# station beyond it.
+POCKET = """name = "pocket"
+description = "a station at the end of a dead-end corridor, the other in the room beyond"
+cell_size = 2.0
+starts = ["1,2,E", "3,2,E", "15,3,S", "8,2,N"]
+
+[bounds]
+x = [0.0, 32.0]
+y = [0.0, 10.0]
+
+[[cluster]]
+name = "c"
+fill = ["14,0..15,0"]
+
+[[obstacle]]
+name = "walls"
+kind = "wall"
+cells = ["0,0..7,1", "0,3..7,4"]
+
+[[station]]
+name = "p1"
+cell = "0,2"
+dock = "1,2,E"
+
+[[station]]
+name = "p2"
+cell = "15,4"
+dock = "15,3,S"
+"""
+
+
+def test_a_way_that_cannot_be_opened_gives_way_to_another_goal():
+    """Every stack done, forklift 1 to return; forklift 2 holds the dock at the end of the
+    corridor forklift 1 stands in, forklift 3 the other dock. The way past fewest vehicles,
+    to the corridor's dock, cannot be opened: forklift 2 could only leave past forklift 1.
+    The way to the other dock can: forklift 3 steps aside and forklift 1 returns there.
+    (24 forklifts on the 16 docks of a generated floor ended stuck this way.)"""
+    from fleet.mission.pickup import Recovered
+    from fleet.world.layout_file import parse_layout
+
+    layout = parse_layout(POCKET, "pocket.toml")
+    mission = Mission("pocket", MissionKind.FILL, Strategy.GREEDY, 4, 0)
+    poses = {1: Pose.parse("3,2,E"), 2: Pose.parse("1,2,E"), 3: Pose.parse("15,3,S"),
+             4: Pose.parse("8,2,N")}
+    all_done = tuple((s.cluster, s.index, 50.0) for s in layout.stacks)
+    after = Recovered(all_done, (), poses, dict.fromkeys(poses, 100.0),
+                      {1: False, 2: True, 3: True, 4: True}, {}, 100.0)
+    record = Engine(mission, EngineOptions(), layout, recovered=after).run()
+    assert any(d.moved in (3, 4) for d in record.deadlocks)
+    returned = [s for s in record.subtasks if s.vehicle == 1]
+    assert returned and returned[-1].target == "p2"
+    assert mission_problems(record, layout) == []

@@ -38,6 +38,7 @@ from fleet.mission.step_aside import SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
+from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
@@ -344,8 +345,10 @@ class Engine:
                     self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
                                             list(deadlock.chain), None, None, None))
                 continue
+            waiting = self.fleet[deadlock.waiting]
             sent = break_deadlock(deadlock, self.waits, planner, store, poses,
-                                  self.work.keep_clear(), self._send_aside)
+                                  self.work.keep_clear(), self._send_aside,
+                                  lambda w=waiting: self._ways(w, planner, movable))
             if sent is not None:
                 self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
                                         list(deadlock.chain), sent.vehicle,
@@ -363,6 +366,16 @@ class Engine:
             way = planner.blockage(v.vehicle, v.pose, goals, store, movable, shortest=True)
             return Wait(v.vehicle, way, store.revision, shortest=True)
         return Wait(v.vehicle, way, store.revision)
+
+    def _ways(self, v: VehicleSlot, planner: Planner,
+              movable: Callable[[int], bool]) -> list[Blockage]:
+        """The vehicle's way to each pose its next subtask could end at, fewest blockers
+        first: where the way past fewest vehicles cannot be opened, another may (24
+        forklifts on 16 docks, docs/dispatching.md)."""
+        store = self.executor.store
+        ways = (planner.blockage(v.vehicle, v.pose, [goal], store, movable)
+                for goal in self.work.wanted(v.view()))
+        return sorted((w for w in ways if w is not None), key=lambda w: len(w.blockers))
 
     def _replanned(self, vehicle: int) -> bool:
         """Whether its plans, or every decision, kept failing since the last subtask (the
