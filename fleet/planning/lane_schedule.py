@@ -1,0 +1,115 @@
+"""A one-cell AGV's route in time (seed 002, Section 5.2), and the cells its body touches.
+
+The paper times a route by its arrival times: τ_{m+1} = τ_m + t_m + d(C_m, C_{m+1}) / v,
+where t_m is how long the AGV stands at node m (a wait inserted by a collision rule, the
+packing dwell). The store of reservations keeps bodies apart by cells, so a schedule also says
+which cells its unit body touches when: the node it stands on while it stands; both cells of a
+straight move while it is made (it leaves one as it enters the other); all four cells of the
+2 x 2 block a diagonal move cuts across (the body's corners sweep the two cells beside the
+diagonal). Two schedules whose touches never share a cell at one time never collide, which is
+what the store promises and the recording's verifier checks apart from this code.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+from fleet.planning.geometry import Cell
+from fleet.planning.reservations import INF, Interval
+
+
+@dataclass(frozen=True)
+class Touch:
+    """Cells the body touches over [t0, t1): standing at node `node` (`moving` False) or
+    moving from node `node` to the next."""
+
+    t0: float
+    t1: float
+    cells: frozenset[Cell]
+    node: int
+    moving: bool
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """One AGV's route with its arrival time at each node and how long it stands there;
+    the last node's dwell may be infinite (it stays)."""
+
+    vehicle: int
+    cells: tuple[Cell, ...]
+    arrivals: tuple[float, ...]  # τ_m
+    dwells: tuple[float, ...]  # t_m
+    seconds_per_cell: float
+
+    def __post_init__(self) -> None:
+        if not (len(self.cells) == len(self.arrivals) == len(self.dwells) >= 1):
+            raise ValueError("a schedule has one arrival time and one dwell per node")
+
+    def departure(self, node: int) -> float:
+        return self.arrivals[node] + self.dwells[node]
+
+    @property
+    def t_end(self) -> float:
+        """When it arrives at its last node."""
+        return self.arrivals[-1]
+
+    def move_seconds(self, node: int) -> float:
+        (x0, y0), (x1, y1) = self.cells[node], self.cells[node + 1]
+        return (1.4 if x0 != x1 and y0 != y1 else 1.0) * self.seconds_per_cell
+
+    def waited(self, node: int, seconds: float) -> Schedule:
+        """The schedule with `seconds` more standing at `node`: every later arrival shifts."""
+        if seconds < 0:
+            raise ValueError(f"a wait lasts zero seconds or more, not {seconds}")
+        dwells = list(self.dwells)
+        dwells[node] += seconds
+        arrivals = [*self.arrivals[:node + 1],
+                    *(t + seconds for t in self.arrivals[node + 1:])]
+        return Schedule(self.vehicle, self.cells, tuple(arrivals), tuple(dwells),
+                        self.seconds_per_cell)
+
+    def touches(self) -> list[Touch]:
+        """Standing and moving, in time order (zero-length stands left out)."""
+        found = []
+        for m, cell in enumerate(self.cells):
+            if self.dwells[m] > 0:
+                found.append(Touch(self.arrivals[m], self.departure(m), frozenset({cell}),
+                                   m, False))
+            if m + 1 < len(self.cells):
+                nxt = self.cells[m + 1]
+                block = {cell, nxt, (cell[0], nxt[1]), (nxt[0], cell[1])}
+                found.append(Touch(self.departure(m), self.arrivals[m + 1], frozenset(block),
+                                   m, True))
+        return found
+
+    def intervals(self) -> list[Interval]:
+        """The touches as reservations, merged per cell."""
+        by_cell: dict[Cell, list[tuple[float, float]]] = {}
+        for touch in self.touches():
+            for cell in touch.cells:
+                by_cell.setdefault(cell, []).append((touch.t0, touch.t1))
+        merged = []
+        for cell, spans in sorted(by_cell.items()):
+            spans.sort()
+            t0, t1 = spans[0]
+            for a, b in spans[1:]:
+                if a <= t1:
+                    t1 = max(t1, b)
+                else:
+                    merged.append(Interval(cell, t0, t1))
+                    t0, t1 = a, b
+            merged.append(Interval(cell, t0, t1))
+        return merged
+
+
+def timed(vehicle: int, cells: tuple[Cell, ...], t_start: float, seconds_per_cell: float,
+          dwell_at_end: float = INF) -> Schedule:
+    """A route driven without stopping from `t_start` on, standing `dwell_at_end` at its
+    last node (for good, by default)."""
+    arrivals = [t_start]
+    for a, b in itertools.pairwise(cells):
+        d = 1.4 if a[0] != b[0] and a[1] != b[1] else 1.0
+        arrivals.append(arrivals[-1] + d * seconds_per_cell)
+    dwells = [0.0] * (len(cells) - 1) + [dwell_at_end]
+    return Schedule(vehicle, tuple(cells), tuple(arrivals), tuple(dwells), seconds_per_cell)
