@@ -9,9 +9,14 @@ import itertools
 import random
 
 import pytest
+from test_lane_rules import BOTTOM_T, CROSSROAD, T_TURNS
 
+from fleet.analysis.lane_rules import lane_violations
 from fleet.planning.lane_route import Heuristic, LaneRoutes
 from fleet.world.layout_file import load_layout
+
+LANE_LAYOUTS = ("paper002", "paper002-uni", "paper002-406", "micro-cross", "micro-t",
+                "micro-channel")
 
 
 def place_cells(layout) -> list:
@@ -59,6 +64,44 @@ def test_g_is_the_sum_of_d_over_v_and_only_the_ends_are_off_the_lanes(paper002, 
             # the unidirectional baseline crosses an access cell next to either end only
             assert all(c in layout.access_cells for c in off)
             assert all(c in (route.cells[1], route.cells[-2]) for c in off)
+
+
+@pytest.mark.parametrize("name", LANE_LAYOUTS)
+def test_every_route_keeps_the_lane_rules_as_the_independent_oracle_reads_them(name):
+    """A-RHR-1 on planned routes: fleet/analysis/lane_rules.py, written apart from the
+    planner, finds no violation on any of 500 seeded place-to-place routes."""
+    layout = load_layout(name)
+    routes = LaneRoutes(layout)
+    for start, goal in pairs(layout, 500, seed=7):
+        route = routes.route(start, goal)
+        assert lane_violations(layout, route.cells) == [], (start, goal)
+
+
+@pytest.mark.parametrize("layout,table", [("micro-cross", CROSSROAD), ("micro-t", T_TURNS),
+                                          ("micro-cross", BOTTOM_T)],
+                         ids=["crossroad", "left T", "bottom T"])
+def test_every_turn_through_a_junction(layout, table):
+    """A-RHR-3: between the ends of each hand-written turn (tests/test_lane_rules.py), the
+    route is legal and no dearer than the cheapest written; straight on and right turns
+    are those very cells, and lefts and U-turns cut across the junction by one diagonal
+    (3.4 and 4.4 cell-times where the orthogonal way takes 4 and 5)."""
+    layout = load_layout(layout)
+    routes = LaneRoutes(layout)
+    by_ends: dict[tuple, list] = {}
+    for name, cells in table.items():
+        by_ends.setdefault((cells[0], cells[-1]), []).append((recomputed_g(cells), name, cells))
+    for (start, goal), written in by_ends.items():
+        cost, name, cells = min(written)
+        route = routes.route(start, goal)
+        assert lane_violations(layout, route.cells) == [], name
+        assert route.cost_s <= cost + 1e-9, name
+        diagonals = sum(d == 1.4 for d in route.distances())
+        if "straight" in name or "right" in name:
+            assert list(route.cells) == cells, name
+        elif "U-turn" in name:
+            assert diagonals == 1 and route.cost_s == pytest.approx(4.4), name
+        else:
+            assert diagonals == 1, name
 
 
 def optimal_cost(routes: LaneRoutes, start, goal) -> float:
