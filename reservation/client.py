@@ -15,9 +15,9 @@ from typing import TypeVar
 import zenoh
 
 from fleet.planning.geometry import Cell
-from fleet.planning.reservations import INF, Interval, WriteResult
+from fleet.planning.reservations import INF, Amendment, Interval, WriteResult
 from fleet.runtime.bus import Requester, RequestFailed, received
-from fleet.wire.convert import intervals_to_wire
+from fleet.wire.convert import amends_to_wire, intervals_to_wire
 from fleet.wire.protocol import (
     CommitRequest,
     Message,
@@ -48,15 +48,18 @@ class ReservationClient:
 
     # -- ReservationWriter ---------------------------------------------------------------------
     def commit(self, vehicle: int, intervals: Sequence[Interval],
-               release_from: float | None = None, *, based_on: int | None = None,
-               deadline: float | None = None, request_id: str | None = None) -> WriteResult:
-        """The table's commit, and two refusals only the service can make: `based_on`, the
-        table revision a forklift's task was issued at (refused if the dispatcher has halted
-        the vehicle since); `deadline`, the Unix time after which it is refused. `request_id`
+               release_from: float | None = None, amends: Sequence[Amendment] = (), *,
+               based_on: int | None = None, deadline: float | None = None,
+               request_id: str | None = None) -> WriteResult:
+        """The table's commit (with `amends`, other vehicles' holdings postponed in the same
+        step), and two refusals only the service can make: `based_on`, the table revision a
+        task was issued at (refused if the dispatcher has halted the vehicle, or one it
+        amends, since); `deadline`, the Unix time after which it is refused. `request_id`
         names the commit (by default a fresh one), so a restarted sender that repeats a
         commit under its old id is answered as before."""
         request = CommitRequest(request_id or self.requester.next_id(), vehicle,
-                                intervals_to_wire(intervals), release_from, based_on, deadline)
+                                intervals_to_wire(intervals), release_from, based_on, deadline,
+                                amends_to_wire(amends))
         return self._write(request)
 
     def release(self, vehicle: int, from_t: float = -INF,

@@ -99,8 +99,10 @@ class ReservationService:
 
 
 def not_theirs(key: str, message) -> str:
-    """Why the principal the key names may not make this request ("" if it may): a forklift
-    commits and releases only its own reservations (access control keeps it to its key)."""
+    """Why the principal the key names may not make this request ("" if it may): a vehicle
+    commits and releases only its own reservations (access control keeps it to its key).
+    Its commit may amend other vehicles' holdings, which the store allows only as a
+    postponement of what they hold (`ReservationTable.amended`)."""
     who = Keys.reservation_request.sender_on(key)
     vehicle = vehicle_of(who) if who is not None else None
     if vehicle is not None and isinstance(message, CommitRequest | ReleaseRequest) and \

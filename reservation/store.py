@@ -4,11 +4,17 @@ retried request answer the same way without applying twice."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.planning.reservations import Change, ReservationTable
-from fleet.wire.convert import change_from_wire, intervals_from_wire
+from fleet.planning.reservations import Amendment, Change, Interval, ReservationTable
+from fleet.wire.convert import (
+    amends_from_wire,
+    change_from_wire,
+    change_to_wire,
+    intervals_from_wire,
+)
 from fleet.wire.protocol import (
     CommitRequest,
     Message,
@@ -73,20 +79,20 @@ class ReservationStore:
     def _commit(self, request: CommitRequest, wall: float) -> Outcome:
         try:
             intervals = intervals_from_wire(request.intervals)  # the one validation
+            amends = amends_from_wire(request.amends)
         except ValueError as exc:
             return Outcome(Reply(request.request_id, False, self.revision, reason=str(exc)))
-        halted = self.halted_at.get(request.vehicle, -1)
-        refusal = ""
-        if request.based_on is not None and halted > request.based_on:
-            refusal = f"vehicle {request.vehicle} was halted at revision {halted}, after " \
-                f"its task's revision {request.based_on}"
-        elif request.deadline is not None and wall > request.deadline:
+        refusal = self._halted_since(request.based_on,
+                                     [request.vehicle, *(a.vehicle for a in amends)])
+        if not refusal and request.deadline is not None and wall > request.deadline:
             refusal = f"arrived {wall - request.deadline:.3f} s after its deadline (the " \
                 f"plan's start has passed)"
         if refusal:  # no conflict: the requester must not replan the same task
             reply = Reply(request.request_id, False, self.revision, reason=refusal)
             self._remember(reply)
             return Outcome(reply)
+        if amends:
+            return self._amend(request, intervals, amends)
         # Only other vehicles' intervals can conflict, so releasing first changes nothing here.
         conflict = self.table.first_conflict(request.vehicle, intervals)
         if conflict is not None:
@@ -101,6 +107,38 @@ class ReservationStore:
             WireChange(revision, "commit", request.vehicle, request.intervals,
                        request.release_from, request.request_id),
             Change(revision, request.vehicle, request.release_from, intervals))
+
+    def _halted_since(self, based_on: int | None, vehicles: list[int]) -> str:
+        """Why a commit issued at table revision `based_on` may no longer change these
+        vehicles ("" if it may): the dispatcher has halted one since."""
+        for vehicle in vehicles:
+            halted = self.halted_at.get(vehicle, -1)
+            if based_on is not None and halted > based_on:
+                return f"vehicle {vehicle} was halted at revision {halted}, after its " \
+                    f"task's revision {based_on}"
+        return ""
+
+    def _amend(self, request: CommitRequest, intervals: tuple[Interval, ...],
+               amends: tuple[Amendment, ...]) -> Outcome:
+        """A commit that postpones other vehicles' holdings: checked whole, then journaled
+        and published as the table's steps (`ReservationTable.amended`), the request's id
+        on the last, so a retry after a lost reply is answered as the first time."""
+        planned = self.table.amended(request.vehicle, intervals, request.release_from, amends)
+        if not isinstance(planned, list):
+            reply = Reply(request.request_id, False, self.revision, reason=planned) \
+                if isinstance(planned, str) else \
+                Reply(request.request_id, False, self.revision, planned.other,
+                      list(planned.cell), planned.reason)
+            self._remember(reply)
+            return Outcome(reply)
+        steps = [change_to_wire(c) for c in planned]
+        steps[-1] = dataclasses.replace(steps[-1], request_id=request.request_id)
+        if self.journal is not None:
+            for step in steps:
+                self.journal.append(step)
+        for step, change in zip(steps, planned, strict=True):
+            self._apply(step, change)
+        return Outcome(self.replies[request.request_id], steps)
 
     def _accept(self, change: WireChange, as_table: Change) -> Outcome:
         if self.journal is not None:

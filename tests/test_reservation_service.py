@@ -137,3 +137,41 @@ def test_a_forklift_changes_only_its_own_reservations(service):
         assert goods.ok and goods.revision == mine.revision + 1
     finally:
         session.close()
+
+
+def test_an_amending_commit_over_zenoh_postpones_the_other_and_a_mirror_follows(service):
+    """Vehicle 1 commits through the service's client with vehicle 2's holdings postponed
+    2 s (the wait a collision rule gave it); a mirror following the change stream ends
+    with both, apart, at the service's revision."""
+    from fleet.planning.reservations import INF, Amendment, Interval
+    from fleet.wire.topics import Keys
+    from reservation.client import ReservationClient
+    from reservation.mirror import TableMirror
+
+    session = client(service)
+    try:
+        keys = Keys(service.keys.run)
+        mirror = TableMirror()
+        writer = ReservationClient(session, keys, Requester(session, "vehicle-1"))
+        sub = writer.follow(mirror)
+        other = ReservationClient(session, keys, Requester(session, "vehicle-2"))
+
+        def driving(t0):
+            route = [(3, 0), (4, 0), (5, 0), (6, 0)]
+            return [*(Interval(c, t0 + k, t0 + k + 2) for k, c in enumerate(route)),
+                    Interval((7, 0), t0 + 3, INF)]
+
+        assert other.commit(2, driving(0.0)).ok
+        crossing = [Interval((5, 1), 0.0, 2.0), Interval((5, 0), 1.0, 4.0),
+                    Interval((5, -1), 3.0, INF)]
+        assert not writer.commit(1, crossing, 0.0).ok
+        written = writer.commit(1, crossing, 0.0, [Amendment(2, 0.0, tuple(driving(2.0)))])
+        assert written.ok and written.revision == 4
+        assert mirror.wait_for(4, 10)
+        with mirror.frozen() as table:
+            assert table.conflict(9, (5, 0), 1.0, 4.0) == 1
+            assert table.conflict(9, (5, 0), 4.0, 6.0) == 2
+            assert table.conflict(9, (5, 0), 0.0, 0.9) is None
+        sub.undeclare()
+    finally:
+        session.close()

@@ -1,6 +1,7 @@
 """The reservation service's state machine and journal (no network here; the process is tested
 in test_reservation_service.py)."""
 
+import dataclasses
 import math
 
 import pytest
@@ -11,6 +12,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.wire.convert import change_from_wire, intervals_from_wire
 from fleet.wire.protocol import (
     CommitRequest,
+    ProtocolError,
     ReleaseRequest,
     Reply,
     SnapshotRequest,
@@ -160,3 +162,54 @@ def test_a_commit_after_its_deadline_is_refused_and_answered_the_same_when_retri
     assert store.handle(request, wall=999.0).reply == out.reply  # a retry: the same answer
     assert store.handle(CommitRequest("rt2", 1, [(0, 0, 4.0, 6.0)], 4.0, deadline=1000.0),
                         wall=999.0).reply.ok
+
+
+def crossing(store):
+    """Vehicle 2 drives east along row 0 from t = 0 and parks at (7, 0); vehicle 1 crosses
+    (5, 0) over [1, 4): only if vehicle 2 waits 2 s. The amending commit, and vehicle 2's
+    postponed holdings."""
+    def driving(t0):
+        route = [(3, 0), (4, 0), (5, 0), (6, 0)]
+        return [(c, r, t0 + k, t0 + k + 2) for k, (c, r) in enumerate(route)] + \
+            [(7, 0, t0 + 3, INF)]
+    assert store.handle(CommitRequest("v2", 2, driving(0.0))).reply.ok
+    request = CommitRequest("v1", 1, [(5, 1, 0.0, 2.0), (5, 0, 1.0, 4.0), (5, -1, 3.0, INF)],
+                            0.0, amends=[(2, 0.0, driving(2.0))])
+    return request, driving(2.0)
+
+
+def test_an_amending_commit_is_journaled_published_and_answered_once(tmp_path):
+    path = tmp_path / "journal.msgpack"
+    store = ReservationStore(path)
+    request, postponed = crossing(store)
+    out = store.handle(request)
+    assert out.reply == Reply("v1", True, 4)
+    assert [(c.op, c.vehicle, c.request_id) for c in out.published] == [
+        ("commit", 1, ""), ("commit", 2, ""), ("commit", 1, "v1")]
+    assert out.published[1].intervals == [tuple(iv) for iv in postponed]
+    again = store.handle(request)  # the reply was lost: the same answer, nothing applied
+    assert again.reply == out.reply and again.published == [] and store.revision == 4
+    table = store.table.reservations()
+    store.close()
+    restarted = ReservationStore(path)
+    assert restarted.table.reservations() == table and restarted.revision == 4
+    assert restarted.handle(request).reply == out.reply  # known after a restart too
+
+
+def test_an_amendment_of_a_vehicle_halted_since_is_refused():
+    store = ReservationStore()
+    request, _ = crossing(store)
+    store.handle(ReleaseRequest("halt", 2, 0.5))  # the dispatcher froze vehicle 2
+    out = store.handle(dataclasses.replace(request, based_on=1))
+    assert not out.reply.ok and "vehicle 2 was halted at revision 2" in out.reply.reason
+    assert store.revision == 2 and out.published == []
+
+
+def test_malformed_amendments_are_refused_with_a_reason():
+    store = ReservationStore()
+    request, _ = crossing(store)
+    bad = dataclasses.replace(request, amends=[(2, 0.0, [(3, 0, 5.0, 5.0)])])
+    assert "must have t0 < t1" in store.handle(bad).reply.reason
+    with pytest.raises(ProtocolError, match="amends"):
+        build(CommitRequest, {**body_of(request), "amends": [[2, "soon", []]]})
+    assert store.revision == 1

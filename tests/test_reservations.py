@@ -1,5 +1,6 @@
 """The reservation table against a naive reference model (hypothesis state machine)."""
 
+import dataclasses
 import math
 
 import hypothesis.strategies as st
@@ -7,7 +8,7 @@ import pytest
 from hypothesis import settings
 from hypothesis.stateful import RuleBasedStateMachine, invariant, rule
 
-from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.reservations import Amendment, Interval, ReservationTable
 
 INF = math.inf
 CELLS = [(0, 0), (0, 1), (1, 0), (1, 1)]
@@ -159,3 +160,77 @@ def test_apply_refuses_out_of_order_change():
 def test_bad_interval_is_named():
     with pytest.raises(ValueError, match=r"cell \(1, 2\)"):
         Interval((1, 2), 5.0, 5.0)
+
+
+# -- amending: a commit that postpones other vehicles' holdings (seed 002) ---------------------
+
+def overlapping(table: ReservationTable) -> list:
+    """Pairs of reservations of different vehicles on one cell over overlapping times,
+    recomputed from the table's contents."""
+    found = []
+    rows = table.reservations()
+    for i, a in enumerate(rows):
+        for b in rows[i + 1:]:
+            if a.cell == b.cell and a.vehicle != b.vehicle and max(a.t0, b.t0) < min(a.t1, b.t1):
+                found.append((a, b))
+    return found
+
+
+def crossing_tables():
+    """Vehicle 2 crosses cell (5, 0) over [2, 4) and parks at (7, 0); vehicle 1 wants
+    (5, 0) over [2, 4) too. Postponed by 2 s, vehicle 2 takes it over [4, 6)."""
+    table = ReservationTable()
+    route = [(3, 0), (4, 0), (5, 0), (6, 0), (7, 0)]
+
+    def driving(t0):
+        ivs = [Interval(c, t0 + k, t0 + k + 2) for k, c in enumerate(route[:-1])]
+        return [*ivs, Interval(route[-1], t0 + len(route) - 2, INF)]
+    assert table.commit(2, driving(0.0)).ok
+    mine = [Interval((5, 1), 0.0, 2.0), Interval((5, 0), 1.0, 4.0), Interval((5, -1), 3.0, INF)]
+    return table, mine, Amendment(2, 0.0, tuple(driving(2.0)))
+
+
+def test_a_commit_that_postpones_another_vehicle_is_taken_whole():
+    table, mine, later = crossing_tables()
+    assert not table.commit(1, mine).ok  # without the amendment vehicle 2 is in the way
+    result = table.commit(1, mine, 0.0, [later])
+    assert result.ok and result.revision == 4  # release, amendment, commit: one step each
+    assert [c.kind for c in table.changes[1:]] == ["commit"] * 3
+    assert table.conflict(9, (5, 0), 4.0, 6.0) == 2 and table.conflict(9, (5, 0), 1.0, 4.0) == 1
+    assert overlapping(table) == []
+    replayed = ReservationTable()
+    for change in table.changes:  # no revision between holds two overlapping reservations
+        replayed.apply(change)
+        assert overlapping(replayed) == []
+
+
+def test_an_amendment_that_does_not_only_postpone_is_refused_and_nothing_changes():
+    table, mine, later = crossing_tables()
+    before = table.reservations()
+    earlier = Amendment(2, 0.0, tuple(Interval(iv.cell, iv.t0 - 2.5, iv.t1)
+                                      for iv in later.intervals))
+    elsewhere = Amendment(2, 0.0, (*later.intervals, Interval((9, 9), 5.0, 6.0)))
+    cases = {
+        "earlier than": earlier,
+        "holds cells": elsewhere,
+    }
+    for reason, amendment in cases.items():
+        result = table.commit(1, mine, 0.0, [amendment])
+        assert not result.ok and reason in result.reason
+    assert "names the committing vehicle" in table.commit(1, mine, 0.0, [
+        Amendment(1, 0.0, ())]).reason
+    assert "before the commit's own release" in table.commit(1, mine, 1.0, [
+        dataclasses.replace(later, release_from=0.5)]).reason
+    assert table.reservations() == before and table.revision == 1
+
+
+def test_an_amended_schedule_may_not_run_into_a_third_vehicle_or_the_committer():
+    table, mine, later = crossing_tables()
+    assert table.commit(3, [Interval((6, 0), 5.0, 5.5)]).ok  # in the postponed way
+    result = table.commit(1, mine, 0.0, [later])
+    assert not result.ok and result.conflict_vehicle == 3 and result.conflict_cell == (6, 0)
+    table, mine, later = crossing_tables()
+    late_mine = [*mine, Interval((4, 0), 3.0, 3.5)]  # where vehicle 2 now waits
+    result = table.commit(1, late_mine, 0.0, [later])
+    assert not result.ok and result.conflict_cell == (4, 0)
+    assert table.revision == 1

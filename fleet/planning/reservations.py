@@ -14,8 +14,9 @@ mirror can follow the table (`diff`, `apply`).
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -53,6 +54,17 @@ class Conflict:
 
 
 @dataclass(frozen=True)
+class Amendment:
+    """Another vehicle's holdings from `release_from` on, replaced by `intervals`, which only
+    postpone them: the same cells, each taken and left no earlier than before (a wait a
+    collision rule put into a schedule already committed, seed 002)."""
+
+    vehicle: int
+    release_from: float
+    intervals: tuple[Interval, ...]
+
+
+@dataclass(frozen=True)
 class WriteResult:
     """A writer's answer to a commit or release: made (`ok`), the table at `revision`; or
     refused, the table unchanged at `revision`, with the reason."""
@@ -84,6 +96,13 @@ class Change:
     release_from: float | None
     intervals: tuple[Interval, ...] = ()
     release_cells: frozenset[Cell] | None = None  # release only these cells (None: all)
+    op: str = ""  # "commit" or "release"; "" says it by whether it adds intervals
+
+    @property
+    def kind(self) -> str:
+        """A commit adds intervals, or is the releasing first step of one (`amended`); a
+        release only gives up (the dispatcher's freeze)."""
+        return self.op or ("commit" if self.intervals else "release")
 
 
 @dataclass(frozen=True)
@@ -107,10 +126,12 @@ class ReservationWriter(Protocol):
     service's client (reservation/client.py) across processes."""
 
     def commit(self, vehicle: int, intervals: Sequence[Interval],
-               release_from: float | None = None) -> WriteResult:
+               release_from: float | None = None,
+               amends: Sequence[Amendment] = ()) -> WriteResult:
         """All or nothing: if no interval conflicts with another vehicle, release this
         vehicle's reservations from `release_from` on (when given) and add the intervals;
-        otherwise change nothing and name the first conflict."""
+        otherwise change nothing and name the first conflict. `amends` postpone other
+        vehicles' holdings in the same step (seed 002's collision rules)."""
         ...
 
     def release(self, vehicle: int, from_t: float = -INF,
@@ -181,17 +202,114 @@ class ReservationTable:
 
     # -- changes -------------------------------------------------------------------------------
     def commit(self, vehicle: int, intervals: Iterable[Interval],
-               release_from: float | None = None) -> WriteResult:
+               release_from: float | None = None,
+               amends: Sequence[Amendment] = ()) -> WriteResult:
         """All or nothing: if no interval conflicts with another vehicle, release this
         vehicle's reservations from `release_from` on (when given) and add the intervals;
-        otherwise change nothing and name the first conflict."""
+        otherwise change nothing and name the first conflict. With `amends`, the other
+        vehicles' holdings are postponed in the same step (`amended`)."""
         intervals = tuple(intervals)
+        if amends:
+            planned = self.amended(vehicle, intervals, release_from, amends)
+            if isinstance(planned, str):
+                return WriteResult(False, self.revision, planned)
+            if isinstance(planned, Conflict):
+                return WriteResult(False, self.revision, planned.reason, planned.other,
+                                   planned.cell)
+            for change in planned:
+                self._apply(change)
+            return WriteResult(True, self.revision)
         conflict = self.first_conflict(vehicle, intervals)
         if conflict is not None:
             return WriteResult(False, self.revision, conflict.reason, conflict.other,
                                conflict.cell)
         self._apply(Change(self.revision + 1, vehicle, release_from, intervals))
         return WriteResult(True, self.revision)
+
+    def amended(self, vehicle: int, intervals: tuple[Interval, ...],
+                release_from: float | None, amends: Sequence[Amendment]
+                ) -> list[Change] | Conflict | str:
+        """A commit that also postpones other vehicles' holdings, checked whole against the
+        table it would leave, as the changes that make it: the committing vehicle's release
+        first, then each amendment, then its intervals, so the table holds no two
+        overlapping reservations at any revision between. A Conflict, or why the amendments
+        are refused (one names the committing vehicle or a vehicle twice, reaches back before
+        the commit's own release, or does more than postpone)."""
+        names = [a.vehicle for a in amends]
+        if vehicle in names or len(set(names)) != len(names):
+            return "an amendment names the committing vehicle or one vehicle twice"
+        for a in amends:
+            if release_from is not None and a.release_from < release_from:
+                return (f"the amendment of vehicle {a.vehicle} releases from {a.release_from}, "
+                        f"before the commit's own release from {release_from}")
+            why = self._not_postponed(a)
+            if why:
+                return f"the amendment of vehicle {a.vehicle} does not only postpone: {why}"
+        released = {a.vehicle: a.release_from for a in amends}
+        if release_from is not None:
+            released[vehicle] = release_from
+        parts = [(vehicle, intervals), *((a.vehicle, a.intervals) for a in amends)]
+        for owner, ivs in parts:
+            for iv in ivs:
+                other = self._held_after(owner, iv, released)
+                if other is not None:
+                    return Conflict(iv.cell, iv.t0, iv.t1, other)
+        for (_, ps), (q, qs) in itertools.combinations(parts, 2):
+            for a, b in itertools.product(ps, qs):
+                if a.cell == b.cell and max(a.t0, b.t0) < min(a.t1, b.t1):
+                    return Conflict(a.cell, a.t0, a.t1, q)
+        revision = self.revision
+        changes = []
+        if release_from is not None:
+            revision += 1
+            changes.append(Change(revision, vehicle, release_from, op="commit"))
+        for a in amends:
+            revision += 1
+            changes.append(Change(revision, a.vehicle, a.release_from, a.intervals, op="commit"))
+        if intervals:
+            changes.append(Change(revision + 1, vehicle, None, intervals))
+        return changes
+
+    def _held_after(self, vehicle: int, iv: Interval, released: Mapping[int, float]
+                    ) -> int | None:
+        """Who else holds the interval's cell over it once `released` vehicles have given
+        up their holdings from their instants on."""
+        line = self._cells.get(iv.cell)
+        if line is None:
+            return None
+        i = bisect.bisect_left(line.starts, iv.t1) - 1
+        while i >= 0 and line.ends[i] > iv.t0:
+            owner = line.owners[i]
+            end = min(line.ends[i], released.get(owner, INF))
+            if owner != vehicle and line.starts[i] < end and end > iv.t0:
+                return owner
+            i -= 1
+        return None
+
+    def _not_postponed(self, a: Amendment) -> str:
+        """Why the amendment is not a postponement of what the vehicle holds from its
+        release on ("" if it is): the same cells, each taken and left no earlier."""
+        before: dict[Cell, list[tuple[float, float]]] = {}
+        for cell in self._cells_of.get(a.vehicle, ()):
+            line = self._cells[cell]
+            for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
+                if owner == a.vehicle and t1 > a.release_from:
+                    before.setdefault(cell, []).append((max(t0, a.release_from), t1))
+        after: dict[Cell, list[tuple[float, float]]] = {}
+        for iv in sorted(a.intervals):  # merged as the table would merge them
+            spans = after.setdefault(iv.cell, [])
+            if spans and iv.t0 <= spans[-1][1]:
+                spans[-1] = (spans[-1][0], max(spans[-1][1], iv.t1))
+            else:
+                spans.append((iv.t0, iv.t1))
+        if set(before) != set(after):
+            return f"it holds cells {sorted(before)} from then on, not {sorted(after)}"
+        for cell, spans in before.items():
+            new = after[cell]
+            if len(new) != len(spans) or any(n0 < o0 or n1 < o1 for (o0, o1), (n0, n1)
+                                             in zip(sorted(spans), new, strict=True)):
+                return f"cell {cell} would be taken or left earlier than {sorted(spans)}"
+        return ""
 
     def release(self, vehicle: int, from_t: float = -INF,
                 cells: Iterable[Cell] | None = None) -> WriteResult:

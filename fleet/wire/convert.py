@@ -9,11 +9,12 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from fleet.planning.maneuvers import Manner
-from fleet.planning.reservations import Change, Interval
+from fleet.planning.reservations import Amendment, Change, Interval
 from fleet.planning.trajectory import Pose, Step
 from fleet.planning.velocity import Speed
 from fleet.wire.protocol import (
     ProtocolError,
+    WireAmend,
     WireChange,
     WireInterval,
     WireStep,
@@ -57,8 +58,8 @@ def change_to_wire(change: Change) -> WireChange:
     """A table change as the reservation service publishes it (no request id: made in this
     process). Release cells go in sorted order."""
     cells = None if change.release_cells is None else sorted(change.release_cells)
-    return WireChange(change.revision, "commit" if change.intervals else "release",
-                      change.vehicle, intervals_to_wire(change.intervals), change.release_from,
+    return WireChange(change.revision, change.kind, change.vehicle,
+                      intervals_to_wire(change.intervals), change.release_from,
                       release_cells=cells)
 
 
@@ -67,7 +68,17 @@ def change_from_wire(change: WireChange) -> Change:
     cells = None if change.release_cells is None else \
         frozenset((c, r) for c, r in change.release_cells)
     return Change(change.revision, change.vehicle, change.release_from,
-                  intervals_from_wire(change.intervals), cells)
+                  intervals_from_wire(change.intervals), cells, change.op)
+
+
+def amends_to_wire(amends: Iterable[Amendment]) -> list[WireAmend]:
+    return [(a.vehicle, a.release_from, intervals_to_wire(a.intervals)) for a in amends]
+
+
+def amends_from_wire(wire: Iterable[WireAmend]) -> tuple[Amendment, ...]:
+    """ValueError for an interval that does not end after it starts."""
+    return tuple(Amendment(v, release_from, intervals_from_wire(ivs))
+                 for v, release_from, ivs in wire)
 
 
 def change_time(change: WireChange) -> float:

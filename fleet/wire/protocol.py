@@ -45,6 +45,9 @@ ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
+# (vehicle, release_from, intervals): another vehicle's holdings from release_from on,
+# postponed to these (a commit's `amends`; fleet/planning/reservations.py, Amendment).
+WireAmend = tuple[int, float, list[WireInterval]]
 
 # Reservation owners that are no forklift (forklifts are 1..N), in every commit and change.
 GOODS = 0  # the goods on the stacks
@@ -82,6 +85,9 @@ class CommitRequest(Message):
     # Real time: the Unix time after which it is refused (the plan's start would be past,
     # and releasing from there would rewrite what was already driven).
     deadline: float | None = None
+    # Other vehicles' holdings postponed in the same step, all or nothing (seed 002's
+    # collision rules may make an AGV already under way wait).
+    amends: list[WireAmend] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
