@@ -12,11 +12,11 @@ import pytest
 from fleet.planning.lane_conflicts import (
     Area,
     CollisionKind,
-    areas,
     first_collision,
     settle,
 )
 from fleet.planning.lane_schedule import timed
+from fleet.world.lanes import collision_areas as areas
 from fleet.world.layout_file import load_layout
 
 

@@ -37,35 +37,18 @@ from enum import Enum
 
 from fleet.planning.geometry import Cell
 from fleet.planning.lane_schedule import Schedule, Touch
-from fleet.world.layout import Layout
 
 MAX_RESOLUTIONS = 100
 
 
 class Area(Enum):
+    """Section 5.3's sets of cells (`fleet.world.lanes.collision_areas` sorts a layout's)."""
+
     CROSSROAD = "R"
     T_CROSSROAD = "T"
     OFF_CHANNEL = "N"
     HORIZONTAL = "H"
     LONGITUDINAL = "L"
-
-
-def areas(layout: Layout) -> dict[Cell, Area]:
-    """Each cell's set in Section 5.3's terms (cells off every set are not driven)."""
-    found: dict[Cell, Area] = {}
-    for lane in layout.lanes:
-        area = Area.HORIZONTAL if lane.direction in "EW" else Area.LONGITUDINAL
-        for cell in lane.cells:
-            found[cell] = area
-    for junction in layout.junctions:
-        area = Area.CROSSROAD if junction.kind == "crossroad" else Area.T_CROSSROAD
-        for cell in junction.cells:
-            found[cell] = area
-    for place in (*layout.slots, *layout.packing, *layout.piles):
-        found[place.cell] = Area.OFF_CHANNEL
-    for cell in layout.access_cells:
-        found[cell] = Area.OFF_CHANNEL
-    return found
 
 
 class CollisionKind(Enum):

@@ -3,9 +3,10 @@
 The search is the paper's: f(n) = g(n) + h(n), g(n) = g(n-1) + d/v with d = 1 for a
 straight move and 1.4 for a diagonal one, h(n) = Manhattan distance to the goal / v. The
 moves are the lane mode of the seed pack note (A.4.2), the reference form of the paper's
-per-AGV dynamic map: an orthogonal move along a lane, turning only on junction cells
-(`lanes.allowed_moves`); a diagonal move only where both orthogonal neighbours are lane cells
-and one way round the corner is allowed (`lanes.diagonal_moves`). A slot, packing station or
+per-AGV dynamic map: an orthogonal move along a lane, turning only on junction cells; a
+diagonal move only where both orthogonal neighbours are lane cells and one way round the
+corner is allowed. The layout's `LaneGraph` (built by `fleet.world.lanes.lane_graph`) holds
+them; this module only searches it. A slot, packing station or
 pile is entered and left only at the route's two ends, through its access cell, and straight
 on across one cell more onto the far lane: the only place a route crosses the opposite lane
 (Algorithms 1 and 2 leave exactly that opening, in the start's and end's own column).
@@ -27,13 +28,11 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from enum import Enum
 
 from fleet.planning.geometry import Cell
-from fleet.world.lanes import allowed_moves, diagonal_moves, direction_between, places, step
-from fleet.world.layout import Layout
 
 STRAIGHT, DIAGONAL = 1.0, 1.4  # the paper's d, in cells
 
@@ -41,6 +40,29 @@ STRAIGHT, DIAGONAL = 1.0, 1.4  # the paper's d, in cells
 class Heuristic(Enum):
     MANHATTAN = "manhattan"  # the paper's Equation (4)
     OCTILE = "octile"  # admissible with 1.4-cell diagonals
+
+
+@dataclass(frozen=True)
+class Move:
+    """One move of the lane graph: to `to`, `d` cells long, passing `via` (straight across
+    the near lane, out of or into a place)."""
+
+    to: Cell
+    d: float
+    via: tuple[Cell, ...] = ()
+
+
+@dataclass(frozen=True)
+class LaneGraph:
+    """A lane layout's moves as the search sees them: from each lane cell along the lanes,
+    out of each place (slot, packing station, pile) onto the lanes, and into each place
+    from the lane cells its ways in start on."""
+
+    name: str
+    cell_size: float
+    moves: Mapping[Cell, tuple[Move, ...]]
+    ways_out: Mapping[Cell, tuple[Move, ...]]
+    ways_in: Mapping[Cell, Mapping[Cell, Move]]  # place -> lane cell -> the move into it
 
 
 @dataclass(frozen=True)
@@ -57,57 +79,16 @@ class Route:
                 for a, b in itertools.pairwise(self.cells)]
 
 
-@dataclass(frozen=True)
-class _Edge:
-    to: Cell
-    d: float
-    via: tuple[Cell, ...] = ()  # cells passed between (straight across the near lane)
-
-
 class LaneRoutes:
-    """The moves of one lane layout, worked out once; `route` searches them per query."""
+    """Routes on one lane graph, searched per query."""
 
-    def __init__(self, layout: Layout, speed_mps: float = 1.0,
+    def __init__(self, graph: LaneGraph, speed_mps: float = 1.0,
                  heuristic: Heuristic = Heuristic.MANHATTAN):
-        if not layout.has_lanes:
-            raise ValueError(f"layout {layout.name} has no lanes: routes on lanes need a "
-                             f"lane layout")
         if speed_mps <= 0:
             raise ValueError(f"speed must be positive, not {speed_mps}")
-        self.layout = layout
-        self.seconds_per_cell = 1.0 / (speed_mps / layout.cell_size)
+        self.graph = graph
+        self.seconds_per_cell = graph.cell_size / speed_mps
         self.heuristic = heuristic
-        self.places = {place.cell: place for _, place in places(layout)}
-        self.moves: dict[Cell, tuple[_Edge, ...]] = {
-            cell: tuple(self._lane_moves(cell)) for cell in sorted(layout.lane_directions)}
-
-    def _lane_moves(self, cell: Cell) -> Iterator[_Edge]:
-        for d in sorted(allowed_moves(self.layout, cell)):
-            yield _Edge(step(cell, d), STRAIGHT)
-        for d in sorted(diagonal_moves(self.layout, cell)):
-            yield _Edge(step(step(cell, d[0]), d[1]), DIAGONAL)
-
-    def _ways_out(self, start: Cell) -> Iterator[_Edge]:
-        """Out of a place onto its access cell, and straight on across one cell more."""
-        lanes = self.layout.lane_directions
-        for near in self.places[start].access:
-            beyond = step(near, direction_between(start, near))
-            if near in lanes:
-                yield _Edge(near, STRAIGHT)
-            if beyond in lanes:
-                yield _Edge(beyond, 2 * STRAIGHT, (near,))
-
-    def _ways_in(self, goal: Cell) -> dict[Cell, _Edge]:
-        """Into a place, by lane cell: from its access cell, or from straight across it."""
-        lanes = self.layout.lane_directions
-        found: dict[Cell, _Edge] = {}
-        for near in self.places[goal].access:
-            beyond = step(near, direction_between(goal, near))
-            if near in lanes:
-                found[near] = _Edge(goal, STRAIGHT)
-            if beyond in lanes and beyond not in found:
-                found[beyond] = _Edge(goal, 2 * STRAIGHT, (near,))
-        return found
 
     def _h(self, cell: Cell, goal: Cell) -> float:
         dx, dy = abs(cell[0] - goal[0]), abs(cell[1] - goal[1])
@@ -118,13 +99,14 @@ class LaneRoutes:
     def route(self, start: Cell, goal: Cell) -> Route | None:
         """The route from `start` to `goal` (a lane cell, slot, packing station or pile
         each); None when the lanes lead from one to the other by no way."""
+        graph = self.graph
         for name, cell in (("start", start), ("goal", goal)):
-            if cell not in self.places and cell not in self.moves:
+            if cell not in graph.ways_out and cell not in graph.moves:
                 raise ValueError(f"{name} {cell} is neither on a lane nor a slot, packing "
-                                 f"station or pile of layout {self.layout.name}")
+                                 f"station or pile of layout {graph.name}")
         if start == goal:
             return Route((start,), 0.0, 0)
-        ways_in = self._ways_in(goal) if goal in self.places else {}
+        ways_in = graph.ways_in.get(goal, {})
         g = {start: 0.0}
         parent: dict[Cell, tuple[Cell, tuple[Cell, ...]]] = {}
         closed: set[Cell] = set()
@@ -140,24 +122,27 @@ class LaneRoutes:
             expansions += 1
             if cell == goal:
                 return Route(self._cells(parent, goal), g[goal], expansions)
-            for edge in self._edges(cell, start, goal, ways_in):
-                if edge.to in closed:
+            for move in self.moves_from(cell, start, ways_in):
+                if move.to in closed:
                     continue
-                cost = g[cell] + edge.d * self.seconds_per_cell
-                if cost < g.get(edge.to, float("inf")):
-                    g[edge.to] = cost
-                    parent[edge.to] = (cell, edge.via)
+                cost = g[cell] + move.d * self.seconds_per_cell
+                if cost < g.get(move.to, float("inf")):
+                    g[move.to] = cost
+                    parent[move.to] = (cell, move.via)
                     counter += 1
-                    h = self._h(edge.to, goal)
-                    heapq.heappush(open_heap, (cost + h, h, counter, edge.to))
+                    h = self._h(move.to, goal)
+                    heapq.heappush(open_heap, (cost + h, h, counter, move.to))
         return None
 
-    def _edges(self, cell: Cell, start: Cell, goal: Cell,
-               ways_in: dict[Cell, _Edge]) -> Iterator[_Edge]:
-        if cell == start and cell in self.places:
-            yield from self._ways_out(cell)
+    def moves_from(self, cell: Cell, start: Cell, ways_in: Mapping[Cell, Move]
+                   ) -> Iterator[Move]:
+        """The moves a route from `start` may make from `cell`: out of the start place
+        only by its ways out; along the lanes (which lead onto lane cells only); and into
+        the goal place by its ways in."""
+        if cell == start and cell in self.graph.ways_out:
+            yield from self.graph.ways_out[cell]
             return
-        yield from self.moves.get(cell, ())  # lane moves land on lane cells only
+        yield from self.graph.moves.get(cell, ())
         if cell in ways_in:
             yield ways_in[cell]
 

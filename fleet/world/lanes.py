@@ -11,6 +11,8 @@ of the layout, for the checks here and for the planner.
 from __future__ import annotations
 
 from fleet.planning.geometry import Cell
+from fleet.planning.lane_conflicts import Area
+from fleet.planning.lane_route import DIAGONAL, STRAIGHT, LaneGraph, Move
 from fleet.world.layout import DIRECTIONS, Layout, PackingStation, Pile, Slot
 
 Place = Slot | PackingStation | Pile
@@ -79,3 +81,53 @@ def doors(layout: Layout, place: Place) -> frozenset[Cell]:
         if beyond in lanes:
             found.add(beyond)
     return frozenset(found)
+
+
+def lane_graph(layout: Layout) -> LaneGraph:
+    """The moves of seed 002's lane mode (A.4.2) for the route search: along the lanes
+    (`allowed_moves`, `diagonal_moves`); out of each place onto its access cell and straight
+    on across one cell more; into each place the same ways back (`doors`)."""
+    if not layout.has_lanes:
+        raise ValueError(f"layout {layout.name} has no lanes: routes on lanes need a lane "
+                         f"layout")
+    moves = {}
+    for cell in sorted(layout.lane_directions):
+        straight = [Move(step(cell, d), STRAIGHT) for d in sorted(allowed_moves(layout, cell))]
+        diagonal = [Move(step(step(cell, d[0]), d[1]), DIAGONAL)
+                    for d in sorted(diagonal_moves(layout, cell))]
+        moves[cell] = (*straight, *diagonal)
+    lanes = layout.lane_directions
+    ways_out: dict[Cell, tuple[Move, ...]] = {}
+    ways_in: dict[Cell, dict[Cell, Move]] = {}
+    for _, place in places(layout):
+        out: list[Move] = []
+        into: dict[Cell, Move] = {}
+        for near in place.access:
+            beyond = step(near, direction_between(place.cell, near))
+            if near in lanes:
+                out.append(Move(near, STRAIGHT))
+                into[near] = Move(place.cell, STRAIGHT)
+            if beyond in lanes:
+                out.append(Move(beyond, 2 * STRAIGHT, (near,)))
+                into.setdefault(beyond, Move(place.cell, 2 * STRAIGHT, (near,)))
+        ways_out[place.cell] = tuple(out)
+        ways_in[place.cell] = into
+    return LaneGraph(layout.name, layout.cell_size, moves, ways_out, ways_in)
+
+
+def collision_areas(layout: Layout) -> dict[Cell, Area]:
+    """Each cell's set in seed 002's Section 5.3 (cells off every set are not driven)."""
+    found: dict[Cell, Area] = {}
+    for lane in layout.lanes:
+        area = Area.HORIZONTAL if lane.direction in "EW" else Area.LONGITUDINAL
+        for cell in lane.cells:
+            found[cell] = area
+    for junction in layout.junctions:
+        area = Area.CROSSROAD if junction.kind == "crossroad" else Area.T_CROSSROAD
+        for cell in junction.cells:
+            found[cell] = area
+    for _, place in places(layout):
+        found[place.cell] = Area.OFF_CHANNEL
+    for cell in layout.access_cells:
+        found[cell] = Area.OFF_CHANNEL
+    return found
