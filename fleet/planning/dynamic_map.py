@@ -528,8 +528,8 @@ def check_pairs(layout: LaneLayout, pairs: Iterable[tuple[Cell, Cell]], speed: f
 
 
 def all_pairs(layout: LaneLayout) -> list[tuple[Cell, Cell]]:
-    """Every slot <-> station, slot -> slot, pile <-> slot pair (the full sweep: about 155 000
-    pairs, minutes of work; the tests take samples)."""
+    """Every slot <-> station, slot <-> pile and slot -> slot pair: the full sweep, 190 134
+    pairs on paper002, about two minutes; the tests take samples."""
     slots = [s.cell for s in layout.slots]
     ends = [p.cell for p in (*layout.packing, *layout.piles)]
     pairs = [(s, e) for s in slots for e in ends] + [(e, s) for e in ends for s in slots]
