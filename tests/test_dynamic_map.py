@@ -4,11 +4,13 @@ the A* over the open cells; and, on seeded samples of the pairs the paper plans,
 route exists and keeps right by the layout's lanes. docs/planning-002.md has the counts."""
 
 from collections import Counter
+from dataclasses import dataclass
 from functools import cache
 from itertools import pairwise
 
 import pytest
 
+from fleet.analysis.lane_rules import lane_violations
 from fleet.planning import dynamic_map as dm
 from fleet.world.layout_file import load_layout
 
@@ -162,11 +164,12 @@ def test_e7_start_and_end_are_open():
 # -- the A* --------------------------------------------------------------------------------
 
 def test_route_cost_is_the_sum_of_d_over_v():
-    cells, cost = dm.literal_route(PAPER002, (30, 3), (5, 22))
+    route = dm.literal_route(PAPER002, (30, 3), (5, 22))
+    cells = list(route.cells)
     d = [1.4 if a[0] != b[0] and a[1] != b[1] else 1.0 for a, b in pairwise(cells)]
-    assert cost == pytest.approx(sum(d))
-    cells2, cost2 = dm.literal_route(PAPER002, (30, 3), (5, 22), speed=2.0)
-    assert cells2 == cells and cost2 == pytest.approx(cost / 2)
+    assert route.cost_s == pytest.approx(sum(d))
+    faster = dm.literal_route(PAPER002, (30, 3), (5, 22), speed=2.0)
+    assert faster.cells == route.cells and faster.cost_s == pytest.approx(route.cost_s / 2)
     assert cells[0] == (30, 3) and cells[-1] == (5, 22)
     open_cells = dm.literal_open_cells(PAPER002, (30, 3), (5, 22))
     for a, b in pairwise(cells):  # one step each, on open cells, no closed corner cut
@@ -175,21 +178,8 @@ def test_route_cost_is_the_sum_of_d_over_v():
 
 
 def test_a_station_route_leaves_and_enters_through_the_access_cells():
-    cells, _ = dm.literal_route(PAPER002, (0, 14), (20, 2))
+    cells = dm.literal_route(PAPER002, (0, 14), (20, 2)).cells
     assert cells[1] == (1, 14) and cells[-2] == (20, 1)
-
-
-# -- the oracle ----------------------------------------------------------------------------
-
-def test_oracle_accepts_keep_right_and_flags_wrong_way():
-    right = [(5, 7), (5, 8), (6, 8), (7, 8), (7, 7)]  # out, east on row 8, in
-    assert dm.keep_right_violations(PAPER002, right) == []
-    across = [(5, 7), (5, 8), (5, 9), (4, 9), (3, 9), (3, 10)]  # out across, west, in
-    assert dm.keep_right_violations(PAPER002, across) == []
-    wrong = [(7, 7), (7, 8), (6, 8), (5, 8), (5, 7)]  # west on the eastbound row 8
-    assert len(dm.keep_right_violations(PAPER002, wrong)) == 2
-    sideways = [(3, 7), (2, 7), (2, 8), (3, 8), (4, 8), (4, 7)]  # a slot left sideways
-    assert any("access" in v for v in dm.keep_right_violations(PAPER002, sideways))
 
 
 # -- sweeps over the pairs the paper plans ---------------------------------------------------------
@@ -206,14 +196,34 @@ def sample_pairs():
     return pairs + dm.sample_slot_pairs(PAPER002, 300, seed=2002)
 
 
+@dataclass(frozen=True)
+class Checked:
+    """A pair planned on its literal map and judged by the lane oracle
+    (fleet/analysis/lane_rules.py)."""
+
+    start: tuple
+    end: tuple
+    route: tuple | None
+    violations: tuple
+
+    @property
+    def ok(self) -> bool:
+        return self.route is not None and not self.violations
+
+
 @cache
 def sweep(unpatched):
-    return dm.check_pairs(PAPER002, sample_pairs(), unpatched=unpatched)
+    results = []
+    for start, end in sample_pairs():
+        found = dm.literal_route(PAPER002, start, end, unpatched=unpatched)
+        cells = None if found is None else found.cells
+        results.append(Checked(start, end, cells, () if cells is None else
+                               tuple(lane_violations(PAPER002, cells))))
+    return results
 
 
 def wrong_way_moves(result):
-    return [tuple(eval(t) for t in v[len("move "):-len(" runs against the lanes")].split(" -> "))
-            for v in result.violations if v.startswith("move ")]
+    return [v.move for v in result.violations if v.rule not in ("place-access", "corner-cut")]
 
 
 def test_patched_literal_map_always_has_a_route():
@@ -221,7 +231,8 @@ def test_patched_literal_map_always_has_a_route():
     assert len(results) == 4 * 2 * 378 + 300
     assert all(r.route is not None for r in results)
     for r in results:  # no place but the ends is driven over, every place through its access
-        assert not any("access" in v or "off the lanes" in v for v in r.violations)
+        assert not any(v.rule in ("place-access", "through-place", "off-lanes", "access-cell")
+                       for v in r.violations)
 
 
 def test_patched_literal_routes_keep_right_but_at_junctions_and_the_ends():
@@ -229,11 +240,18 @@ def test_patched_literal_routes_keep_right_but_at_junctions_and_the_ends():
     both of its lanes) and the start's and end's own columns (open in both lanes: Algorithms
     1, 2 and E4) can be crossed the wrong way by the direction-blind A*. Every wrong-way move
     of the sample is of one of these kinds, or of a same-block pair (E5 leaves the middle
-    horizontal lanes open both ways)."""
+    horizontal lanes open both ways). And the start and end cells, open on the map (E7), let
+    a diagonal cut the corner past them, which the lane oracle does not allow."""
     results = sweep(False)
     bad = [r for r in results if not r.ok]
     kinds = Counter()
     for r in bad:
+        for v in r.violations:
+            if v.rule != "corner-cut":
+                continue
+            (ax, ay), (bx, by) = v.move
+            assert {(ax, by), (bx, ay)} & {r.start, r.end}, (r.start, r.end, v)
+            kinds["corner past the start or end"] += 1
         for a, b in wrong_way_moves(r):
             own_rows = {4 * (dm.level(c) - 1) + j for c in (r.start, r.end) for j in (0, 1)}
             if len(LANES[a]) == 2 or len(LANES[b]) == 2:
@@ -251,10 +269,10 @@ def test_patched_literal_routes_keep_right_but_at_junctions_and_the_ends():
 def test_literal_route_at_a_junction_goes_the_wrong_way():
     # slot (3, 3) (below h2, beside V0) to p1: the A* steps west from (3, 4) onto (2, 4), the
     # eastbound lane's junction cell, which no line of Algorithms 1-3 closes
-    cells, _ = dm.literal_route(PAPER002, (3, 3), (0, 0))
-    assert cells[:3] == [(3, 3), (3, 4), (2, 4)]
-    assert "move (3, 4) -> (2, 4) runs against the lanes" in dm.keep_right_violations(
-        PAPER002, cells)
+    cells = dm.literal_route(PAPER002, (3, 3), (0, 0)).cells
+    assert cells[:3] == ((3, 3), (3, 4), (2, 4))
+    assert ((3, 4), (2, 4), "wrong-way") in [
+        (*v.move, v.rule) for v in lane_violations(PAPER002, cells)]
 
 
 def test_unpatched_indices_fail_more_pairs():

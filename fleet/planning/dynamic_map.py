@@ -42,11 +42,10 @@ only the readings without which the listings cannot run at all (E2, E6, E7) and 
 index corrections E1, E3, E4 and E5: the listings' raw indices, for the finding of what they
 break (docs/planning-002.md).
 
-`literal_route` is the Section 4 A*: 8 neighbours over the open cells, a diagonal only when
-both orthogonal neighbours are open, f = g + h, g += d / v (d = 1 or 1.4), h = Manhattan / v,
-ties by smaller h then insertion order, an open node re-parented when a cheaper way is found.
-It knows nothing of lane directions: whether its routes keep right is checked against the
-layout's lanes by `keep_right_violations` (the oracle of the tests and the sweep).
+`literal_route` is the Section 4 A* of the lane mode (`fleet.planning.lane_route`) on a
+graph of the open cells: 8 neighbours, a diagonal only when both orthogonal neighbours are
+open. It knows nothing of lane directions: whether its routes keep right is for the lane
+oracle (`fleet.analysis.lane_rules`, which the tests and the sweep use).
 
 This module imports nothing from `fleet.world` (planning sits below it): a layout is anything
 with the attributes of `LaneLayout`, such as `fleet.world.layout.Layout`.
@@ -54,14 +53,14 @@ with the attributes of `LaneLayout`, such as `fleet.world.layout.Layout`.
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import random
-from collections.abc import Collection, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 from fleet.planning.geometry import Cell
+from fleet.planning.lane_route import DIAGONAL, STRAIGHT, LaneGraph, LaneRoutes, Move, Route
 
 L = 9  # shelving stations per shelf row of a block ("a size of 2*L"), derived (note A.2.1)
 PERIOD = L + 2  # a block and the vertical channel right of it
@@ -70,7 +69,6 @@ TOP = 29  # the listings' last map row
 RIGHT = 35  # the listings' last column
 LEVELS = 8  # horizontal channels h1..h8
 BLOCKS = 3
-STRAIGHT, DIAGONAL = 1.0, 1.4
 
 ERRATA = frozenset({"E1", "E2", "E3", "E4", "E5", "E6", "E7"})
 READINGS = frozenset({"E2", "E6", "E7"})  # kept by `unpatched`: the listings cannot run without
@@ -376,65 +374,13 @@ def closed_lane_cells(layout: LaneLayout, start: Cell, end: Cell, **options) -> 
     return frozenset(layout.lane_directions) - literal_open_cells(layout, start, end, **options)
 
 
-# -- the A* of Section 4 ---------------------------------------------------------------------
+# -- the A* of Section 4, on the literal map ---------------------------------------------------
 
-def astar(open_cells: frozenset[Cell] | set[Cell], start: Cell, end: Cell,
-          speed: float = 1.0, exits: Collection[Cell] | None = None,
-          entries: Collection[Cell] | None = None) -> tuple[list[Cell], float] | None:
-    """Seed 002's A* over `open_cells`: the cells from start to end and g(end) in seconds, or
-    None. 8 neighbours, a diagonal only when both orthogonal neighbours are open. `exits`
-    (`entries`), when given, are the only cells the start is left for (the end entered from)."""
-    if speed <= 0:
-        raise ValueError(f"speed must be positive, not {speed}")
-    if start not in open_cells or end not in open_cells:
-        return None
-
-    def h(c: Cell) -> float:
-        return (abs(c[0] - end[0]) + abs(c[1] - end[1])) / speed
-
-    order = itertools.count()
-    g = {start: 0.0}
-    parent: dict[Cell, Cell] = {}
-    heap = [(h(start), h(start), next(order), start)]
-    closed: set[Cell] = set()
-    while heap:
-        _, _, _, cur = heapq.heappop(heap)
-        if cur in closed:
-            continue
-        if cur == end:
-            cells = [cur]
-            while cells[-1] != start:
-                cells.append(parent[cells[-1]])
-            return cells[::-1], g[cur]
-        closed.add(cur)
-        x, y = cur
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                nxt = (x + dx, y + dy)
-                if nxt == cur or nxt in closed or nxt not in open_cells:
-                    continue
-                if (cur == start and exits is not None and nxt not in exits) or (
-                        nxt == end and entries is not None and cur not in entries):
-                    continue
-                if dx and dy:
-                    if (x + dx, y) not in open_cells or (x, y + dy) not in open_cells:
-                        continue
-                    d = DIAGONAL
-                else:
-                    d = STRAIGHT
-                cost = g[cur] + d / speed
-                if cost < g.get(nxt, float("inf")):
-                    g[nxt] = cost
-                    parent[nxt] = cur
-                    heapq.heappush(heap, (cost + h(nxt), h(nxt), next(order), nxt))
-    return None
-
-
-def literal_route(layout: LaneLayout, start: Cell, end: Cell, speed: float = 1.0, *,
-                  unpatched: bool = False, errata: Iterable[str] | None = None,
-                  via_access: bool = True) -> tuple[list[Cell], float] | None:
-    """The A* route on the AGV's literal dynamic map from `start` to `end`: its cells, start
-    to end, and g(end) in seconds at `speed` cells per second; None when the map has none.
+def literal_graph(layout: LaneLayout, start: Cell, end: Cell, *, unpatched: bool = False,
+                  errata: Iterable[str] | None = None, via_access: bool = True) -> LaneGraph:
+    """The AGV's literal dynamic map for a route from `start` to `end` as the route search's
+    graph: any of the 8 neighbours among the open cells, a diagonal only when both
+    orthogonal neighbours are open (the map knows no directions).
 
     With `via_access` (the default) the start is left, and the end entered, only through the
     layout's access cells of that place: the seed's map has no access sides, but `paper002`
@@ -442,90 +388,45 @@ def literal_route(layout: LaneLayout, start: Cell, end: Cell, speed: float = 1.0
     1 and a pile from row 29. Without it a slot beside a vertical channel may be left sideways
     (or diagonally) onto it, and two slots back to back reach each other directly."""
     cells = literal_open_cells(layout, start, end, unpatched=unpatched, errata=errata)
-    if not via_access:
-        return astar(cells, start, end, speed)
-    access = {p.cell: p.access for p in (*layout.slots, *layout.packing, *layout.piles)}
-    return astar(cells, start, end, speed, exits=access[start], entries=access[end])
+    moves: dict[Cell, tuple[Move, ...]] = {}
+    for x, y in cells:
+        found = []
+        for dx, dy in itertools.product((-1, 0, 1), repeat=2):
+            to = (x + dx, y + dy)
+            if to == (x, y) or to not in cells:
+                continue
+            if dx and dy:
+                if (x + dx, y) in cells and (x, y + dy) in cells:
+                    found.append(Move(to, DIAGONAL))
+            else:
+                found.append(Move(to, STRAIGHT))
+        moves[(x, y)] = tuple(found)
+    ways_out: dict[Cell, tuple[Move, ...]] = {}
+    ways_in: dict[Cell, dict[Cell, Move]] = {}
+    if via_access:
+        access = {p.cell: p.access for p in (*layout.slots, *layout.packing, *layout.piles)}
+        ways_out[start] = tuple(m for m in moves.get(start, ()) if m.to in access[start])
+        ways_in[end] = {c: Move(end, STRAIGHT) for c in access[end] if c in cells}
+        moves = {c: tuple(m for m in ms if m.to != end) for c, ms in moves.items()}
+    return LaneGraph(layout.name, 1.0, moves, ways_out, ways_in)
 
 
-# -- the keep-right oracle, from the layout's lanes alone ----------------------------------------
-
-def _lane_move_ok(lanes: Mapping[Cell, frozenset[str]], a: Cell, b: Cell) -> bool:
-    d = next((n for n, v in DIRECTIONS.items() if v == (b[0] - a[0], b[1] - a[1])), None)
-    return d is not None and d in lanes.get(a, ()) and d in lanes.get(b, ())
-
-
-def keep_right_violations(layout: LaneLayout, cells: Sequence[Cell]) -> list[str]:
-    """What is wrong with a route (start to end, each a place) under the layout's lanes:
-
-    - the first move leaves the start for one of its access cells, the last enters the end
-      from one of its, both straight; no other cell of the route is off the lanes;
-    - the second move may go on straight across the channel (the start's own column), and the
-      last but one likewise into the end's access cell: the only crossings of an opposite lane;
-    - every other orthogonal move runs along a direction of both the cell it leaves and the
-      cell it lands on; a diagonal one does so by one of its two orthogonal decompositions.
-    """
-    lanes = layout.lane_directions
-    access = {p.cell: p.access for p in (*layout.slots, *layout.packing, *layout.piles)}
-    found = []
-    if len(cells) < 3:
-        return [f"route {list(cells)} is too short to leave a place and enter another"]
-    start, end = cells[0], cells[-1]
-    if cells[1] not in access.get(start, ()):
-        found.append(f"leaves {start} for {cells[1]}, not an access cell")
-    if cells[-2] not in access.get(end, ()):
-        found.append(f"enters {end} from {cells[-2]}, not an access cell")
-    for c in cells[1:-1]:
-        if c not in lanes:
-            found.append(f"passes {c}, off the lanes")
-    last = len(cells) - 2  # index of the move into the end
-    for i, (a, b) in enumerate(itertools.pairwise(cells)):
-        if i in (0, last) or a not in lanes or b not in lanes:
-            continue
-        step = (b[0] - a[0], b[1] - a[1])
-        if i == 1 and step == (cells[1][0] - start[0], cells[1][1] - start[1]):
-            continue  # straight on across the channel after leaving the start
-        if i == last - 1 and step == (end[0] - cells[-2][0], end[1] - cells[-2][1]):
-            continue  # straight across the channel into the end's access cell
-        if step[0] and step[1]:
-            ok = any(m in lanes and _lane_move_ok(lanes, a, m) and _lane_move_ok(lanes, m, b)
-                     for m in ((b[0], a[1]), (a[0], b[1])))
-        else:
-            ok = _lane_move_ok(lanes, a, b)
-        if not ok:
-            found.append(f"move {a} -> {b} runs against the lanes")
-    return found
+def literal_route(layout: LaneLayout, start: Cell, end: Cell, speed: float = 1.0,
+                  **options) -> Route | None:
+    """The Section 4 A* (`LaneRoutes`, the lane mode's search) on the literal map from
+    `start` to `end`, at `speed` cells per second; None when the map has no route (a start
+    or end the map closes, too: E7 off)."""
+    if start not in literal_open_cells(layout, start, end, **{
+            k: v for k, v in options.items() if k != "via_access"}) and \
+            options.get("errata") is not None:
+        return None
+    graph = literal_graph(layout, start, end, **options)
+    if start not in graph.moves or end not in graph.moves:
+        return None
+    return LaneRoutes(graph, speed_mps=speed).route(start, end)
 
 
 # -- sweeps, for the tests and the benchmark ------------------------------------------------------
-
-@dataclass(frozen=True)
-class PairResult:
-    start: Cell
-    end: Cell
-    route: tuple[Cell, ...] | None
-    cost_s: float | None
-    violations: tuple[str, ...]
-
-    @property
-    def ok(self) -> bool:
-        return self.route is not None and not self.violations
-
-
-def check_pairs(layout: LaneLayout, pairs: Iterable[tuple[Cell, Cell]], speed: float = 1.0,
-                **options) -> list[PairResult]:
-    """Plan each pair on its literal map and check the route against the lanes."""
-    results = []
-    for start, end in pairs:
-        found = literal_route(layout, start, end, speed, **options)
-        if found is None:
-            results.append(PairResult(start, end, None, None, ("no route",)))
-        else:
-            cells, cost = found
-            results.append(PairResult(start, end, tuple(cells), cost,
-                                      tuple(keep_right_violations(layout, cells))))
-    return results
-
 
 def all_pairs(layout: LaneLayout) -> list[tuple[Cell, Cell]]:
     """Every slot <-> station, slot <-> pile and slot -> slot pair: the full sweep, 190 134
