@@ -18,7 +18,8 @@ outside junctions), for two AGVs meeting at nodes α and β:
 - both in R from the same orientation (12, 14), or both in T from L (15, 16): the one with the
   later τ_{α+1} waits at its last node before the junction;
 - both in T, one from H (15, not 16; the paper is silent): longitudinal priority, as in R;
-- both on channels, one coming out of N (17, 18): that one waits where it is, in N;
+- both on channels, one coming out of N (17, 18): that one waits where it is, in N (also
+  when its way out crosses the near lane and they meet on the far one);
 - otherwise (both on channels, and every other case): the later τ_{α+1} waits at α-1.
 
 Ties in τ go to the higher vehicle id waiting. A wait lasts until the other has stopped
@@ -155,6 +156,18 @@ def who_waits(c: Collision, a: Schedule, b: Schedule, cell_areas: Mapping[Cell, 
         node = outside(s, i, junction) if junction else max(i - 1, 0)
         return s.vehicle, node, rule
 
+    def came_out(s: Schedule, node: int) -> int | None:
+        """The N node `s` comes straight out of to reach `node`: the one before it, or the
+        one before that when the way out crosses the near lane (N cell, access cell, far
+        lane in one line: one move out of N for lane_route, its access cell passed)."""
+        if node >= 1 and area(s, node - 1) is Area.OFF_CHANNEL:
+            return node - 1
+        if node >= 2 and area(s, node - 2) is Area.OFF_CHANNEL:
+            (x0, y0), (x1, y1), (x2, y2) = s.cells[node - 2:node + 1]
+            if (x1 - x0, y1 - y0) == (x2 - x1, y2 - y1):
+                return node - 2
+        return None
+
     here_a, here_b = area(a, c.alpha), area(b, c.beta)
     h, v = Area.HORIZONTAL, Area.LONGITUDINAL
     for junction in (Area.CROSSROAD, Area.T_CROSSROAD):
@@ -171,11 +184,10 @@ def who_waits(c: Collision, a: Schedule, b: Schedule, cell_areas: Mapping[Cell, 
                 return by_time(f"{junction.value}: later clears, waits", junction)
     channels = (h, v)
     if here_a in channels and here_b in channels:  # (17)
-        out_a = area(a, c.alpha - 1) is Area.OFF_CHANNEL and c.alpha > 0
-        out_b = area(b, c.beta - 1) is Area.OFF_CHANNEL and c.beta > 0
-        if out_a != out_b:  # (18): the one leaving N waits in N
-            s, i = (a, c.alpha) if out_a else (b, c.beta)
-            return s.vehicle, i - 1, "channel: leaving N waits in N"
+        out_a, out_b = came_out(a, c.alpha), came_out(b, c.beta)
+        if (out_a is None) != (out_b is None):  # (18): the one leaving N waits in N
+            s, k = (a, out_a) if out_a is not None else (b, out_b)
+            return s.vehicle, k, "channel: leaving N waits in N"
     return by_time("later clears, waits")
 
 
