@@ -28,7 +28,9 @@ def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = tuple(Mi
     result: dict = {"layout": layout.name, "vehicles": len(layout.vehicle_starts),
                     "lower_bound_s": {}}
     for kind in missions:
-        bound = lower_bound(layout, kind, len(layout.vehicle_starts))
+        bound = lower_bound(layout, kind, len(layout.vehicle_starts), progress=(
+            None if progress is None else
+            lambda done, total, kind=kind: progress(f"{kind.value} lower bound", done, total)))
         result["lower_bound_s"][kind.value] = round(bound, 2)
         rows = {}
         for strategy in ORDER:

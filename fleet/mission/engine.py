@@ -502,11 +502,13 @@ def run_mission(mission: Mission, options: EngineOptions | None = None,
 
 
 def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
-                params: DispatchParams | None = None) -> float:
+                params: DispatchParams | None = None,
+                progress: Callable[[int, int], None] | None = None) -> float:
     """A lower bound on the mission end time: every subtask at its unobstructed shortest time
     (an empty reservation table, the best station for each stack), shared ideally among the
     vehicles: sum over stacks of (trip from the station + handling + trip back + handling),
-    divided by the number of vehicles."""
+    divided by the number of vehicles. Two searches per stack and station: `progress` hears
+    (stacks done, stacks) after each stack, since a large floor takes minutes."""
     p = params or DispatchParams()
     fill = kind is MissionKind.FILL
     total = 0.0
@@ -514,7 +516,7 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
     empty = ReservationTable()
     planners = layout.vehicle_kind.planners(layout.grid_map)
-    for stack in order:
+    for done, stack in enumerate(order, 1):
         key = frozenset(present - {stack.cell})
         planner = planners.get(key)
         goals = layout.unload_poses(stack.cell, key)
@@ -534,4 +536,6 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
             present.add(stack.cell)
         else:
             present.discard(stack.cell)
+        if progress:
+            progress(done, len(order))
     return total / vehicles
