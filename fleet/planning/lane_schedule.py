@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Interval
+from fleet.planning.trajectory import merge_intervals
 
 
 @dataclass(frozen=True)
@@ -83,24 +84,9 @@ class Schedule:
                                    m, True))
         return found
 
-    def intervals(self) -> list[Interval]:
+    def intervals(self) -> tuple[Interval, ...]:
         """The touches as reservations, merged per cell."""
-        by_cell: dict[Cell, list[tuple[float, float]]] = {}
-        for touch in self.touches():
-            for cell in touch.cells:
-                by_cell.setdefault(cell, []).append((touch.t0, touch.t1))
-        merged = []
-        for cell, spans in sorted(by_cell.items()):
-            spans.sort()
-            t0, t1 = spans[0]
-            for a, b in spans[1:]:
-                if a <= t1:
-                    t1 = max(t1, b)
-                else:
-                    merged.append(Interval(cell, t0, t1))
-                    t0, t1 = a, b
-            merged.append(Interval(cell, t0, t1))
-        return merged
+        return merge_intervals((cell, t.t0, t.t1) for t in self.touches() for cell in t.cells)
 
 
 def timed(vehicle: int, cells: tuple[Cell, ...], t_start: float, seconds_per_cell: float,
