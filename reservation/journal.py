@@ -2,7 +2,9 @@
 
 msgpack is self-delimiting, so the file is a plain stream of records. A process killed in the
 middle of a write leaves a torn last record; `replay` keeps every complete record before it,
-reports the torn tail, and cuts it off so new records follow good ones. Bytes that are not
+reports the torn tail, and cuts it off so new records follow good ones. The steps of one
+amending commit are written at once, and a tail of them without the last (the one carrying
+the request id) is cut off with it: an amend replays whole or not at all. Bytes that are not
 msgpack at all are an error naming the record, and so is an unfinished record with complete
 records after it (damage in the middle is never cut off as if it were a torn tail).
 """
@@ -40,6 +42,7 @@ class Journal:
         unpacker = msgpack.Unpacker(raw=False, strict_map_key=True)
         unpacker.feed(data)
         changes: list[WireChange] = []
+        starts: list[int] = []  # where each change's record begins
         good = 0
         try:
             for raw in unpacker:
@@ -53,29 +56,36 @@ class Journal:
                                        f"{good}: {exc}") from None
                 assert isinstance(change, WireChange)
                 changes.append(change)
+                starts.append(good)
                 good = unpacker.tell()
         except JournalError:
             raise
         except (ValueError, msgpack.exceptions.UnpackException) as exc:
             raise JournalError(f"{self.path}: record {len(changes) + 1} at byte {good} is "
                                f"not msgpack: {exc}") from None
-        torn = len(data) - good
-        if torn:
+        if len(data) > good:
             later = _next_record(data, good)
             if later is not None:  # damage in the middle, not a write cut short at the end
                 raise JournalError(f"{self.path}: record {len(changes) + 1} at byte {good} is "
                                    f"not a complete record, yet a complete record follows at "
                                    f"byte {later}")
+        while changes and changes[-1].part_of:  # the steps of an amend cut short: none
+            changes.pop()
+            good = starts.pop()
+        torn = len(data) - good
+        if torn:
             with open(self.path, "r+b") as f:
                 f.truncate(good)
         return Replayed(changes, torn)
 
-    def append(self, change: WireChange) -> None:
-        """Write the record and hand it to the OS before the change is answered (a killed
-        process loses nothing; a power cut may lose the last records: no fsync, for speed)."""
+    def append(self, *changes: WireChange) -> None:
+        """Write the records in one write and hand them to the OS before the change is
+        answered (a killed process loses nothing; a power cut may lose the last records: no
+        fsync, for speed)."""
         if self._file is None:
             self._file = open(self.path, "ab")  # noqa: SIM115 - kept open for the service's life
-        self._file.write(msgpack.packb(body_of(change), use_bin_type=True))
+        self._file.write(b"".join(msgpack.packb(body_of(c), use_bin_type=True)
+                                  for c in changes))
         self._file.flush()
 
     def close(self) -> None:

@@ -70,7 +70,7 @@ class ReservationStore:
                 WireChange(revision, "release", message.vehicle, [], message.from_t,
                            message.request_id, cells),
                 Change(revision, message.vehicle, message.from_t, (),
-                       None if cells is None else frozenset(cells)))
+                       None if cells is None else frozenset(cells), op="release"))
         if isinstance(message, SnapshotRequest):
             return Outcome(self.snapshot(message.since_revision))
         return Outcome(Reply("", False, self.revision,
@@ -114,15 +114,17 @@ class ReservationStore:
         for vehicle in vehicles:
             halted = self.halted_at.get(vehicle, -1)
             if based_on is not None and halted > based_on:
-                return f"vehicle {vehicle} was halted at revision {halted}, after its " \
-                    f"task's revision {based_on}"
+                return f"vehicle {vehicle} was halted at revision {halted}, after the " \
+                    f"commit's task was issued at revision {based_on}"
         return ""
 
     def _amend(self, request: CommitRequest, intervals: tuple[Interval, ...],
                amends: tuple[Amendment, ...]) -> Outcome:
         """A commit that postpones other vehicles' holdings: checked whole, then journaled
-        and published as the table's steps (`ReservationTable.amended`), the request's id
-        on the last, so a retry after a lost reply is answered as the first time."""
+        in one write and published as the table's steps (`ReservationTable.amended`). The
+        last carries the request's id, so a retry after a lost reply is answered as the
+        first time; the others name it as the request they are part of, so a journal cut
+        short inside them replays none of them."""
         planned = self.table.amended(request.vehicle, intervals, request.release_from, amends)
         if not isinstance(planned, list):
             reply = Reply(request.request_id, False, self.revision, reason=planned) \
@@ -131,11 +133,12 @@ class ReservationStore:
                       list(planned.cell), planned.reason)
             self._remember(reply)
             return Outcome(reply)
-        steps = [change_to_wire(c) for c in planned]
-        steps[-1] = dataclasses.replace(steps[-1], request_id=request.request_id)
+        steps = [dataclasses.replace(change_to_wire(c), part_of=request.request_id)
+                 for c in planned[:-1]]
+        steps.append(dataclasses.replace(change_to_wire(planned[-1]),
+                                         request_id=request.request_id))
         if self.journal is not None:
-            for step in steps:
-                self.journal.append(step)
+            self.journal.append(*steps)
         for step, change in zip(steps, planned, strict=True):
             self._apply(step, change)
         return Outcome(self.replies[request.request_id], steps)

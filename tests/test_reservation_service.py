@@ -166,8 +166,8 @@ def test_an_amending_commit_over_zenoh_postpones_the_other_and_a_mirror_follows(
                     Interval((5, -1), 3.0, INF)]
         assert not writer.commit(1, crossing, 0.0).ok
         written = writer.commit(1, crossing, 0.0, [Amendment(2, 0.0, tuple(driving(2.0)))])
-        assert written.ok and written.revision == 4
-        assert mirror.wait_for(4, 10)
+        assert written.ok and written.revision == 5
+        assert mirror.wait_for(5, 10)
         with mirror.frozen() as table:
             assert table.conflict(9, (5, 0), 1.0, 4.0) == 1
             assert table.conflict(9, (5, 0), 4.0, 6.0) == 2

@@ -183,17 +183,37 @@ def test_an_amending_commit_is_journaled_published_and_answered_once(tmp_path):
     store = ReservationStore(path)
     request, postponed = crossing(store)
     out = store.handle(request)
-    assert out.reply == Reply("v1", True, 4)
-    assert [(c.op, c.vehicle, c.request_id) for c in out.published] == [
-        ("commit", 1, ""), ("commit", 2, ""), ("commit", 1, "v1")]
-    assert out.published[1].intervals == [tuple(iv) for iv in postponed]
+    assert out.reply == Reply("v1", True, 5)
+    assert [(c.op, c.vehicle, c.request_id, c.part_of) for c in out.published] == [
+        ("commit", 1, "", "v1"), ("commit", 2, "", "v1"), ("commit", 2, "", "v1"),
+        ("commit", 1, "v1", "")]
+    assert out.published[2].intervals == [tuple(iv) for iv in postponed]
     again = store.handle(request)  # the reply was lost: the same answer, nothing applied
-    assert again.reply == out.reply and again.published == [] and store.revision == 4
+    assert again.reply == out.reply and again.published == [] and store.revision == 5
     table = store.table.reservations()
     store.close()
     restarted = ReservationStore(path)
-    assert restarted.table.reservations() == table and restarted.revision == 4
+    assert restarted.table.reservations() == table and restarted.revision == 5
     assert restarted.handle(request).reply == out.reply  # known after a restart too
+
+
+def test_a_journal_cut_short_inside_an_amend_replays_none_of_it(tmp_path):
+    """Killed while writing an amend's steps: the whole records before the last step are
+    cut off with the torn one, so neither the committer's release nor the other vehicle's
+    postponement comes back without the commit that needed them."""
+    path = tmp_path / "journal.msgpack"
+    store = ReservationStore(path)
+    request, _ = crossing(store)
+    before = store.table.reservations()
+    size = path.stat().st_size
+    store.handle(request)
+    store.close()
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) - 3])  # the last step's record torn
+    restarted = ReservationStore(path)
+    assert restarted.revision == 1 and restarted.table.reservations() == before
+    assert restarted.torn_bytes == len(data) - 3 - size and path.stat().st_size == size
+    assert restarted.handle(request).reply == Reply("v1", True, 5)  # the retry goes through
 
 
 def test_an_amendment_of_a_vehicle_halted_since_is_refused():

@@ -194,8 +194,9 @@ def test_a_commit_that_postpones_another_vehicle_is_taken_whole():
     table, mine, later = crossing_tables()
     assert not table.commit(1, mine).ok  # without the amendment vehicle 2 is in the way
     result = table.commit(1, mine, 0.0, [later])
-    assert result.ok and result.revision == 4  # release, amendment, commit: one step each
-    assert [c.kind for c in table.changes[1:]] == ["commit"] * 3
+    assert result.ok and result.revision == 5  # two releases, the amendment, the commit
+    assert [(c.op, c.vehicle) for c in table.changes[1:]] == [
+        ("commit", 1), ("commit", 2), ("commit", 2), ("commit", 1)]
     assert table.conflict(9, (5, 0), 4.0, 6.0) == 2 and table.conflict(9, (5, 0), 1.0, 4.0) == 1
     assert overlapping(table) == []
     replayed = ReservationTable()
@@ -211,7 +212,7 @@ def test_an_amendment_that_does_not_only_postpone_is_refused_and_nothing_changes
                                       for iv in later.intervals))
     elsewhere = Amendment(2, 0.0, (*later.intervals, Interval((9, 9), 5.0, 6.0)))
     cases = {
-        "earlier than": earlier,
+        "taken earlier": earlier,
         "holds cells": elsewhere,
     }
     for reason, amendment in cases.items():
@@ -234,3 +235,34 @@ def test_an_amended_schedule_may_not_run_into_a_third_vehicle_or_the_committer()
     result = table.commit(1, late_mine, 0.0, [later])
     assert not result.ok and result.conflict_cell == (4, 0)
     assert table.revision == 1
+
+
+def test_no_revision_between_the_steps_of_an_amend_holds_an_overlap():
+    """Two vehicles postponed one after the other on one cell: each new hold overlaps the
+    other's old one, so both are released before either takes its new one."""
+    table = ReservationTable()
+    x = (0, 0)
+    assert table.commit(2, [Interval(x, 0.0, 10.0)]).ok
+    assert table.commit(3, [Interval(x, 10.0, 20.0)]).ok
+    result = table.commit(1, [], None, [Amendment(2, 0.0, (Interval(x, 0.0, 15.0),)),
+                                        Amendment(3, 0.0, (Interval(x, 15.0, 25.0),))])
+    assert result.ok
+    replayed = ReservationTable()
+    for change in table.changes:
+        replayed.apply(change)
+        assert overlapping(replayed) == []
+    assert table.changes[-1].vehicle == 1  # the committer's step comes last, even empty
+
+
+def test_an_amendment_may_not_open_a_gap_where_the_vehicle_stands_nor_move_goods():
+    table = ReservationTable()
+    x = (0, 0)
+    assert table.commit(2, [Interval(x, 0.0, 10.0), Interval((0, 1), 10.0, 20.0)]).ok
+    gap = Amendment(2, 5.0, (Interval(x, 9.0, 10.0), Interval((0, 1), 10.0, 20.0)))
+    result = table.commit(1, [Interval(x, 5.0, 9.0)], 5.0, [gap])
+    assert not result.ok and "left for a while" in result.reason
+    assert table.commit(0, [Interval((4, 4), 0.0, INF)]).ok  # goods on a stack
+    goods = Amendment(0, 1.0, (Interval((4, 4), 3.0, INF),))
+    assert "is no vehicle" in table.commit(1, [Interval((4, 4), 1.0, 2.0)], 1.0, [goods]).reason
+    whole = Amendment(2, 5.0, (Interval(x, 0.0, 12.0), Interval((0, 1), 12.0, 22.0)))
+    assert table.commit(1, [Interval((9, 9), 5.0, 6.0)], 5.0, [whole]).ok  # the past too

@@ -244,7 +244,10 @@ def _order(c: Collision, current: Mapping[int, Schedule], cell_areas: Mapping[Ce
     if first is not None:
         return first
     other = c.b if vehicle == c.a else c.a
+    cells = current[other].cells
     at = (c.beta if other == c.b else c.alpha) - 1
+    while at > 0 and cell_areas.get(cells[at]) in (Area.CROSSROAD, Area.T_CROSSROAD):
+        at -= 1  # it waits before the junction, not inside it
     return _wait(c, current, other, max(at, 0), rule + "; the other had left, so this one",
                  now)
 

@@ -14,7 +14,6 @@ mirror can follow the table (`diff`, `apply`).
 from __future__ import annotations
 
 import bisect
-import itertools
 import math
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -96,13 +95,9 @@ class Change:
     release_from: float | None
     intervals: tuple[Interval, ...] = ()
     release_cells: frozenset[Cell] | None = None  # release only these cells (None: all)
-    op: str = ""  # "commit" or "release"; "" says it by whether it adds intervals
-
-    @property
-    def kind(self) -> str:
-        """A commit adds intervals, or is the releasing first step of one (`amended`); a
-        release only gives up (the dispatcher's freeze)."""
-        return self.op or ("commit" if self.intervals else "release")
+    # "commit": adds intervals (or, as a first step of `amended`, only releases); "release":
+    # only gives up (the dispatcher's freeze, which the store takes for a halt)
+    op: str = "commit"
 
 
 @dataclass(frozen=True)
@@ -223,22 +218,26 @@ class ReservationTable:
         if conflict is not None:
             return WriteResult(False, self.revision, conflict.reason, conflict.other,
                                conflict.cell)
-        self._apply(Change(self.revision + 1, vehicle, release_from, intervals))
+        self._apply(Change(self.revision + 1, vehicle, release_from, intervals, op="commit"))
         return WriteResult(True, self.revision)
 
     def amended(self, vehicle: int, intervals: tuple[Interval, ...],
                 release_from: float | None, amends: Sequence[Amendment]
                 ) -> list[Change] | Conflict | str:
         """A commit that also postpones other vehicles' holdings, checked whole against the
-        table it would leave, as the changes that make it: the committing vehicle's release
-        first, then each amendment, then its intervals, so the table holds no two
-        overlapping reservations at any revision between. A Conflict, or why the amendments
-        are refused (one names the committing vehicle or a vehicle twice, reaches back before
-        the commit's own release, or does more than postpone)."""
+        table it would leave, as the changes that make it: every release first (the
+        committing vehicle's, then each amended one's), then each amended vehicle's new
+        intervals, then the committing vehicle's (always a last change, which carries the
+        request). Each revision between holds a part of what the last one holds, so none
+        holds two overlapping reservations. A Conflict, or why the amendments are refused
+        (one names the committing vehicle, one vehicle twice or no vehicle, reaches back
+        before the commit's own release, or does more than postpone)."""
         names = [a.vehicle for a in amends]
         if vehicle in names or len(set(names)) != len(names):
             return "an amendment names the committing vehicle or one vehicle twice"
         for a in amends:
+            if a.vehicle < 1:
+                return f"owner {a.vehicle} is no vehicle: only vehicles' holdings are amended"
             if release_from is not None and a.release_from < release_from:
                 return (f"the amendment of vehicle {a.vehicle} releases from {a.release_from}, "
                         f"before the commit's own release from {release_from}")
@@ -249,26 +248,24 @@ class ReservationTable:
         if release_from is not None:
             released[vehicle] = release_from
         parts = [(vehicle, intervals), *((a.vehicle, a.intervals) for a in amends)]
+        new_by_cell: dict[Cell, list[tuple[float, float, int]]] = {}
         for owner, ivs in parts:
             for iv in ivs:
                 other = self._held_after(owner, iv, released)
+                if other is None:  # then against the other parts' new intervals
+                    other = next((o for t0, t1, o in new_by_cell.get(iv.cell, ())
+                                  if o != owner and max(t0, iv.t0) < min(t1, iv.t1)), None)
                 if other is not None:
                     return Conflict(iv.cell, iv.t0, iv.t1, other)
-        for (_, ps), (q, qs) in itertools.combinations(parts, 2):
-            for a, b in itertools.product(ps, qs):
-                if a.cell == b.cell and max(a.t0, b.t0) < min(a.t1, b.t1):
-                    return Conflict(a.cell, a.t0, a.t1, q)
-        revision = self.revision
-        changes = []
+                new_by_cell.setdefault(iv.cell, []).append((iv.t0, iv.t1, owner))
+        steps: list[tuple[int, float | None, tuple[Interval, ...]]] = []
         if release_from is not None:
-            revision += 1
-            changes.append(Change(revision, vehicle, release_from, op="commit"))
-        for a in amends:
-            revision += 1
-            changes.append(Change(revision, a.vehicle, a.release_from, a.intervals, op="commit"))
-        if intervals:
-            changes.append(Change(revision + 1, vehicle, None, intervals))
-        return changes
+            steps.append((vehicle, release_from, ()))
+        steps += [(a.vehicle, a.release_from, ()) for a in amends]
+        steps += [(a.vehicle, None, a.intervals) for a in amends if a.intervals]
+        steps.append((vehicle, None, intervals))
+        return [Change(self.revision + k, v, t, ivs, op="commit")
+                for k, (v, t, ivs) in enumerate(steps, 1)]
 
     def _held_after(self, vehicle: int, iv: Interval, released: Mapping[int, float]
                     ) -> int | None:
@@ -288,27 +285,36 @@ class ReservationTable:
 
     def _not_postponed(self, a: Amendment) -> str:
         """Why the amendment is not a postponement of what the vehicle holds from its
-        release on ("" if it is): the same cells, each taken and left no earlier."""
-        before: dict[Cell, list[tuple[float, float]]] = {}
+        release on ("" if it is): the same cells, each taken no earlier and held no shorter
+        (waits only lengthen a stay and push what follows later), and a cell it holds across
+        the release instant held on without a gap."""
+        before: dict[Cell, list[tuple[float, float, bool]]] = {}  # (t0, t1, held across)
         for cell in self._cells_of.get(a.vehicle, ()):
             line = self._cells[cell]
             for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
                 if owner == a.vehicle and t1 > a.release_from:
-                    before.setdefault(cell, []).append((max(t0, a.release_from), t1))
+                    before.setdefault(cell, []).append(
+                        (max(t0, a.release_from), t1, t0 < a.release_from))
         after: dict[Cell, list[tuple[float, float]]] = {}
-        for iv in sorted(a.intervals):  # merged as the table would merge them
+        for iv in sorted(a.intervals):  # from the release on, merged as the table would
+            if iv.t1 <= a.release_from:
+                continue
+            t0 = max(iv.t0, a.release_from)
             spans = after.setdefault(iv.cell, [])
-            if spans and iv.t0 <= spans[-1][1]:
+            if spans and t0 <= spans[-1][1]:
                 spans[-1] = (spans[-1][0], max(spans[-1][1], iv.t1))
             else:
-                spans.append((iv.t0, iv.t1))
+                spans.append((t0, iv.t1))
         if set(before) != set(after):
             return f"it holds cells {sorted(before)} from then on, not {sorted(after)}"
         for cell, spans in before.items():
             new = after[cell]
-            if len(new) != len(spans) or any(n0 < o0 or n1 < o1 for (o0, o1), (n0, n1)
-                                             in zip(sorted(spans), new, strict=True)):
-                return f"cell {cell} would be taken or left earlier than {sorted(spans)}"
+            old = sorted(spans)
+            if len(new) != len(old) or any(
+                    n0 < o0 or n1 - n0 < o1 - o0 or (across and n0 != o0)
+                    for (o0, o1, across), (n0, n1) in zip(old, new, strict=True)):
+                return (f"cell {cell} would be taken earlier, held shorter or left for a "
+                        f"while, against {[(o0, o1) for o0, o1, _ in old]}")
         return ""
 
     def release(self, vehicle: int, from_t: float = -INF,
@@ -318,7 +324,7 @@ class ReservationTable:
         only = None if cells is None else frozenset(cells)
         if only is not None and not only:
             raise ValueError("a release of no cells releases nothing; give None for all")
-        self._apply(Change(self.revision + 1, vehicle, from_t, (), only))
+        self._apply(Change(self.revision + 1, vehicle, from_t, (), only, op="release"))
         return WriteResult(True, self.revision)
 
     def park(self, vehicle: int, cells: Iterable[Cell], t0: float) -> WriteResult:

@@ -58,7 +58,7 @@ def change_to_wire(change: Change) -> WireChange:
     """A table change as the reservation service publishes it (no request id: made in this
     process). Release cells go in sorted order."""
     cells = None if change.release_cells is None else sorted(change.release_cells)
-    return WireChange(change.revision, change.kind, change.vehicle,
+    return WireChange(change.revision, change.op, change.vehicle,
                       intervals_to_wire(change.intervals), change.release_from,
                       release_cells=cells)
 

@@ -131,6 +131,9 @@ class WireChange(Message):
     release_from: float | None = None
     request_id: str = ""
     release_cells: list[tuple[int, int]] | None = None  # release only these (None: all)
+    # A step of an amending commit before its last (which carries `request_id`): the
+    # request it is part of, so a journal cut short inside the steps replays none of them.
+    part_of: str = ""
 
 
 @dataclass(frozen=True)
