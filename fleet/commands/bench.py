@@ -293,7 +293,7 @@ def run_campaign(args: argparse.Namespace) -> int:
     spec = campaign.CampaignSpec(args.layout, args.runs, args.seed, ClockMode(args.clock),
                                  args.speed, kinds, Strategy(args.strategy), args.weights)
     out = campaign_dir(args.out, layout.name)
-    runs = ProgressBar(args.runs, "campaign", unit="runs", enabled=not args.json)
+    runs = ProgressBar(args.runs, "campaign", unit="runs")  # on stderr: --json keeps stdout
 
     def progress(label: str, done: int, total: int) -> None:
         if label == "runs":
@@ -302,8 +302,7 @@ def run_campaign(args: argparse.Namespace) -> int:
             runs.update(runs.done, f"{label}, {done}/{total} stacks")
 
     def say(line: str) -> None:
-        if not args.json:
-            print(line, file=sys.stderr, flush=True)
+        print(line, file=sys.stderr, flush=True)
 
     try:
         result = campaign.run(spec, out, progress, say)
