@@ -74,6 +74,25 @@ def test_plan_without_a_path_exits_1(tmp_path, capsys):
     assert "no trajectory: goal blocked" in capsys.readouterr().out
 
 
+def test_plan_on_a_lane_layout_by_either_map_judged_by_the_lane_oracle(capsys):
+    """Seed 002 on the command line: the lanes mode keeps the lane rules; the paper's literal
+    map, direction-blind, drives slot s-3-3 to p1 west on the eastbound lane (the finding of
+    docs/planning-002.md), which the oracle names and the exit status says."""
+    assert main(["plan", "--layout", "paper002", "--from", "s-3-3", "--to", "p1"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[1] == "3,3 3,4 3,5 2,5 1,4 1,3 1,2 1,1 1,0 0,0"
+    assert "g = 9.40 s" in out and "lane rules: kept" in out
+    code = main(["plan", "--layout", "paper002", "--from", "s-3-3", "--to", "p1",
+                 "--map", "literal"])
+    out = capsys.readouterr().out
+    assert code == 1 and "(3, 4) -> (2, 4): wrong-way" in out
+    assert main(["plan", "--layout", "micro-cross", "--from", "s-2-2", "--to", "s-7-7",
+                 "--map", "literal"]) == 2
+    assert "micro-cross is not paper002-shaped" in capsys.readouterr().err
+    assert main(["plan", "--layout", "paper002", "--from", "s-99-2", "--to", "p1"]) == 2
+    assert "has no slot, packing station or pile of that name" in capsys.readouterr().err
+
+
 def test_bad_place_is_named(capsys):
     assert main(["plan", "--from", "p9", "--to", "s1#1"]) == 2
     assert "place 'p9' is not a pose 'col,row,H', a station (p1, p2, p3, p4)" in \

@@ -9,6 +9,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fleet.commands import lane_plan
 from fleet.errors import UserError
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
@@ -43,6 +44,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(docs/planning.md; default: none, only the planning vehicle is there)")
     p.add_argument("--png", type=png_file, metavar="FILE",
                    help="draw the plan into this PNG file (default: no drawing)")
+    p.add_argument("--map", choices=lane_plan.MAPS, default="lanes",
+                   help="on a lane layout (seed 002; places are slots 's-3-2', packing "
+                   "stations, piles or cells 'col,row'): the lanes mode, the paper's literal "
+                   "dynamic map with errata E1-E7, or with its raw indices (default lanes)")
     p.set_defaults(handler=run)
 
 
@@ -202,6 +207,8 @@ def format_trajectory(traj: Trajectory) -> str:
 
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
+    if layout.has_lanes:
+        return lane_plan.run(args, layout)
     forklifts = len(layout.vehicle_starts)
     if args.vehicle > forklifts:
         raise UserError(f"--vehicle {args.vehicle}: layout {layout.name} has forklifts 1 to "
