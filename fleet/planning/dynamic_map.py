@@ -416,10 +416,6 @@ def literal_route(layout: LaneLayout, start: Cell, end: Cell, speed: float = 1.0
     """The Section 4 A* (`LaneRoutes`, the lane mode's search) on the literal map from
     `start` to `end`, at `speed` cells per second; None when the map has no route (a start
     or end the map closes, too: E7 off)."""
-    if start not in literal_open_cells(layout, start, end, **{
-            k: v for k, v in options.items() if k != "via_access"}) and \
-            options.get("errata") is not None:
-        return None
     graph = literal_graph(layout, start, end, **options)
     if start not in graph.moves or end not in graph.moves:
         return None

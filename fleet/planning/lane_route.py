@@ -37,6 +37,11 @@ from fleet.planning.geometry import Cell
 STRAIGHT, DIAGONAL = 1.0, 1.4  # the paper's d, in cells
 
 
+def move_length(a: Cell, b: Cell) -> float:
+    """The paper's d of a move to one of the eight neighbours, in cells."""
+    return DIAGONAL if a[0] != b[0] and a[1] != b[1] else STRAIGHT
+
+
 class Heuristic(Enum):
     MANHATTAN = "manhattan"  # the paper's Equation (4)
     OCTILE = "octile"  # admissible with 1.4-cell diagonals
@@ -75,8 +80,7 @@ class Route:
 
     def distances(self) -> list[float]:
         """Each move's d, in cells."""
-        return [DIAGONAL if a[0] != b[0] and a[1] != b[1] else STRAIGHT
-                for a, b in itertools.pairwise(self.cells)]
+        return [move_length(a, b) for a, b in itertools.pairwise(self.cells)]
 
 
 class LaneRoutes:

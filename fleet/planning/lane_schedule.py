@@ -16,6 +16,7 @@ import itertools
 from dataclasses import dataclass
 
 from fleet.planning.geometry import Cell
+from fleet.planning.lane_route import move_length
 from fleet.planning.reservations import INF, Interval
 from fleet.planning.trajectory import merge_intervals
 
@@ -55,10 +56,6 @@ class Schedule:
         """When it arrives at its last node."""
         return self.arrivals[-1]
 
-    def move_seconds(self, node: int) -> float:
-        (x0, y0), (x1, y1) = self.cells[node], self.cells[node + 1]
-        return (1.4 if x0 != x1 and y0 != y1 else 1.0) * self.seconds_per_cell
-
     def waited(self, node: int, seconds: float) -> Schedule:
         """The schedule with `seconds` more standing at `node`: every later arrival shifts."""
         if seconds < 0:
@@ -95,7 +92,6 @@ def timed(vehicle: int, cells: tuple[Cell, ...], t_start: float, seconds_per_cel
     last node (for good, by default)."""
     arrivals = [t_start]
     for a, b in itertools.pairwise(cells):
-        d = 1.4 if a[0] != b[0] and a[1] != b[1] else 1.0
-        arrivals.append(arrivals[-1] + d * seconds_per_cell)
+        arrivals.append(arrivals[-1] + move_length(a, b) * seconds_per_cell)
     dwells = [0.0] * (len(cells) - 1) + [dwell_at_end]
     return Schedule(vehicle, tuple(cells), tuple(arrivals), tuple(dwells), seconds_per_cell)
