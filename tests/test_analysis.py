@@ -271,3 +271,32 @@ def test_any_damaged_recording_reads_as_far_as_it_goes_or_is_refused(clean_strea
         return
     assert len(recording.messages) <= len(clean_stream)
     assert report.stacks_done <= 24
+
+
+def test_a_message_lost_as_its_sender_went_down_was_sent_while_cut_off(tmp_path, capsys):
+    """A docker network disconnect may catch a forklift's message in flight on the fast clock
+    too (tests/test_compose.py saw a clock ack go): a hole in its own stream spanning its
+    halt is counted as sent while cut off; the same hole away from any halt is lost."""
+    from fleet.mission.faults import parse_scenario
+    from fleet.wire.protocol import Halt
+
+    mission = Mission(LAYOUT, MissionKind.FILL, Strategy.GREEDY)
+    layout = load_layout(LAYOUT)
+    scenario = parse_scenario('name = "k"\ndescription = "k"\n[[fault]]\nkind = "kill_vehicle"\n'
+                              'at = 100.3\nvehicle = 2\nduration = 20.0\n', "k")
+    stream = recorded_run(mission, layout, engine_options(mission, layout, None),
+                          scenario=scenario)[1]
+    halt = next(o.message for o in stream if isinstance(o.message, Halt)
+                and o.message.vehicle == 2 and not o.message.moving)
+    mine = [k for k, o in enumerate(stream)
+            if isinstance(o.message, VehicleState) and o.message.vehicle == 2]
+    at_halt = max(k for k in mine if stream[k].sim_time <= halt.t)
+    numbered = numbers(stream)
+    for k, cut_off in ((at_halt, True), (mine[len(mine) // 4], False)):
+        path = tmp_path / f"run-{k}.mcap"
+        write_numbered(path, stream[:k] + stream[k + 1:], numbered[:k] + numbered[k + 1:])
+        status = main(["analyze", str(path), "--json"])
+        report = json.loads(capsys.readouterr().out)
+        assert (report["messages_cut_off"], report["messages_lost"]) == \
+            ((1, 0) if cut_off else (0, 1))
+        assert status == (0 if cut_off else 1)
