@@ -10,7 +10,7 @@ from dispatcher.liveness import ParticipantLost
 from dispatcher.remote import RemoteExecutor
 from fleet.mission.pickup import HeldLeg, Recovered, recovered_state
 from fleet.mission.spec import MissionKind
-from fleet.mission.work import mission_work
+from fleet.mission.work import stack_work
 from fleet.params import DispatchParams
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import Pose, Trajectory
@@ -42,6 +42,6 @@ def pick_up(executor: RemoteExecutor, layout: Layout, kind: MissionKind, vehicle
     goods = [Interval(r.cell, r.t0, r.t1) for r in executor.store.reservations(GOODS)]
     stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
     last = max(statuses, key=lambda s: s.tick)
-    work = mission_work(kind, layout, params, executor.store,
-                        layout.vehicle_kind.planners(layout.grid_map))
+    work = stack_work(kind, layout, params, executor.store,
+                      layout.vehicle_kind.planners(layout))
     return recovered_state(stacks, goods, held, last.t, work), last.tick, last.wall

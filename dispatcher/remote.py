@@ -72,6 +72,11 @@ class RemoteExecutor:
             raise ParticipantLost(f"forklift {vehicle} is not parked at {pose} (its agent "
                                   f"holds {self.mirror.table.reservations(vehicle)})")
 
+    def take_amended(self) -> list[Trajectory]:
+        # Only seed 002's AGVs amend, and they do not run as processes yet (the reservation
+        # service does not carry routes in time: docs/agv-002.md).
+        return []
+
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         message = task_to_wire(task, self.task_requester.next_id(), self.mirror.revision)
         try:

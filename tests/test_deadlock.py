@@ -61,7 +61,7 @@ def small_with_one_stack_left():
     layout = load_layout("small")
     kind = layout.vehicle_kind
     filled = frozenset(s.cell for s in layout.stacks if s.cell != (3, 2))
-    planner = kind.planners(layout.grid_map).get(filled)
+    planner = kind.planners(layout).get(filled)
     table = ReservationTable()
     me, other = Pose.parse("4,6,S"), Pose.parse("4,4,E")
     table.park(1, kind.body_cells_at_rest(me), 0.0)

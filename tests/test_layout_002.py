@@ -170,11 +170,3 @@ def test_layout_check_names_the_cut_off_slot(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err[0] == f"{path}: slot s-2-2: cannot be reached from slot s-2-3 along the lanes"
     assert err[-1] == f"{path}: 8 problem(s)"
-
-
-def test_fleet_run_refuses_the_agv_kind_in_one_line(capsys):
-    assert main(["run", "--layout", "paper002", "--inprocess"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "Traceback" not in err
-    assert err.startswith("fleet run: error: layout paper002: the agv vehicle kind is not "
-                          "built yet")

@@ -8,7 +8,7 @@ import pytest
 from fleet.analysis.safety import Body, covered_cells
 from fleet.params import VehicleDims
 from fleet.planning.reservations import Interval, ReservationTable
-from fleet.planning.trajectory import Pose, Trajectory
+from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.registry import UnknownVehicleKind, vehicle_kind
 from fleet.world.layout import LayoutError
 from fleet.world.layout_file import layout_source, load_layout, parse_layout
@@ -16,24 +16,26 @@ from fleet.world.layout_file import layout_source, load_layout, parse_layout
 
 def test_the_registry_refuses_an_unknown_kind_naming_the_known_ones():
     with pytest.raises(UnknownVehicleKind, match=r"^kind 'drone' is not one of the known "
-                                                  r"vehicle kinds: forklift, agv$"):
+                                                  r"vehicle kinds: forklift, agv, lifting-agv$"):
         vehicle_kind("drone", VehicleDims(), 2.0)
     assert vehicle_kind("forklift", VehicleDims(), 2.0).name == "forklift"
 
 
-@pytest.mark.parametrize("kind", ["lifting-agv", "Forklift"])
+@pytest.mark.parametrize("kind", ["hovercraft", "Forklift"])
 def test_a_layout_naming_an_unknown_kind_is_a_one_line_layout_error(kind):
     text = layout_source("small").replace("[bounds]", f'[vehicle]\nkind = "{kind}"\n\n[bounds]')
     with pytest.raises(LayoutError) as refused:
         parse_layout(text, "t")
     assert str(refused.value) == (f"t: vehicle: kind {kind!r} is not one of the known vehicle "
-                                  f"kinds: forklift, agv")
+                                  f"kinds: forklift, agv, lifting-agv")
 
 
 def test_a_forklift_layout_naming_the_kind_not_built_yet_cannot_check_its_poses():
-    text = layout_source("small").replace("[bounds]", '[vehicle]\nkind = "agv"\n\n[bounds]')
+    text = layout_source("small").replace("[bounds]",
+                                          '[vehicle]\nkind = "lifting-agv"\n\n[bounds]')
     with pytest.raises(LayoutError, match="station p1: a pose is checked with the vehicle "
-                                          "kind's body, and the agv vehicle kind is not built"):
+                                          "kind's body, and the lifting-agv vehicle kind is not "
+                                          "built"):
         parse_layout(text, "t")
 
 
@@ -55,8 +57,9 @@ def test_the_forklift_drives_inside_what_its_planner_commits(other):
         table.commit(2, [other])
     planned = kind.planner(layout.grid_map()).plan(1, start, 3.0, [Pose((1, 4), 2)], table)
     assert isinstance(planned, Trajectory)
-    leg = kind.conflict_policy.commitment(planned, table)
-    assert table.commit(1, leg.intervals, release_from=leg.release_from).ok
+    leg = kind.planners(layout).policy.commitment(planned, table)
+    assert not isinstance(leg, PlanFailure)
+    assert leg.write(table).ok
     traj = leg.trajectory
     outline = kind.outline
     body = Body(outline.front, outline.rear, outline.width, layout.cell_size, (0.0, 0.0))

@@ -15,11 +15,12 @@ from fleet.dispatching.decision import (
 )
 from fleet.dispatching.policy import POLICIES
 from fleet.mission.engine import run_mission
-from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.spec import STACK_KINDS, Mission, MissionKind
 from fleet.mission.vehicle_slot import VehicleSlot
-from fleet.mission.work import EmptyWork, FillWork, mission_work
+from fleet.mission.work import EmptyWork, FillWork, stack_work
 from fleet.params import DispatchParams
 from fleet.planning.reservations import Interval, ReservationTable
+from fleet.planning.trajectory import Trajectory
 from fleet.world.layout_file import load_layout
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -29,8 +30,14 @@ SMALL = load_layout("small")
 
 
 def work_of(kind: MissionKind):
-    return mission_work(kind, SMALL, DispatchParams(), ReservationTable(),
-                        SMALL.vehicle_kind.planners(SMALL.grid_map))
+    return stack_work(kind, SMALL, DispatchParams(), ReservationTable(),
+                        SMALL.vehicle_kind.planners(SMALL))
+
+
+def leg_ending(t_end: float) -> Trajectory:
+    """A committed leg that arrives at t_end (all `serve` reads of it)."""
+    pose = SMALL.vehicle_starts[0]
+    return Trajectory(1, pose, pose, t_end, (), (), 0)
 
 
 def deliver(work, view, cluster):
@@ -51,7 +58,7 @@ def test_each_kind_orders_its_stacks_and_says_which_way_the_goods_go(kind, cls, 
     view = VehicleSlot(1, SMALL.vehicle_starts[0], ready, TaskKind.DELIVER).view()
     decision, target = deliver(work, view, "a")
     assert (target.stack_index, target.remaining) == (first, 12)
-    served = work.serve(decision, 40.0, 45.0)
+    served = work.serve(decision, leg_ending(40.0), 45.0)
     assert (served.cluster, served.index, served.t_done) == ("a", first, 45.0)
     assert served.goods.cell == target.stack_cell
     assert (target.stack_cell in work.filled) is (kind is MissionKind.FILL)
@@ -92,7 +99,7 @@ class EarliestToFirstTarget:
                                {first.vehicle: first.t_free + 10.0})
 
 
-@pytest.mark.parametrize("kind", list(MissionKind))
+@pytest.mark.parametrize("kind", STACK_KINDS)
 def test_a_registered_policy_runs_a_whole_mission_without_the_engine_knowing_it(
         kind, monkeypatch):
     policy = EarliestToFirstTarget()

@@ -108,7 +108,7 @@ class Agent:
         self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
         self.vehicle_kind = layout.vehicle_kind
-        self.planners = self.vehicle_kind.planners(layout.grid_map)
+        self.planners = self.vehicle_kind.planners(layout)
         self.drive = Drive(vehicle, start, layout)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()
@@ -282,7 +282,7 @@ class Agent:
             result = planner.plan(self.vehicle, task.start, task.t_i, task.goals,
                                   self.mirror.table)
             if isinstance(result, Trajectory):
-                result = self.vehicle_kind.conflict_policy.commitment(result, self.mirror.table)
+                result = self.planners.policy.commitment(result, self.mirror.table)
         if self.slow > 1:  # an injected slow planner: as if the search ran on a slower CPU
             time.sleep((self.slow - 1) * (time.perf_counter() - started))
         return result

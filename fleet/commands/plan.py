@@ -21,7 +21,7 @@ from fleet.runtime.argtypes import (
     sim_seconds,
     text_file,
 )
-from fleet.vehicles.kind import Planner
+from fleet.vehicles.kind import Planners
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
@@ -60,8 +60,8 @@ class Scene:
     others: list[Trajectory] = field(default_factory=list)
 
 
-def load_scene(path: Path | None, layout: Layout, planner_for, table: ReservationTable,
-               me: int, my_start: str) -> Scene:
+def load_scene(path: Path | None, layout: Layout, planners: Planners,
+               table: ReservationTable, me: int, my_start: str) -> Scene:
     """Fill state and the other vehicles' plans; the planning vehicle is parked at its start
     first, so the others plan around it as they would in a fleet."""
     data = _scene_file(path, layout) if path is not None else {}
@@ -70,7 +70,7 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
     scene.start = resolve(layout, my_start, scene.filled)[0]
     kind = layout.vehicle_kind
     table.park(me, kind.body_cells_at_rest(scene.start), 0.0)
-    planner = planner_for(scene.filled)
+    planner = planners.get(frozenset(scene.filled))
     vehicles = data.get("vehicle", [])
     starts = {}
     for i, entry in enumerate(vehicles):
@@ -93,8 +93,11 @@ def load_scene(path: Path | None, layout: Layout, planner_for, table: Reservatio
         if isinstance(result, PlanFailure):
             raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be planned: "
                             f"{result.reason.value}: {result.detail}")
-        leg = kind.conflict_policy.commitment(result, table)
-        table.commit(vid, leg.intervals, release_from=leg.release_from)
+        leg = planners.policy.commitment(result, table)
+        if isinstance(leg, PlanFailure):
+            raise UserError(f"{path}: vehicle[{i}] (id {vid}) could not be committed: "
+                            f"{leg.detail}")
+        leg.write(table)
         scene.others.append(leg.trajectory)
     for i, entry in enumerate(data.get("reservation", [])):
         iv = Interval(entry["cell"], entry["t0"], entry.get("t1", math.inf))
@@ -215,16 +218,12 @@ def run(args: argparse.Namespace) -> int:
                         f"{forklifts}" if forklifts else
                         f"--vehicle {args.vehicle}: layout {layout.name} has no forklifts "
                         f"(no start poses)")
-    planners = layout.vehicle_kind.planners(layout.grid_map)
-
-    def planner_for(filled) -> Planner:
-        return planners.get(frozenset(filled))
-
+    planners = layout.vehicle_kind.planners(layout)
     table = ReservationTable()
-    scene = load_scene(args.reserved, layout, planner_for, table, args.vehicle, args.start)
+    scene = load_scene(args.reserved, layout, planners, table, args.vehicle, args.start)
     goals = resolve(layout, args.goal, scene.filled)
     start = scene.start
-    planner = planner_for(scene.filled)
+    planner = planners.get(frozenset(scene.filled))
     t0 = time.perf_counter()
     result = planner.plan(args.vehicle, start, args.at, goals, table)
     wall_ms = (time.perf_counter() - t0) * 1000

@@ -21,12 +21,22 @@ class Strategy(Enum):
     BALANCE = "balance"  # argmax G_d
     COMPREHENSIVE = "comprehensive"  # argmax S_d,0
     ANN = "ann"  # argmax S_d (Equation 9): comprehensive corrected by the MLP
+    NEAREST = "nearest"  # seed 002: the order book's nearest idle AGV, station, slot, pile
+
+
+# Seed 000's five, all Algorithm 1 (stack missions); NEAREST runs order missions only.
+STACK_STRATEGIES = tuple(s for s in Strategy if s is not Strategy.NEAREST)
 
 
 class TaskKind(Enum):
     DELIVER = "deliver"  # to a shelf cluster (put goods in fill, take goods in empty)
     RETURN = "return"  # to a picking station
     ASIDE = "aside"  # out of another vehicle's way (a deadlock broken; no policy decides it)
+    # Seed 002's order missions (fleet/mission/order_work.py)
+    FETCH = "fetch"  # to the order's shelf, lifted from under
+    PACK = "pack"  # with the shelf to a packing station, standing its dwell there
+    STOW = "stow"  # with the shelf to a vacant slot, put down
+    CHARGE = "charge"  # to a charging pile
 
 
 @dataclass(frozen=True)
@@ -49,6 +59,7 @@ class Target:
     stack_index: int | None = None
     remaining: int = 0  # G_d: stacks of the cluster still to do
     far: bool = False  # s1/s2-like clusters far from the stations (C5, C7)
+    kind: TaskKind | None = None  # the subtask it is for, where the work decides it (orders)
 
 
 @dataclass(frozen=True)

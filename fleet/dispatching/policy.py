@@ -18,7 +18,13 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from fleet.dispatching.algorithm1 import Algorithm1, MlpFn
-from fleet.dispatching.decision import DispatchOutcome, Strategy, Target, VehicleView
+from fleet.dispatching.decision import (
+    STACK_STRATEGIES,
+    DispatchOutcome,
+    Strategy,
+    Target,
+    VehicleView,
+)
 from fleet.params import DispatchParams
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
@@ -57,8 +63,14 @@ def algorithm1(setup: PolicySetup) -> Algorithm1:
                       mlp=setup.mlp)
 
 
+def order_book(setup: PolicySetup) -> DispatchPolicy:
+    from fleet.dispatching.order_book_policy import OrderBookPolicy  # it imports this module
+
+    return OrderBookPolicy()
+
+
 POLICIES: dict[Strategy, Callable[[PolicySetup], DispatchPolicy]] = {
-    strategy: algorithm1 for strategy in Strategy}
+    **{strategy: algorithm1 for strategy in STACK_STRATEGIES}, Strategy.NEAREST: order_book}
 
 
 def dispatch_policy(setup: PolicySetup) -> DispatchPolicy:

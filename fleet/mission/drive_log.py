@@ -18,6 +18,13 @@ class AddLeg:
 
 
 @dataclass(frozen=True)
+class AmendLeg:
+    """The last leg added is postponed (seed 002's collision rules): drive this instead."""
+
+    trajectory: Trajectory
+
+
+@dataclass(frozen=True)
 class CutAt:
     """Stop after the maneuver in progress at t: the plan beyond is cancelled."""
 
@@ -38,5 +45,5 @@ class ResumeAt:
     t: float
 
 
-DriveOrder = AddLeg | CutAt | StopAt | ResumeAt
+DriveOrder = AddLeg | AmendLeg | CutAt | StopAt | ResumeAt
 DriveLog = dict[int, list[DriveOrder]]  # vehicle -> what it was told, in order

@@ -74,6 +74,16 @@ class Drive:
     def add(self, trajectory: Trajectory, loaded: bool) -> None:
         self.legs.append(Leg(trajectory, loaded))
 
+    def amend(self, trajectory: Trajectory) -> None:
+        """The last leg is postponed: drive `trajectory` instead (the same start, the same
+        steps up to the first wait put in)."""
+        last = self.legs[-1]
+        if last.trajectory.t_start != trajectory.t_start:
+            raise ValueError(f"vehicle {self.vehicle}: the amended leg from "
+                             f"t={trajectory.t_start} is not its last, from "
+                             f"t={last.trajectory.t_start}")
+        self.legs[-1] = Leg(trajectory, last.loaded)
+
     def cut(self, t: float) -> None:
         """Drive nothing committed after the step in progress at t (legs not started by t go;
         the one in progress ends with that step)."""

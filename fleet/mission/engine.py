@@ -26,11 +26,18 @@ from fleet.dispatching.decision import Decision, DispatchOutcome, Target, TaskKi
 from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks
-from fleet.mission.drive_log import AddLeg, DriveLog
+from fleet.mission.drive_log import AddLeg, AmendLeg, DriveLog
 from fleet.mission.fault_response import FaultResponse
 from fleet.mission.freeze import Disruption, VehicleDown
+from fleet.mission.order_work import order_fleet
 from fleet.mission.pickup import Recovered
-from fleet.mission.record import FailureEvent, MissionRecord, Subtask, subtask_event
+from fleet.mission.record import (
+    FailureEvent,
+    MissionRecord,
+    Subtask,
+    amended_event,
+    subtask_event,
+)
 from fleet.mission.seam import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.mission.spec import Mission, MissionKind
 from fleet.mission.standstill import Cause, Standstill, failure_text, standstill
@@ -133,16 +140,19 @@ class Engine:
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
         self.vehicle_kind = self.layout.vehicle_kind
-        self.planners = self.vehicle_kind.planners(self.layout.grid_map)
+        self.planners = self.vehicle_kind.planners(self.layout)
         self.executor = executor or LocalExecutor(self.vehicle_kind, self.planners)
         self.pacer = pacer or NoPacer()
         starts = list(mission.starts or self.layout.vehicle_starts)
         n = mission.vehicles if mission.vehicles is not None else len(starts)
+        if mission.kind is MissionKind.ORDERS and not mission.starts:
+            n = order_fleet(self.layout, mission.vehicles)
+        self.work = mission_work(mission, self.layout, self.options.params,
+                                 self.executor.store, self.planners, n)
+        starts = starts or list(self.work.start_poses())  # order missions: on the piles
         if not 1 <= n <= len(starts):
             raise UserError(f"{n} vehicles requested but layout {self.layout.name} has "
                              f"{len(starts)} start poses")
-        self.work = mission_work(mission.kind, self.layout, self.options.params,
-                                 self.executor.store, self.planners)
         self.fleet = {i + 1: VehicleSlot(i + 1, pose, self.work.ready_at, TaskKind.DELIVER,
                                          t_still=self.work.ready_at)
                       for i, pose in enumerate(starts[:n])}
@@ -173,9 +183,8 @@ class Engine:
 
     def active(self) -> list[VehicleSlot]:
         """Vehicles with something left to do: any return, or a delivery while work waits."""
-        work_left = self.work.work_left()
         return [v for v in self.fleet.values() if v.vehicle not in self.faults.down and
-                (v.next_task is TaskKind.RETURN or work_left)]
+                self.work.busy(v.view())]
 
     def targets_for(self, view: VehicleView) -> list[Target]:
         """Where the forklift may go next; once the fleet is stuck, not where it failed to
@@ -229,9 +238,14 @@ class Engine:
         applied; None once the mission is over (or the forklifts left are down for good)."""
         while True:
             active = self.active()
+            t_next = min((v.t_free for v in active), default=math.inf)
+            t_work = self.work.next_event()
+            if t_work <= t_next and t_work < math.inf:  # the work changes first (orders)
+                for vehicle, t in self.work.advance(t_work).items():
+                    self.fleet[vehicle].wait_until(max(t, self.fleet[vehicle].t_free))
+                continue
             if not active and not self.faults.down:
                 return None
-            t_next = min((v.t_free for v in active), default=math.inf)
             disruptions = self.pacer.disruptions(t_next, frozenset(self.faults.down))
             if not disruptions:
                 return active or None
@@ -473,9 +487,10 @@ class Engine:
         v = self.fleet[decision.vehicle]
         target = decision.target
         t_done = traj.t_end + self.work.handling(decision.kind)
-        served = self.work.serve(decision, traj.t_end, t_done)
+        served = self.work.serve(decision, traj, t_done)
         if served is not None:
-            self.executor.reserve_goods([served.goods])
+            if served.goods is not None:
+                self.executor.reserve_goods([served.goods])
             self.record.stacks_done.append((served.cluster, served.index, t_done))
             # Announced as it is committed (the clock at `now`), as a dispatcher of processes
             # publishes it: a reopening then follows the announcement it takes back.
@@ -484,16 +499,35 @@ class Engine:
         self.faults.committed(dataclasses.replace(v), traj)
         waited = sum(s.t1 - s.t0 for s in traj.steps
                      if self.vehicle_kind.is_wait(s.manner.label))
-        v.drive(decision.kind, target.name, traj, t_done, waited)
+        v.drive(decision.kind, target.name, traj, t_done, waited,
+                self.work.next_task(decision.kind))
         self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(decision.kind)))
         subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,
                           target.stack_cell, decision.t_i, traj.t_end, t_done, traj,
                           decision.postponed)
         self.record.subtasks.append(subtask)
         self._emit(subtask_event(subtask), decision.t_i)
+        for leg in self.executor.take_amended():
+            self._amended(leg)
         if self.options.progress:  # at the instant the clock reached, not the planned arrival
             self.options.progress(len(self.record.stacks_done), self.work.total, self.now,
                                   self.record.decision_failures)
+
+
+    def _amended(self, leg: Trajectory) -> None:
+        """Another vehicle's committed leg was postponed by this commit (seed 002's collision
+        rules): it arrives later, and is free that much later."""
+        v = self.fleet[leg.vehicle]
+        k = max(i for i, s in enumerate(self.record.subtasks) if s.vehicle == leg.vehicle)
+        before = self.record.subtasks[k]
+        delay = leg.t_end - before.t_end
+        after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
+                                    t_done=leg.t_end + self.work.handling(before.kind))
+        self.record.subtasks[k] = after
+        v.amended(delay, after.t_done)
+        self.drive_log[v.vehicle].append(AmendLeg(leg))
+        self.work.amended(leg)
+        self._emit(amended_event(after), self.now)
 
 
 def run_mission(mission: Mission, options: EngineOptions | None = None,
@@ -515,7 +549,7 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
     order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
     empty = ReservationTable()
-    planners = layout.vehicle_kind.planners(layout.grid_map)
+    planners = layout.vehicle_kind.planners(layout)
     for done, stack in enumerate(order, 1):
         key = frozenset(present - {stack.cell})
         planner = planners.get(key)

@@ -23,6 +23,7 @@ from fleet.wire.convert import intervals_to_wire
 from fleet.wire.protocol import (
     DeadlockSeen,
     DecisionFailure,
+    LegAmended,
     RecordStep,
     SubtaskEvent,
     WireInterval,
@@ -83,14 +84,22 @@ class MissionRecord:
         return sum(self.wait_s.values())
 
 
+def record_steps(trajectory: Trajectory) -> list[RecordStep]:
+    return [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
+            for st in trajectory.steps]
+
+
 def subtask_event(s: Subtask) -> SubtaskEvent:
     """A subtask as the dispatcher announces it (and as mission records hold it)."""
     return SubtaskEvent(
         s.vehicle, s.kind.value, s.target, s.stack_index, s.t_i, s.t_end, s.t_done,
-        s.postponed,
-        [(st.manner.label, str(st.start), str(st.end), st.t0, st.t1, int(st.v0), int(st.v1))
-         for st in s.trajectory.steps],
-        intervals_to_wire(s.trajectory.intervals))
+        s.postponed, record_steps(s.trajectory), intervals_to_wire(s.trajectory.intervals))
+
+
+def amended_event(s: Subtask) -> LegAmended:
+    """A subtask's leg postponed, as the dispatcher announces it."""
+    return LegAmended(s.vehicle, s.t_i, s.t_end, s.t_done, record_steps(s.trajectory),
+                      intervals_to_wire(s.trajectory.intervals))
 
 
 # -- as one frozen value --------------------------------------------------------------------------

@@ -62,6 +62,10 @@ class Executor(Protocol):
         """Plan the task and commit its trajectory (releasing the vehicle's parking from t_i);
         a failure commits nothing."""
 
+    def take_amended(self) -> list[Trajectory]:
+        """Other vehicles' committed legs that the commits since the last call postponed
+        (seed 002's collision rules), each as the vehicle now drives it."""
+
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
         """Reserve stack cells for the goods on them (owner GOODS); refused silently where a
         vehicle holds the cell, exactly as the table refuses a conflicting commit."""
@@ -108,6 +112,7 @@ class LocalExecutor:
         self.vehicle_kind = vehicle_kind
         self.planners = planners
         self.table = ReservationTable()
+        self.amended: list[Trajectory] = []  # other vehicles' legs postponed, not yet taken
 
     @property
     def store(self) -> ReservationTable:
@@ -124,11 +129,18 @@ class LocalExecutor:
                                                      task.goals, self.table)
         if isinstance(result, PlanFailure):
             return result
-        leg = self.vehicle_kind.conflict_policy.commitment(result, self.table)
-        written = self.table.commit(task.vehicle, leg.intervals, leg.release_from)
+        leg = self.planners.policy.commitment(result, self.table)
+        if isinstance(leg, PlanFailure):
+            return leg
+        written = leg.write(self.table)
         if not written.ok:  # the policy settled against this very table
             raise AssertionError(f"planned trajectory conflicts: {written.reason}")
+        self.amended += [a.trajectory for a in leg.amends]
         return leg.trajectory
+
+    def take_amended(self) -> list[Trajectory]:
+        taken, self.amended = self.amended, []
+        return taken
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:
         self.table.commit(GOODS, intervals)  # refused where a vehicle holds the cell

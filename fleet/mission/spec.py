@@ -13,6 +13,10 @@ from fleet.planning.trajectory import Pose
 class MissionKind(Enum):
     FILL = "fill"  # goods picked at stations, delivered to stacks in fill order
     EMPTY = "empty"  # goods fetched from stacks in reverse fill order, dropped at stations
+    ORDERS = "orders"  # seed 002: shelves fetched to packing stations and put back in slots
+
+
+STACK_KINDS = (MissionKind.FILL, MissionKind.EMPTY)  # seed 000's, on layouts with stacks
 
 
 class ClockMode(StrEnum):
@@ -30,3 +34,4 @@ class Mission:
     vehicles: int | None = None  # None: as many as the layout has start poses
     seed: int = 0
     starts: tuple[Pose, ...] = field(default=())  # empty: the layout's start poses
+    orders: int = 0  # how many orders an order mission releases (drawn with `seed`)

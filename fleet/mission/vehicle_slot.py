@@ -30,6 +30,11 @@ class VehicleSlot:
         self.wait_s += t - self.t_free
         self.t_free = t
 
+    def amended(self, delay: float, t_done: float) -> None:
+        """Its committed leg was postponed by `delay` seconds of waiting: done at t_done."""
+        self.wait_s += delay
+        self.t_free = self.t_still = t_done
+
     def step_aside(self, traj: Trajectory, waited: float) -> None:
         """Sent out of another's way, standing still since before traj.t_start (perhaps
         postponed beyond): it stands at the siding from the arrival on, with the same subtask
@@ -40,16 +45,15 @@ class VehicleSlot:
         self.t_free = self.t_still = traj.t_end
 
     def drive(self, kind: TaskKind, target: str, traj: Trajectory, t_done: float,
-              waited: float) -> None:
+              waited: float, next_task: TaskKind) -> None:
         """A subtask committed (`waited`: the seconds of its steps that wait in place): it
-        stands at the goal from t_done on, and does the other kind of subtask next."""
+        stands at the goal from t_done on, and does `next_task` next."""
         self.busy_s += traj.t_end - traj.t_start - waited
         self.wait_s += waited
         self.pose = traj.goal
         self.t_free = self.t_still = t_done
-        deliver = kind is TaskKind.DELIVER
-        self.next_task = TaskKind.RETURN if deliver else TaskKind.DELIVER
-        if deliver:
+        self.next_task = next_task
+        if kind is TaskKind.DELIVER:
             self.linked_cluster, self.linked_kind = target, TaskKind.DELIVER
         else:
             self.linked_kind = TaskKind.RETURN if self.linked_cluster else None

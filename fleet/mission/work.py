@@ -4,9 +4,10 @@ A mission kind says what is left and in which order it is done, where a vehicle 
 whether it carries goods there, how long handling takes at the end, what an arrival changes
 and when the mission is done. The engine decides through it and never asks which kind it
 runs. Fill and empty (seed 000) are the first two kinds: both work through the stacks of each
-cluster in a fixed order, one goods-carrying trip and one empty trip per stack. A kind for
-order streams (seeds 002 and 004: orders -> shelf -> station -> slot) is another class with
-these methods and an entry in WORK_KINDS.
+cluster in a fixed order, one goods-carrying trip and one empty trip per stack. Seed 002's
+order missions (orders -> shelf -> station -> slot, fleet/mission/order_work.py) are the
+third: their order book decides every trip at the instants things happen, which the engine
+feeds it (`next_event`, `advance`).
 """
 
 from __future__ import annotations
@@ -16,12 +17,13 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
-from fleet.mission.spec import MissionKind
+from fleet.dispatching.decision import Decision, Strategy, Target, TaskKind, VehicleView
+from fleet.errors import UserError
+from fleet.mission.spec import Mission, MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationView
-from fleet.planning.trajectory import Pose
+from fleet.planning.trajectory import Pose, Trajectory
 from fleet.vehicles.kind import Planner, Planners
 from fleet.world.layout import Layout, Stack
 
@@ -31,10 +33,10 @@ class StackServed:
     """A delivery arrived: its stack is done at t_done, and the goods hold its cell over
     `goods` (owner GOODS in the table)."""
 
-    cluster: str
-    index: int
+    cluster: str  # order missions: the shelf
+    index: int  # order missions: the order
     t_done: float
-    goods: Interval
+    goods: Interval | None  # None: nothing for the table (a shelf travels with its AGV)
 
 
 class MissionWork(Protocol):
@@ -54,6 +56,23 @@ class MissionWork(Protocol):
         """Whether anything is still to be assigned (False: the mission is done once every
         vehicle is home)."""
 
+    def busy(self, view: VehicleView) -> bool:
+        """Whether the vehicle has something to do now or next (the engine decides for the
+        busy ones only)."""
+
+    def next_task(self, kind: TaskKind) -> TaskKind:
+        """What a vehicle does after a subtask of this kind."""
+
+    def next_event(self) -> float:
+        """When the work next changes by itself, as time passes (infinity: never)."""
+
+    def advance(self, t: float) -> dict[int, float]:
+        """Take what happens up to t; returns the vehicles it gave something to do, and from
+        when."""
+
+    def amended(self, trajectory: Trajectory) -> None:
+        """A committed leg was postponed (seed 002's collision rules): it arrives later."""
+
     def remaining(self) -> dict[str, int]:
         """Work still to be assigned, per group of targets (per cluster)."""
 
@@ -69,7 +88,8 @@ class MissionWork(Protocol):
     def handling(self, kind: TaskKind) -> float:
         """Seconds from arrival to being free again (claiming or unloading)."""
 
-    def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
+    def serve(self, decision: Decision, trajectory: Trajectory, t_done: float
+              ) -> StackServed | None:
         """A decided subtask was committed: the work it does is no longer left."""
 
     @property
@@ -192,6 +212,21 @@ class StackWork(ABC):
     def remaining(self) -> dict[str, int]:
         return {name: len(q) for name, q in self.queue.items()}
 
+    def busy(self, view: VehicleView) -> bool:
+        return view.next_task is TaskKind.RETURN or self.work_left()
+
+    def next_task(self, kind: TaskKind) -> TaskKind:
+        return TaskKind.RETURN if kind is TaskKind.DELIVER else TaskKind.DELIVER
+
+    def next_event(self) -> float:
+        return math.inf  # the stacks change only when subtasks are committed
+
+    def advance(self, t: float) -> dict[int, float]:
+        return {}
+
+    def amended(self, trajectory: Trajectory) -> None:
+        raise AssertionError("a forklift's leg is never amended")
+
     def targets(self, view: VehicleView, poses: dict[int, Pose]) -> list[Target]:
         if view.next_task is TaskKind.RETURN:
             return [Target(st.name, (st.dock,)) for st in self.layout.stations]
@@ -218,13 +253,14 @@ class StackWork(ABC):
         return frozenset({st.dock.cell for st in self.layout.stations}
                          | {s.cell for queue in self.queue.values() for s in queue})
 
-    def serve(self, decision: Decision, t_end: float, t_done: float) -> StackServed | None:
+    def serve(self, decision: Decision, trajectory: Trajectory, t_done: float
+              ) -> StackServed | None:
         if decision.kind is not TaskKind.DELIVER:
             return None
         stack = self.queue[decision.target.name].pop(0)
         self._served(stack.cell)
         return StackServed(decision.target.name, stack.index, t_done,
-                           self.goods_after(stack.cell, t_end, t_done))
+                           self.goods_after(stack.cell, trajectory.t_end, t_done))
 
     def reopen(self, cluster: str, index: int) -> Cell:
         stack = next(st for st in self.layout.stacks
@@ -353,10 +389,32 @@ class EmptyWork(StackWork):
         self.present.add(cell)
 
 
-WORK_KINDS: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,
+STACK_WORK: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,
                                                  MissionKind.EMPTY: EmptyWork}
 
 
-def mission_work(kind: MissionKind, layout: Layout, params: DispatchParams,
-                 store: ReservationView, planners: Planners) -> MissionWork:
-    return WORK_KINDS[kind](layout, params, store, planners)
+def mission_work(mission: Mission, layout: Layout, params: DispatchParams,
+                 store: ReservationView, planners: Planners, vehicles: int) -> MissionWork:
+    """The work of the mission on the layout, or a UserError saying why the layout cannot
+    host it (stack missions need stacks, order missions slots, packing stations and piles),
+    and which strategy each kind takes."""
+    nearest = mission.strategy is Strategy.NEAREST
+    if mission.kind is MissionKind.ORDERS:
+        from fleet.mission.order_work import OrderWork  # seed 002: a pack of its own
+
+        if not nearest:
+            raise UserError(f"order missions are dispatched by the order book (strategy "
+                            f"nearest), not {mission.strategy.value}")
+        return OrderWork(layout, mission, vehicles)
+    if not layout.stacks:
+        raise UserError(f"layout {layout.name} has no stacks for a {mission.kind.value} "
+                        f"mission: it runs order missions (fleet run --orders N)")
+    if nearest:
+        raise UserError(f"strategy nearest dispatches order missions (--orders N), not "
+                        f"{mission.kind.value} missions")
+    return stack_work(mission.kind, layout, params, store, planners)
+
+
+def stack_work(kind: MissionKind, layout: Layout, params: DispatchParams,
+               store: ReservationView, planners: Planners) -> StackWork:
+    return STACK_WORK[kind](layout, params, store, planners)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from fleet.planning.geometry import Cell
 from fleet.planning.lane_route import move_length
-from fleet.planning.reservations import INF, Interval
+from fleet.planning.reservations import INF, Interval, TimedRoute
 from fleet.planning.trajectory import merge_intervals
 
 
@@ -95,3 +95,12 @@ def timed(vehicle: int, cells: tuple[Cell, ...], t_start: float, seconds_per_cel
         arrivals.append(arrivals[-1] + move_length(a, b) * seconds_per_cell)
     dwells = [0.0] * (len(cells) - 1) + [dwell_at_end]
     return Schedule(vehicle, tuple(cells), tuple(arrivals), tuple(dwells), seconds_per_cell)
+
+
+def as_route(schedule: Schedule) -> TimedRoute:
+    """The schedule as the store shares it with other vehicles."""
+    return TimedRoute(schedule.cells, schedule.arrivals, schedule.dwells)
+
+
+def from_route(vehicle: int, route: TimedRoute, seconds_per_cell: float) -> Schedule:
+    return Schedule(vehicle, route.cells, route.arrivals, route.dwells, seconds_per_cell)

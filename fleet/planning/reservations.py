@@ -22,6 +22,9 @@ from typing import Protocol
 from fleet.planning.geometry import Cell
 
 INF = math.inf
+# Arrival times are sums of move times and waits, so a postponed stay may come out a rounding
+# error shorter than the stay it postpones: an amendment is judged to this much.
+SUM_TOLERANCE_S = 1e-9
 
 
 @dataclass(frozen=True, order=True)
@@ -36,6 +39,22 @@ class Interval:
         if not (self.t0 < self.t1) or math.isnan(self.t0) or math.isnan(self.t1):
             raise ValueError(f"interval on cell {self.cell} must have t0 < t1, got "
                              f"[{self.t0}, {self.t1})")
+
+
+@dataclass(frozen=True)
+class TimedRoute:
+    """A vehicle's committed route in time as other vehicles read it: its nodes, when it
+    arrives at each and how long it stands there (the last dwell may be infinite). Seed
+    002's AGVs share these ("operational status", Section 5) to predict and settle
+    collisions; the table keeps each vehicle's latest beside its reservations."""
+
+    cells: tuple[Cell, ...]
+    arrivals: tuple[float, ...]
+    dwells: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if not (len(self.cells) == len(self.arrivals) == len(self.dwells) >= 1):
+            raise ValueError("a timed route has one arrival and one dwell per node, and a node")
 
 
 @dataclass(frozen=True)
@@ -61,6 +80,7 @@ class Amendment:
     vehicle: int
     release_from: float
     intervals: tuple[Interval, ...]
+    route: TimedRoute | None = None  # the postponed route the intervals come from
 
 
 @dataclass(frozen=True)
@@ -98,6 +118,9 @@ class Change:
     # "commit": adds intervals (or, as a first step of `amended`, only releases); "release":
     # only gives up (the dispatcher's freeze, which the store takes for a halt)
     op: str = "commit"
+    # The route in time the intervals come from: a commit that adds intervals sets the
+    # vehicle's route to it (None: the vehicle has none); a release drops it.
+    route: TimedRoute | None = None
 
 
 @dataclass(frozen=True)
@@ -122,11 +145,13 @@ class ReservationWriter(Protocol):
 
     def commit(self, vehicle: int, intervals: Sequence[Interval],
                release_from: float | None = None,
-               amends: Sequence[Amendment] = ()) -> WriteResult:
+               amends: Sequence[Amendment] = (), route: TimedRoute | None = None
+               ) -> WriteResult:
         """All or nothing: if no interval conflicts with another vehicle, release this
         vehicle's reservations from `release_from` on (when given) and add the intervals;
         otherwise change nothing and name the first conflict. `amends` postpone other
-        vehicles' holdings in the same step (seed 002's collision rules)."""
+        vehicles' holdings in the same step (seed 002's collision rules); `route` is the
+        route in time the intervals come from, for other vehicles to read."""
         ...
 
     def release(self, vehicle: int, from_t: float = -INF,
@@ -150,6 +175,7 @@ class ReservationTable:
     def __init__(self) -> None:
         self._cells: dict[Cell, _CellLine] = {}
         self._cells_of: dict[int, set[Cell]] = {}
+        self._routes: dict[int, TimedRoute] = {}
         self.revision = 0
         self.changes: list[Change] = []
 
@@ -195,17 +221,24 @@ class ReservationTable:
     def vehicles(self) -> list[int]:
         return sorted(v for v, cells in self._cells_of.items() if cells)
 
+    def route(self, vehicle: int) -> TimedRoute | None:
+        """The route in time the vehicle's latest commit came from (None: it gave none, or
+        released since)."""
+        return self._routes.get(vehicle)
+
     # -- changes -------------------------------------------------------------------------------
     def commit(self, vehicle: int, intervals: Iterable[Interval],
                release_from: float | None = None,
-               amends: Sequence[Amendment] = ()) -> WriteResult:
+               amends: Sequence[Amendment] = (), route: TimedRoute | None = None
+               ) -> WriteResult:
         """All or nothing: if no interval conflicts with another vehicle, release this
         vehicle's reservations from `release_from` on (when given) and add the intervals;
         otherwise change nothing and name the first conflict. With `amends`, the other
-        vehicles' holdings are postponed in the same step (`amended`)."""
+        vehicles' holdings are postponed in the same step (`amended`). `route`: the route in
+        time the intervals come from, for others to read (`route`)."""
         intervals = tuple(intervals)
         if amends:
-            planned = self.amended(vehicle, intervals, release_from, amends)
+            planned = self.amended(vehicle, intervals, release_from, amends, route)
             if isinstance(planned, str):
                 return WriteResult(False, self.revision, planned)
             if isinstance(planned, Conflict):
@@ -218,12 +251,13 @@ class ReservationTable:
         if conflict is not None:
             return WriteResult(False, self.revision, conflict.reason, conflict.other,
                                conflict.cell)
-        self._apply(Change(self.revision + 1, vehicle, release_from, intervals, op="commit"))
+        self._apply(Change(self.revision + 1, vehicle, release_from, intervals, op="commit",
+                           route=route))
         return WriteResult(True, self.revision)
 
     def amended(self, vehicle: int, intervals: tuple[Interval, ...],
-                release_from: float | None, amends: Sequence[Amendment]
-                ) -> list[Change] | Conflict | str:
+                release_from: float | None, amends: Sequence[Amendment],
+                route: TimedRoute | None = None) -> list[Change] | Conflict | str:
         """A commit that also postpones other vehicles' holdings, checked whole against the
         table it would leave, as the changes that make it: every release first (the
         committing vehicle's, then each amended one's), then each amended vehicle's new
@@ -258,14 +292,14 @@ class ReservationTable:
                 if other is not None:
                     return Conflict(iv.cell, iv.t0, iv.t1, other)
                 new_by_cell.setdefault(iv.cell, []).append((iv.t0, iv.t1, owner))
-        steps: list[tuple[int, float | None, tuple[Interval, ...]]] = []
+        steps: list[tuple[int, float | None, tuple[Interval, ...], TimedRoute | None]] = []
         if release_from is not None:
-            steps.append((vehicle, release_from, ()))
-        steps += [(a.vehicle, a.release_from, ()) for a in amends]
-        steps += [(a.vehicle, None, a.intervals) for a in amends if a.intervals]
-        steps.append((vehicle, None, intervals))
-        return [Change(self.revision + k, v, t, ivs, op="commit")
-                for k, (v, t, ivs) in enumerate(steps, 1)]
+            steps.append((vehicle, release_from, (), None))
+        steps += [(a.vehicle, a.release_from, (), None) for a in amends]
+        steps += [(a.vehicle, None, a.intervals, a.route) for a in amends if a.intervals]
+        steps.append((vehicle, None, intervals, route))
+        return [Change(self.revision + k, v, t, ivs, op="commit", route=r)
+                for k, (v, t, ivs, r) in enumerate(steps, 1)]
 
     def _held_after(self, vehicle: int, iv: Interval, released: Mapping[int, float]
                     ) -> int | None:
@@ -311,10 +345,11 @@ class ReservationTable:
             new = after[cell]
             old = sorted(spans)
             if len(new) != len(old) or any(
-                    n0 < o0 or n1 - n0 < o1 - o0 or (across and n0 != o0)
+                    n0 < o0 - SUM_TOLERANCE_S or n1 - n0 < o1 - o0 - SUM_TOLERANCE_S
+                    or (across and abs(n0 - o0) > SUM_TOLERANCE_S)
                     for (o0, o1, across), (n0, n1) in zip(old, new, strict=True)):
                 return (f"cell {cell} would be taken earlier, held shorter or left for a "
-                        f"while, against {[(o0, o1) for o0, o1, _ in old]}")
+                        f"while: {new} against {[(o0, o1) for o0, o1, _ in old]}")
         return ""
 
     def release(self, vehicle: int, from_t: float = -INF,
@@ -343,6 +378,13 @@ class ReservationTable:
             self._release(change.vehicle, change.release_from, change.release_cells)
         for iv in change.intervals:
             self._insert(change.vehicle, iv)
+        if change.op == "release":
+            self._routes.pop(change.vehicle, None)
+        elif change.intervals or change.route is not None:
+            if change.route is None:
+                self._routes.pop(change.vehicle, None)
+            else:
+                self._routes[change.vehicle] = change.route
         self.revision = change.revision
         self.changes.append(change)
 
@@ -392,7 +434,7 @@ class ReservationTable:
 
     def load(self, snap: Snapshot) -> None:
         """Become the table of the snapshot (in place, so holders of this object see it)."""
-        self._cells, self._cells_of, self.changes = {}, {}, []
+        self._cells, self._cells_of, self.changes, self._routes = {}, {}, [], {}
         by_vehicle: dict[int, list[Interval]] = {}
         for r in snap.reservations:
             by_vehicle.setdefault(r.vehicle, []).append(Interval(r.cell, r.t0, r.t1))

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from fleet.planning.geometry import Cell
-from fleet.planning.maneuvers import HEADINGS, Manner
+from fleet.planning.maneuvers import HEADINGS, Kind, Manner
 from fleet.planning.reservations import Interval
 from fleet.planning.velocity import Speed
 
@@ -36,11 +36,37 @@ class Pose:
         return cls(cell, HEADINGS.index(parts[2].upper()))
 
 
+class LaneMove(Enum):
+    """The steps of seed 002's one-cell AGV: a move to one of the four neighbours (d = 1), a
+    diagonal one (d = 1.4), and standing at a node (a wait a collision rule inserted). Kind
+    and direction as a forklift manner has them, so a trajectory counts either the same."""
+
+    MOVE = ("move", Kind.STRAIGHT, 1)
+    DIAGONAL = ("diagonal", Kind.STRAIGHT, 1)
+    WAIT = ("wait", Kind.STOP, 0)
+
+    def __init__(self, label: str, kind: Kind, direction: int) -> None:
+        self.label = label
+        self.kind = kind
+        self.direction = direction
+
+
+StepManner = Manner | LaneMove
+
+
+def step_manner(label: str) -> StepManner:
+    """The manner or lane move a step label names (ValueError for none)."""
+    for move in LaneMove:
+        if move.label == label:
+            return move
+    return Manner.from_label(label)
+
+
 @dataclass(frozen=True)
 class Step:
     """One maneuver of a trajectory, over [t0, t1), sweeping `cells`."""
 
-    manner: Manner
+    manner: StepManner
     start: Pose
     end: Pose
     t0: float
@@ -80,6 +106,7 @@ class FailureReason(Enum):
     ITERATION_CAP = "iteration cap"
     LATE = "late"  # real time: the plan was ready only after its own start instant
     REFUSED = "commit refused"  # the reservation store refused every replanned commit
+    DEADLOCK = "deadlock"  # seed 002: the collision rules could not settle a collision
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from collections import defaultdict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fleet.mission.drive_log import AddLeg, CutAt, DriveLog, ResumeAt, StopAt
+from fleet.mission.drive_log import AddLeg, AmendLeg, CutAt, DriveLog, ResumeAt, StopAt
 from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import Scenario
@@ -62,6 +62,8 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log:
             match order:
                 case AddLeg(trajectory, loaded):
                     drive.add(trajectory, loaded)
+                case AmendLeg(trajectory):
+                    drive.amend(trajectory)
                 case CutAt(t):
                     drive.cut(t)
                 case StopAt(t):

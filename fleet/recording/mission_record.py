@@ -14,6 +14,7 @@ A mission that did not finish says how far it got (dispatch/stopped): `recorded_
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from collections import defaultdict
 from dataclasses import dataclass
@@ -32,6 +33,7 @@ from fleet.wire.protocol import (
     DeadlockSeen,
     DecisionFailure,
     Halt,
+    LegAmended,
     MissionDone,
     MissionInfo,
     MissionStopped,
@@ -101,7 +103,7 @@ def summary_of(recording: Recording) -> MissionSummary:
     final = final_record(recording, restarts)
     incomplete = unknown(recording, restarts, final is not None)
     heard = recording.of(SubtaskEvent)
-    subtasks = [SubtaskRecord.of_event(m) for _, m in heard]
+    subtasks = amended(heard, recording.of(LegAmended))
     stacks = [StackRecord(m.cluster, m.index, m.t) for _, m in recording.of(StackDone)]
     failures = [m for _, m in recording.of(DecisionFailure)]
     if final is not None:
@@ -132,6 +134,25 @@ def summary_of(recording: Recording) -> MissionSummary:
         wait_s=wait, busy_s=busy, stacks_done=tuple(stacks), failures=tuple(failures),
         subtasks=tuple(subtasks), deadlocks=tuple(m for _, m in recording.of(DeadlockSeen)),
         incomplete=tuple(incomplete))
+
+
+def amended(heard: list[tuple[Recorded, SubtaskEvent]],
+            amendments: list[tuple[Recorded, LegAmended]]) -> list[SubtaskRecord]:
+    """The subtasks as announced, each postponed by the amendments announced after it (seed
+    002's collision rules): the vehicle's latest subtask decided at the amendment's t_i."""
+    subtasks = [SubtaskRecord.of_event(m) for _, m in heard]
+    at = [r.log_ns for r, _ in heard]
+    for r, a in amendments:
+        k = max((i for i, s in enumerate(subtasks)
+                 if s.vehicle == a.vehicle and s.t_i == a.t_i and at[i] <= r.log_ns),
+                default=None)
+        if k is None:
+            continue  # its subtask was not recorded
+        subtasks[k] = dataclasses.replace(
+            subtasks[k], t_end=a.t_end, t_done=a.t_done,
+            steps=tuple(tuple(st) for st in a.steps),
+            intervals=tuple(tuple(iv) for iv in a.intervals))
+    return subtasks
 
 
 def dispatcher_restarts(recording: Recording) -> list[Restart]:

@@ -20,7 +20,9 @@ from typing import IO, Any
 from mcap.writer import CompressionType, Writer
 
 from fleet import __version__
-from fleet.mission.spec import Mission
+from fleet.mission.battery import start_piles
+from fleet.mission.spec import Mission, MissionKind
+from fleet.planning.trajectory import Pose
 from fleet.recording.format import (
     LAYOUT_ATTACHMENT,
     MESSAGE_ENCODING,
@@ -52,11 +54,14 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
     """What a recording says about its run (the dispatcher publishes it): with this
     process's package versions and, without `command`, its command line."""
     starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
+    if mission.kind is MissionKind.ORDERS and not mission.starts:
+        starts = [Pose(p.cell, 0) for p in start_piles(layout, vehicles)]
     versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
                 "mcap": _package_version("mcap")}
     return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
                        mission.strategy.value, vehicles, mission.seed, clock, speed,
-                       [str(p) for p in starts], command or " ".join(sys.argv), versions)
+                       [str(p) for p in starts], command or " ".join(sys.argv), versions,
+                       mission.orders)
 
 
 def _package_version(name: str) -> str:

@@ -13,6 +13,7 @@ from pathlib import Path
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.engine import EngineOptions
+from fleet.mission.order_work import DEFAULT_ORDERS
 from fleet.mission.spec import Mission, MissionKind
 from fleet.runtime.argtypes import (
     endpoint,
@@ -110,13 +111,17 @@ class BusFlags:
 def add_mission_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--layout", default="paper", type=layout_arg,
                    help="layout name or TOML file (default paper)")
-    p.add_argument("--mission", choices=[k.value for k in MissionKind], default="fill",
+    p.add_argument("--mission", choices=[k.value for k in MissionKind], default=None,
                    help="fill: goods from the stations to the stacks, in each cluster's fill "
-                   "order; empty: from the stacks back to the stations, in reverse (default "
-                   "fill)")
-    p.add_argument("--strategy", choices=[s.value for s in Strategy], default="ann",
-                   help="how the dispatcher picks each forklift's next goal (default ann; "
-                   "each is described below)")
+                   "order; empty: from the stacks back to the stations, in reverse; orders "
+                   "(seed 002's lane layouts): shelves fetched to packing stations and put "
+                   "back (default: orders on a layout with shelf slots, else fill)")
+    p.add_argument("--orders", type=positive_int, default=None, metavar="N",
+                   help=f"an order mission of N orders, released at once on shelves drawn "
+                   f"with --seed (default {DEFAULT_ORDERS} for an order mission)")
+    p.add_argument("--strategy", choices=[s.value for s in Strategy], default=None,
+                   help="how the dispatcher picks each vehicle's next goal (default ann; "
+                   "nearest, the only one, for order missions; each is described below)")
     p.add_argument("--vehicles", type=positive_int, default=None,
                    help="fleet size (default: every start pose of the layout)")
     p.add_argument("--seed", type=integer, default=0,
@@ -128,16 +133,35 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
                    "layout)")
 
 
-def mission_from_args(args: argparse.Namespace) -> Mission:
-    return Mission(layout=args.layout, kind=MissionKind(args.mission),
-                   strategy=Strategy(args.strategy), vehicles=args.vehicles, seed=args.seed)
+def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) -> Mission:
+    """The mission the flags give; what they leave open follows the layout when given (a
+    layout with shelf slots runs order missions)."""
+    if args.mission is not None:
+        kind = MissionKind(args.mission)
+    elif args.orders is not None or (layout is not None and layout.slots):
+        kind = MissionKind.ORDERS
+    else:
+        kind = MissionKind.FILL
+    orders = kind is MissionKind.ORDERS
+    if args.orders is not None and not orders:
+        raise UserError(f"--orders is for order missions, not --mission {kind.value}")
+    if args.strategy is None:
+        strategy = Strategy.NEAREST if orders else Strategy.ANN
+    else:
+        strategy = Strategy(args.strategy)
+    if (strategy is Strategy.NEAREST) != orders:
+        raise UserError(f"--strategy {strategy.value} does not dispatch {kind.value} missions: "
+                        f"order missions take nearest, fill and empty the other strategies")
+    return Mission(layout=args.layout, kind=kind, strategy=strategy, vehicles=args.vehicles,
+                   seed=args.seed, orders=(args.orders or DEFAULT_ORDERS) if orders else 0)
 
 
 def mission_argv(mission: Mission) -> list[str]:
     """The flags that give `mission` (its layout's start poses: it has no others)."""
     fleet = [] if mission.vehicles is None else ["--vehicles", str(mission.vehicles)]
-    return ["--layout", mission.layout, "--mission", mission.kind.value, "--strategy",
-            mission.strategy.value, *fleet, "--seed", str(mission.seed)]
+    orders = ["--orders", str(mission.orders)] if mission.kind is MissionKind.ORDERS else []
+    return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
+            "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
 
 
 def engine_options(mission: Mission, layout: Layout, weights: Path | None,

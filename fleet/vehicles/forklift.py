@@ -9,9 +9,8 @@ stays inside the reservation.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from fleet.params import ManeuverTimes, VehicleDims
 from fleet.planning.geometry import Cell
@@ -26,8 +25,11 @@ from fleet.planning.maneuvers import (
 )
 from fleet.planning.planner import HybridAStar, PlannerCache
 from fleet.planning.reservations import ReservationView
-from fleet.planning.trajectory import Pose, Step, Trajectory
+from fleet.planning.trajectory import PlanFailure, Pose, Step, Trajectory
 from fleet.vehicles.kind import Commitment, ConflictPolicy, Outline, Placement
+
+if TYPE_CHECKING:
+    from fleet.world.layout import Layout
 
 
 class ReserveWholeTrajectory:
@@ -35,7 +37,8 @@ class ReserveWholeTrajectory:
     trajectory as planned, the vehicle's parking released from its start: conflict-free by
     construction, and only the vehicle being planned is ever delayed."""
 
-    def commitment(self, trajectory: Trajectory, view: ReservationView) -> Commitment:
+    def commitment(self, trajectory: Trajectory, view: ReservationView
+                   ) -> Commitment | PlanFailure:
         return Commitment(trajectory, trajectory.intervals, trajectory.t_start)
 
 
@@ -44,7 +47,6 @@ class Forklift:
     dims: VehicleDims = VehicleDims()
     cell_size: float = 2.0
     name: ClassVar[str] = "forklift"
-    conflict_policy: ClassVar[ConflictPolicy] = ReserveWholeTrajectory()
 
     @property
     def outline(self) -> Outline:
@@ -87,5 +89,11 @@ class Forklift:
     def planner(self, grid: GridMap) -> HybridAStar:
         return HybridAStar(grid, self.dims)
 
-    def planners(self, grid_for: Callable[[frozenset[Cell]], GridMap]) -> PlannerCache:
-        return PlannerCache(grid_for, self.dims)
+    def planners(self, layout: Layout) -> ForkliftPlanners:
+        return ForkliftPlanners(layout.grid_map, self.dims)
+
+
+class ForkliftPlanners(PlannerCache):
+    """A hybrid A* per fill state, and legs committed whole."""
+
+    policy: ClassVar[ConflictPolicy] = ReserveWholeTrajectory()

@@ -23,13 +23,23 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Protocol
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
-from fleet.planning.reservations import Interval, ReservationView
+from fleet.planning.reservations import (
+    Amendment,
+    Interval,
+    ReservationView,
+    ReservationWriter,
+    TimedRoute,
+    WriteResult,
+)
 from fleet.planning.trajectory import PlanFailure, Pose, Step, Trajectory
+
+if TYPE_CHECKING:  # the world wing sits above this one (it checks layouts with a kind)
+    from fleet.world.layout import Layout
 
 
 @dataclass(frozen=True)
@@ -55,13 +65,31 @@ class Placement:
 
 
 @dataclass(frozen=True)
+class AmendedLeg:
+    """Another vehicle's committed leg, postponed by a commit: what the store changes, and
+    what that vehicle drives instead."""
+
+    amendment: Amendment
+    trajectory: Trajectory
+
+
+@dataclass(frozen=True)
 class Commitment:
     """What one planned leg asks of the reservation store, all or nothing: the vehicle's
-    holdings from `release_from` on become `intervals`; it then drives `trajectory`."""
+    holdings from `release_from` on become `intervals` (with the route in time they come
+    from, where the kind shares one); it then drives `trajectory`. `amends` postpone other
+    vehicles' legs in the same step (seed 002's collision rules)."""
 
     trajectory: Trajectory
     intervals: tuple[Interval, ...]
     release_from: float
+    amends: tuple[AmendedLeg, ...] = ()
+    route: TimedRoute | None = None
+
+    def write(self, store: ReservationWriter) -> WriteResult:
+        """Ask the store for it (all or nothing)."""
+        return store.commit(self.trajectory.vehicle, self.intervals, self.release_from,
+                            tuple(a.amendment for a in self.amends), route=self.route)
 
 
 class Planner(Protocol):
@@ -100,22 +128,29 @@ class Planner(Protocol):
         ...
 
 
-class Planners(Protocol):
-    """Planners by fill state (the stacks holding goods), built on demand."""
-
-    def get(self, filled: frozenset[Cell]) -> Planner: ...
-
-
 class ConflictPolicy(Protocol):
     """How a kind keeps its vehicles apart: what a planned leg commits, given the table as
     the planner saw it."""
 
-    def commitment(self, trajectory: Trajectory, view: ReservationView) -> Commitment: ...
+    def commitment(self, trajectory: Trajectory, view: ReservationView
+                   ) -> Commitment | PlanFailure:
+        """What to commit, or why nothing can be (seed 002: a collision the rules cannot
+        settle)."""
+        ...
+
+
+class Planners(Protocol):
+    """Planners by fill state (the stacks holding goods), built on demand, and the conflict
+    policy their legs are committed by, for one warehouse."""
+
+    @property
+    def policy(self) -> ConflictPolicy: ...
+
+    def get(self, filled: frozenset[Cell]) -> Planner: ...
 
 
 class VehicleKind(Protocol):
     name: ClassVar[str]  # what a layout's [vehicle] kind says
-    conflict_policy: ConflictPolicy
 
     @property
     def outline(self) -> Outline: ...
@@ -156,6 +191,6 @@ class VehicleKind(Protocol):
     # -- the planner ---------------------------------------------------------------------------
     def planner(self, grid: GridMap) -> Planner: ...
 
-    def planners(self, grid_for: Callable[[frozenset[Cell]], GridMap]) -> Planners:
-        """Planners for the fill states of one warehouse (`grid_for`: its static map)."""
+    def planners(self, layout: Layout) -> Planners:
+        """Planners for the fill states of one warehouse, and its conflict policy."""
         ...

@@ -6,14 +6,17 @@ from collections.abc import Callable
 
 from fleet.errors import UserError
 from fleet.params import VehicleDims
+from fleet.vehicles.agv import Agv
 from fleet.vehicles.forklift import Forklift
 from fleet.vehicles.kind import VehicleKind
 
-KINDS: dict[str, Callable[[VehicleDims, float], VehicleKind]] = {Forklift.name: Forklift}
+KINDS: dict[str, Callable[[VehicleDims, float], VehicleKind]] = {Forklift.name: Forklift,
+                                                                Agv.name: Agv}
 
 # Kinds a layout may already name though no module implements them yet: such a layout loads,
 # shows and checks, and whatever would drive one refuses in one line (KindNotBuilt).
-PLANNED: dict[str, str] = {"agv": "seed 002's one-cell AGV on directed lanes (issue 20)"}
+PLANNED: dict[str, str] = {"lifting-agv": "seed 004's lifting AGV that drives under shelves "
+                                       "(issue 21)"}
 
 
 class UnknownVehicleKind(UserError):

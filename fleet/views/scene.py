@@ -122,8 +122,8 @@ class SceneViews:
 
     def __init__(self, layout: Layout, base_ns: int, kind: str = "fill",
                  vehicles: int = 1) -> None:
-        if kind not in ("fill", "empty"):
-            raise ValueError(f"mission kind {kind!r} is not 'fill' or 'empty'")
+        if kind not in ("fill", "empty", "orders"):
+            raise ValueError(f"mission kind {kind!r} is not 'fill', 'empty' or 'orders'")
         self.layout = layout
         self.vehicles = vehicles
         self.latest: dict[int, VehicleState] = {}  # each forklift's last state shown
@@ -133,8 +133,9 @@ class SceneViews:
         self.base_ns = base_ns
         self.kind = kind
         self._stacks = {(s.cluster, s.index): s.cell for s in layout.stacks}
-        # An empty mission starts with goods on every stack; StackDone removes them.
-        self.goods: set[Cell] = set() if kind == "fill" else {s.cell for s in layout.stacks}
+        # An empty mission starts with goods on every stack; StackDone removes them. (An
+        # order mission's shelves are in the layout's slots: it has no stacks.)
+        self.goods: set[Cell] = {s.cell for s in layout.stacks} if kind == "empty" else set()
         self.reserved: dict[int, list[_Reserved]] = {}  # forklift -> its reservations
         # Reserved cells are drawn tens of thousands of times: their poses are built once.
         self._cell_pose: dict[Cell, Pose] = {}
@@ -238,7 +239,7 @@ class SceneViews:
         """The body rectangle of geometry.body_corners (from `rear` behind the rear-axle point
         to `front` ahead of it), an arrow along the heading, the goods on the forks (the rear)
         when loaded, and the forklift's number."""
-        dims = self.layout.vehicle.dims
+        dims = self.layout.vehicle_kind.outline  # front, rear and width of the body
         x, y, theta = state.x, state.y, state.theta
         c, s = math.cos(theta), math.sin(theta)
         yaw = _yaw(theta)

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from fleet.planning.maneuvers import Manner
 from fleet.planning.reservations import Amendment, Change, Interval
-from fleet.planning.trajectory import Pose, Step
+from fleet.planning.trajectory import Pose, Step, step_manner
 from fleet.planning.velocity import Speed
 from fleet.wire.protocol import (
     ProtocolError,
@@ -36,7 +35,7 @@ def step_to_wire(s: Step) -> WireStep:
 def step_from_wire(step: WireStep, where: str) -> Step:
     label, start, end, t0, t1, v0, v1, cells = step
     try:
-        manner, s0, s1 = Manner.from_label(label), Speed(v0), Speed(v1)
+        manner, s0, s1 = step_manner(label), Speed(v0), Speed(v1)
     except ValueError as exc:
         raise ProtocolError(f"{where}: {exc}") from None
     if not t0 < t1:

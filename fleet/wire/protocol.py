@@ -17,8 +17,7 @@ from typing import Annotated, Any, ClassVar
 
 import msgpack
 
-from fleet.planning.maneuvers import Manner
-from fleet.planning.trajectory import Pose
+from fleet.planning.trajectory import Pose, step_manner
 
 SCHEMA_VERSION = 1
 MAX_PAYLOAD = 16 * 1024 * 1024  # no legitimate message comes near this
@@ -29,12 +28,12 @@ class ProtocolError(ValueError):
 
 
 def _maneuver_label(text: str) -> None:
-    Manner.from_label(text)
+    step_manner(text)
 
 
 def _maneuver_or_rest(text: str) -> None:
     if text:
-        Manner.from_label(text)
+        step_manner(text)
 
 
 # Strings with a syntax of their own: `decode` checks them too (the validator raises
@@ -274,7 +273,7 @@ class MissionInfo(Message):
     TYPE: ClassVar[str] = "dispatch.mission"
     layout: str  # the layout's name
     layout_toml: str  # the layout itself, so a recording stands on its own
-    kind: str  # "fill" or "empty"
+    kind: str  # "fill", "empty" or "orders"
     strategy: str
     vehicles: int
     seed: int
@@ -283,6 +282,7 @@ class MissionInfo(Message):
     starts: list[str]  # start pose of forklift 1..N
     command: str = ""
     versions: dict = field(default_factory=dict)
+    orders: int = 0  # an order mission's orders (kind "orders")
 
 
 @dataclass(frozen=True)
@@ -298,6 +298,21 @@ class SubtaskEvent(Message):
     t_end: float
     t_done: float  # after claiming / unloading
     postponed: bool
+    steps: list[RecordStep]
+    intervals: list[WireInterval]
+
+
+@dataclass(frozen=True)
+class LegAmended(Message):
+    """A vehicle's last committed leg, postponed by another vehicle's commit (seed 002's
+    collision rules): the subtask decided at t_i now drives these steps, and ends (and is
+    done) that much later."""
+
+    TYPE: ClassVar[str] = "dispatch.amended"
+    vehicle: int
+    t_i: float
+    t_end: float
+    t_done: float
     steps: list[RecordStep]
     intervals: list[WireInterval]
 
@@ -512,7 +527,7 @@ TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls for cls in (VehicleState, CommitRequest, ReleaseRequest, Reply,
                               SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionStopped,
-                              MissionInfo, SubtaskEvent, StackDone, DecisionFailure,
+                              MissionInfo, SubtaskEvent, LegAmended, StackDone, DecisionFailure,
                               DeadlockSeen, RecorderStatus, HaltRequest, ResumeRequest, Halt,
                               Resume, StackReopened, ZoneClosed, VehicleFault, InjectFault,
                               StatusRequest, VehicleStatus, VehicleClaim, ClaimReply)

@@ -28,6 +28,7 @@ from fleet.wire.protocol import (
     Halt,
     HaltRequest,
     InjectFault,
+    LegAmended,
     Message,
     MissionDone,
     MissionInfo,
@@ -166,6 +167,8 @@ class Keys:
                              (MissionInfo,), DISPATCHER)
     dispatch_progress = Topic("dispatch/progress", TopicKind.PUBLICATION, (Progress,), DISPATCHER)
     dispatch_subtask = Topic("dispatch/subtask", TopicKind.PUBLICATION, (SubtaskEvent,), DISPATCHER)
+    dispatch_amended = Topic("dispatch/amended", TopicKind.PUBLICATION, (LegAmended,),
+                             DISPATCHER)
     dispatch_stack = Topic("dispatch/stack", TopicKind.PUBLICATION, (StackDone,), DISPATCHER)
     dispatch_failure = Topic("dispatch/failure", TopicKind.PUBLICATION, (DecisionFailure,),
                              DISPATCHER)
