@@ -21,9 +21,10 @@ from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.bus import Requester, RequestFailed
 from fleet.runtime.tasks import result_from_wire, task_to_wire
 from fleet.vehicles.kind import VehicleKind
-from fleet.wire.convert import step_to_wire
+from fleet.wire.convert import leg_from_wire, step_to_wire
 from fleet.wire.protocol import (
     GOODS,
+    AmendRequest,
     HaltRequest,
     Message,
     Reply,
@@ -55,6 +56,7 @@ class RemoteExecutor:
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.task_requester = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
         self.rejections: list[str] = []  # commits the store refused before an agent replanned
+        self.amended: list[Trajectory] = []  # others' legs the commits postponed, not taken
 
     @property
     def store(self) -> ReservationTable:
@@ -73,9 +75,8 @@ class RemoteExecutor:
                                   f"holds {self.mirror.table.reservations(vehicle)})")
 
     def take_amended(self) -> list[Trajectory]:
-        # Only seed 002's AGVs amend, and they do not run as processes yet (the reservation
-        # service does not carry routes in time: docs/agv-002.md).
-        return []
+        taken, self.amended = self.amended, []
+        return taken
 
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         message = task_to_wire(task, self.task_requester.next_id(), self.mirror.revision)
@@ -92,6 +93,11 @@ class RemoteExecutor:
         result = result_from_wire(reply)
         if isinstance(result, Trajectory):
             self._sync(reply.revision)
+            for k, wire in enumerate(reply.amended):  # each AGV postponed drives it so
+                leg = leg_from_wire(wire, f"{reply.TYPE}.amended[{k}]")
+                self._tell(leg.vehicle, AmendRequest(self.task_requester.next_id(),
+                                                     leg.vehicle, wire), task.t_i)
+                self.amended.append(leg)
         return result
 
     def reserve_goods(self, intervals: Sequence[Interval]) -> None:

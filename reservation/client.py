@@ -17,7 +17,7 @@ import zenoh
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Amendment, Interval, TimedRoute, WriteResult
 from fleet.runtime.bus import Requester, RequestFailed, received
-from fleet.wire.convert import amends_to_wire, intervals_to_wire
+from fleet.wire.convert import amends_to_wire, intervals_to_wire, route_to_wire
 from fleet.wire.protocol import (
     CommitRequest,
     Message,
@@ -58,13 +58,9 @@ class ReservationClient:
         amends, since); `deadline`, the Unix time after which it is refused. `request_id`
         names the commit (by default a fresh one), so a restarted sender that repeats a
         commit under its old id is answered as before."""
-        if route is not None or any(a.route is not None for a in amends):
-            # Seed 002's AGVs share their routes in time through the store; the service
-            # does not carry them yet, so they run in one process only (docs/agv-002.md).
-            raise ValueError("the reservation service does not carry routes in time yet")
         request = CommitRequest(request_id or self.requester.next_id(), vehicle,
                                 intervals_to_wire(intervals), release_from, based_on, deadline,
-                                amends_to_wire(amends))
+                                amends_to_wire(amends), route_to_wire(route))
         return self._write(request)
 
     def release(self, vehicle: int, from_t: float = -INF,

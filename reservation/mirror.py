@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from fleet.planning.reservations import Reservation, ReservationTable, Snapshot
-from fleet.wire.convert import change_from_wire
+from fleet.wire.convert import change_from_wire, route_from_wire
 from fleet.wire.protocol import WireChange, WireSnapshot, build_message
 
 MAX_BUFFERED = 10_000
@@ -56,7 +56,9 @@ class TableMirror:
             else:
                 self.table.load(Snapshot(
                     snapshot.revision, tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1
-                                             in snapshot.reservations)))
+                                             in snapshot.reservations),
+                    tuple((v, route) for v, wire in snapshot.routes
+                          if (route := route_from_wire(wire)) is not None)))
             self.synced = True
             self._drain()
 

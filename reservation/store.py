@@ -8,12 +8,14 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.planning.reservations import Amendment, Change, Interval, ReservationTable
+from fleet.planning.reservations import Amendment, Change, Interval, ReservationTable, TimedRoute
 from fleet.wire.convert import (
     amends_from_wire,
     change_from_wire,
     change_to_wire,
     intervals_from_wire,
+    route_from_wire,
+    route_to_wire,
 )
 from fleet.wire.protocol import (
     CommitRequest,
@@ -80,6 +82,7 @@ class ReservationStore:
         try:
             intervals = intervals_from_wire(request.intervals)  # the one validation
             amends = amends_from_wire(request.amends)
+            route = route_from_wire(request.route)
         except ValueError as exc:
             return Outcome(Reply(request.request_id, False, self.revision, reason=str(exc)))
         refusal = self._halted_since(request.based_on,
@@ -92,7 +95,7 @@ class ReservationStore:
             self._remember(reply)
             return Outcome(reply)
         if amends:
-            return self._amend(request, intervals, amends)
+            return self._amend(request, intervals, amends, route)
         # Only other vehicles' intervals can conflict, so releasing first changes nothing here.
         conflict = self.table.first_conflict(request.vehicle, intervals)
         if conflict is not None:
@@ -105,8 +108,8 @@ class ReservationStore:
         revision = self.revision + 1
         return self._accept(
             WireChange(revision, "commit", request.vehicle, request.intervals,
-                       request.release_from, request.request_id),
-            Change(revision, request.vehicle, request.release_from, intervals))
+                       request.release_from, request.request_id, route=request.route),
+            Change(revision, request.vehicle, request.release_from, intervals, route=route))
 
     def _halted_since(self, based_on: int | None, vehicles: list[int]) -> str:
         """Why a commit issued at table revision `based_on` may no longer change these
@@ -119,13 +122,14 @@ class ReservationStore:
         return ""
 
     def _amend(self, request: CommitRequest, intervals: tuple[Interval, ...],
-               amends: tuple[Amendment, ...]) -> Outcome:
+               amends: tuple[Amendment, ...], route: TimedRoute | None) -> Outcome:
         """A commit that postpones other vehicles' holdings: checked whole, then journaled
         in one write and published as the table's steps (`ReservationTable.amended`). The
         last carries the request's id, so a retry after a lost reply is answered as the
         first time; the others name it as the request they are part of, so a journal cut
         short inside them replays none of them."""
-        planned = self.table.amended(request.vehicle, intervals, request.release_from, amends)
+        planned = self.table.amended(request.vehicle, intervals, request.release_from, amends,
+                                     route)
         if not isinstance(planned, list):
             reply = Reply(request.request_id, False, self.revision, reason=planned) \
                 if isinstance(planned, str) else \
@@ -170,7 +174,9 @@ class ReservationStore:
                                 diff=True)
         rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1)
                 for r in self.table.reservations()]
-        return WireSnapshot(self.revision, rows)
+        snap = self.table.snapshot()
+        return WireSnapshot(self.revision, rows,
+                            routes=[(v, route_to_wire(r)) for v, r in snap.routes])
 
     def close(self) -> None:
         if self.journal is not None:

@@ -138,7 +138,6 @@ def test_fleet_run_runs_an_order_mission_in_process_and_its_recording_passes(tmp
 
 
 @pytest.mark.parametrize("argv, says", [
-    (["--orders", "10"], "seed 002's AGVs run in one process only so far (give --inprocess)"),
     (["--orders", "10", "--inprocess", "--strategy", "ann"],
      "--strategy ann does not dispatch orders missions"),
     (["--orders", "10", "--inprocess", "--vehicles", "40"],
@@ -156,3 +155,31 @@ def test_a_stack_mission_on_a_lane_layout_is_refused_naming_what_it_runs():
     with pytest.raises(Exception, match="layout paper002 has no stacks for a fill mission: "
                                         "it runs order missions"):
         Engine(Mission(layout="paper002", kind=MissionKind.FILL), EngineOptions())
+
+
+def test_an_amendment_with_a_route_may_retake_later_a_cell_its_agv_had_just_left():
+    """An AGV arrived at (0, 0) from (1, 0) at t=2 and leaves at once back over (1, 0): the
+    table holds (1, 0) as one interval across t=2. Postponed to wait at (0, 0) first, it
+    leaves (1, 0) free for a while: allowed, since its route has it on (0, 0) at t=2; the
+    cell it stands on must still be held on without a gap."""
+    def arrived() -> ReservationTable:
+        table = ReservationTable()
+        assert table.commit(1, [Interval((1, 0), 1.0, 2.0), Interval((0, 0), 1.0, INF)]).ok
+        leg = [Interval((0, 0), 2.0, 3.0), Interval((1, 0), 2.0, 4.0),
+               Interval((2, 0), 3.0, INF)]
+        assert table.commit(1, leg, release_from=2.0).ok
+        return table
+
+    table = arrived()
+    waited = (Interval((0, 0), 2.0, 8.0), Interval((1, 0), 7.0, 9.0),
+              Interval((2, 0), 8.0, INF))
+    route = TimedRoute(((0, 0), (1, 0), (2, 0)), (2.0, 8.0, 9.0), (5.0, 0.0, INF))
+    without = table.commit(2, [Interval((5, 5), 0.0, INF)], None,
+                           [Amendment(1, 2.0, waited)])
+    assert not without.ok and "cell (1, 0)" in without.reason
+    assert table.commit(2, [Interval((5, 5), 0.0, INF)], None,
+                        [Amendment(1, 2.0, waited, route)]).ok
+    assert table.conflict(3, (1, 0), 2.5, 6.5) is None  # free while it waits
+    gap = (Interval((0, 0), 4.0, 8.0), *waited[1:])  # leaves the cell it stands on a while
+    refused = arrived().commit(2, [], None, [Amendment(1, 2.0, gap, route)])
+    assert not refused.ok and "cell (0, 0)" in refused.reason

@@ -34,8 +34,9 @@ from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
 from fleet.runtime.lifecycle import Stopped
 from fleet.runtime.tasks import result_to_wire, task_from_wire
 from fleet.vehicles.kind import Commitment
-from fleet.wire.convert import step_from_wire, step_to_wire
+from fleet.wire.convert import leg_from_wire, step_from_wire, step_to_wire
 from fleet.wire.protocol import (
+    AmendRequest,
     ClockAck,
     ClockTick,
     HaltRequest,
@@ -207,13 +208,15 @@ class Agent:
     # -- tasks ---------------------------------------------------------------------------------
     def _answer(self, query: zenoh.Query) -> None:
         try:
-            message = asked(query, (TaskRequest, HaltRequest, ResumeRequest, StatusRequest),
-                            log)
+            message = asked(query, (TaskRequest, HaltRequest, AmendRequest, ResumeRequest,
+                                    StatusRequest), log)
             if message is None:
                 return
             if not isinstance(message, TaskRequest):
                 if isinstance(message, HaltRequest):
                     reply = self._halt(message)
+                elif isinstance(message, AmendRequest):
+                    reply = self._amend(message)
                 elif isinstance(message, ResumeRequest):
                     reply = self._resume(message)
                 else:
@@ -255,7 +258,8 @@ class Agent:
             log.info("committing task %s (attempt %d)", message.task_id, attempt + 1)
             start = self.clock.wall_at(result.t_start)
             written = self.reservations.commit(
-                self.vehicle, leg.intervals, leg.release_from, based_on=message.revision,
+                self.vehicle, leg.intervals, leg.release_from,
+                tuple(a.amendment for a in leg.amends), leg.route, based_on=message.revision,
                 deadline=None if start is None else start - COMMIT_SLACK_S,
                 request_id=f"{self.sender}:{message.task_id}:{attempt}")
             if written.ok:
@@ -263,7 +267,7 @@ class Agent:
                     self.drive.add(result, task.loaded)
                 self.last_kind = message.kind
                 return result_to_wire(message.task_id, self.vehicle, result, written.revision,
-                                      rejections)
+                                      rejections, [a.trajectory for a in leg.amends])
             rejections.append(written.reason)
             if written.conflict_vehicle is None:  # halted since, or too late: no replanning
                 return self._failed(message, FailureReason.REFUSED, written.reason, rejections)
@@ -286,6 +290,22 @@ class Agent:
         if self.slow > 1:  # an injected slow planner: as if the search ran on a slower CPU
             time.sleep((self.slow - 1) * (time.perf_counter() - started))
         return result
+
+    def _amend(self, message: AmendRequest) -> Reply:
+        """Another AGV's commit postponed our last leg (seed 002's collision rules): drive
+        the amended one. It differs only after the instant it was committed at, which the
+        states published so far have not reached."""
+        try:
+            if message.vehicle != self.vehicle:
+                raise ValueError(f"amendment for vehicle {message.vehicle} sent to "
+                                 f"{self.vehicle}")
+            leg = leg_from_wire(message.leg, message.TYPE)
+            with self.drive_lock:
+                self.drive.amend(leg)
+        except ValueError as exc:  # ProtocolError too
+            return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
+        log.info("leg from t=%.2f amended: now ends at t=%.2f", leg.t_start, leg.t_end)
+        return Reply(message.request_id, True, self.mirror.revision)
 
     # -- faults (docs/faults.md) ---------------------------------------------------------------
     def _halt(self, message: HaltRequest) -> Reply:

@@ -191,10 +191,6 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
     if mission.kind is MissionKind.ORDERS:
         n = order_fleet(layout, mission.vehicles)
-        if not args.inprocess:
-            raise UserError(f"layout {layout.name}: seed 002's AGVs run in one process only "
-                            f"so far (give --inprocess): the reservation service does not "
-                            f"carry their routes in time yet (docs/agv-002.md)")
         if args.faults:
             raise UserError("order missions take no faults yet (--faults)")
     else:

@@ -57,6 +57,19 @@ class TimedRoute:
             raise ValueError("a timed route has one arrival and one dwell per node, and a node")
 
 
+def _on_at(route: TimedRoute, t: float) -> frozenset[Cell]:
+    """The cells a route has its unit body on at t: the node it stands on (at a departure
+    instant still), or both ends of the move it makes and the cells a diagonal sweeps."""
+    cells, arrivals, dwells = route.cells, route.arrivals, route.dwells
+    for m, cell in enumerate(cells):
+        if arrivals[m] <= t <= arrivals[m] + dwells[m]:
+            return frozenset({cell})
+        if m + 1 < len(cells) and t < arrivals[m + 1]:
+            (c0, r0), (c1, r1) = cell, cells[m + 1]
+            return frozenset({cell, cells[m + 1], (c0, r1), (c1, r0)})
+    return frozenset()
+
+
 @dataclass(frozen=True)
 class Conflict:
     """An interval that cannot be reserved because another vehicle holds the cell."""
@@ -127,6 +140,7 @@ class Change:
 class Snapshot:
     revision: int
     reservations: tuple[Reservation, ...]
+    routes: tuple[tuple[int, TimedRoute], ...] = ()  # (vehicle, its route), where it has one
 
 
 class ReservationView(Protocol):
@@ -321,14 +335,17 @@ class ReservationTable:
         """Why the amendment is not a postponement of what the vehicle holds from its
         release on ("" if it is): the same cells, each taken no earlier and held no shorter
         (waits only lengthen a stay and push what follows later), and a cell it holds across
-        the release instant held on without a gap."""
+        the release instant held on without a gap. With a route, only the cells the route
+        has the vehicle on at that instant count as held across: a cell it left just then
+        (held on by its next move, merged into one interval) may be taken again later."""
+        on = None if a.route is None else _on_at(a.route, a.release_from)
         before: dict[Cell, list[tuple[float, float, bool]]] = {}  # (t0, t1, held across)
         for cell in self._cells_of.get(a.vehicle, ()):
             line = self._cells[cell]
             for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
                 if owner == a.vehicle and t1 > a.release_from:
-                    before.setdefault(cell, []).append(
-                        (max(t0, a.release_from), t1, t0 < a.release_from))
+                    across = t0 < a.release_from and (on is None or cell in on)
+                    before.setdefault(cell, []).append((max(t0, a.release_from), t1, across))
         after: dict[Cell, list[tuple[float, float]]] = {}
         for iv in sorted(a.intervals):  # from the release on, merged as the table would
             if iv.t1 <= a.release_from:
@@ -424,7 +441,8 @@ class ReservationTable:
 
     # -- wire forms ----------------------------------------------------------------------------
     def snapshot(self) -> Snapshot:
-        return Snapshot(self.revision, tuple(self.reservations()))
+        return Snapshot(self.revision, tuple(self.reservations()),
+                        tuple(sorted(self._routes.items())))
 
     @classmethod
     def from_snapshot(cls, snap: Snapshot) -> ReservationTable:
@@ -441,6 +459,7 @@ class ReservationTable:
         for vehicle, intervals in sorted(by_vehicle.items()):
             for iv in intervals:
                 self._insert(vehicle, iv)
+        self._routes = dict(snap.routes)
         self.revision = snap.revision
 
     def diff(self, since: int) -> list[Change]:

@@ -4,12 +4,15 @@ enum values, time order) and raises ProtocolError naming the field."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.seam import Task
 from fleet.planning.trajectory import FailureReason, PlanFailure, Trajectory
 from fleet.wire.convert import (
     intervals_from_wire,
     intervals_to_wire,
+    leg_to_wire,
     pose_from_wire,
     step_from_wire,
     step_to_wire,
@@ -36,7 +39,7 @@ def task_from_wire(message: TaskRequest) -> Task:
 
 
 def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure, revision: int,
-                   rejections: list[str]) -> TaskResult:
+                   rejections: list[str], amended: Sequence[Trajectory] = ()) -> TaskResult:
     if isinstance(result, PlanFailure):
         return TaskResult(task_id, vehicle, False, revision, failure=result.reason.value,
                           detail=result.detail, expansions=result.expansions,
@@ -44,7 +47,7 @@ def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure,
     return TaskResult(task_id, vehicle, True, revision, str(result.start), str(result.goal),
                       result.t_start, [step_to_wire(s) for s in result.steps],
                       intervals_to_wire(result.intervals), result.expansions,
-                      rejections=rejections)
+                      rejections=rejections, amended=[leg_to_wire(leg) for leg in amended])
 
 
 def result_from_wire(message: TaskResult) -> Trajectory | PlanFailure:

@@ -8,14 +8,16 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from fleet.planning.reservations import Amendment, Change, Interval
-from fleet.planning.trajectory import Pose, Step, step_manner
+from fleet.planning.reservations import Amendment, Change, Interval, TimedRoute
+from fleet.planning.trajectory import Pose, Step, Trajectory, step_manner
 from fleet.planning.velocity import Speed
 from fleet.wire.protocol import (
     ProtocolError,
     WireAmend,
     WireChange,
     WireInterval,
+    WireLeg,
+    WireRoute,
     WireStep,
 )
 
@@ -53,31 +55,64 @@ def intervals_from_wire(wire: Iterable[WireInterval]) -> tuple[Interval, ...]:
     return tuple(Interval((c, r), t0, t1) for c, r, t0, t1 in wire)
 
 
+def route_to_wire(route: TimedRoute | None) -> WireRoute | None:
+    if route is None:
+        return None
+    return [list(c) for c in route.cells], list(route.arrivals), list(route.dwells)
+
+
+def route_from_wire(wire: WireRoute | None) -> TimedRoute | None:
+    """ValueError for a route whose lists do not match."""
+    if wire is None:
+        return None
+    cells, arrivals, dwells = wire
+    return TimedRoute(tuple((c, r) for c, r in cells), tuple(arrivals), tuple(dwells))
+
+
 def change_to_wire(change: Change) -> WireChange:
     """A table change as the reservation service publishes it (no request id: made in this
     process). Release cells go in sorted order."""
     cells = None if change.release_cells is None else sorted(change.release_cells)
     return WireChange(change.revision, change.op, change.vehicle,
                       intervals_to_wire(change.intervals), change.release_from,
-                      release_cells=cells)
+                      release_cells=cells, route=route_to_wire(change.route))
 
 
 def change_from_wire(change: WireChange) -> Change:
-    """A published change as the table applies it (ValueError for a bad interval)."""
+    """A published change as the table applies it (ValueError for a bad interval or
+    route)."""
     cells = None if change.release_cells is None else \
         frozenset((c, r) for c, r in change.release_cells)
     return Change(change.revision, change.vehicle, change.release_from,
-                  intervals_from_wire(change.intervals), cells, change.op)
+                  intervals_from_wire(change.intervals), cells, change.op,
+                  route_from_wire(change.route))
 
 
 def amends_to_wire(amends: Iterable[Amendment]) -> list[WireAmend]:
-    return [(a.vehicle, a.release_from, intervals_to_wire(a.intervals)) for a in amends]
+    return [(a.vehicle, a.release_from, intervals_to_wire(a.intervals),
+             route_to_wire(a.route)) for a in amends]
 
 
 def amends_from_wire(wire: Iterable[WireAmend]) -> tuple[Amendment, ...]:
-    """ValueError for an interval that does not end after it starts."""
-    return tuple(Amendment(v, release_from, intervals_from_wire(ivs))
-                 for v, release_from, ivs in wire)
+    """ValueError for an interval that does not end after it starts, or a bad route."""
+    return tuple(Amendment(v, release_from, intervals_from_wire(ivs), route_from_wire(route))
+                 for v, release_from, ivs, route in wire)
+
+
+def leg_to_wire(leg: Trajectory) -> WireLeg:
+    return (leg.vehicle, str(leg.start), str(leg.goal), leg.t_start,
+            [step_to_wire(s) for s in leg.steps], intervals_to_wire(leg.intervals))
+
+
+def leg_from_wire(wire: WireLeg, where: str) -> Trajectory:
+    """ProtocolError naming `where` for a bad step or interval."""
+    vehicle, start, goal, t_start, steps, intervals = wire
+    try:
+        held = intervals_from_wire(intervals)
+    except ValueError as exc:
+        raise ProtocolError(f"{where}: {exc}") from None
+    return Trajectory(vehicle, pose_from_wire(start, where), pose_from_wire(goal, where),
+                      t_start, tuple(step_from_wire(s, where) for s in steps), held, 0)
 
 
 def change_time(change: WireChange) -> float:

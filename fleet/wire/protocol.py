@@ -44,9 +44,12 @@ ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
 
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
-# (vehicle, release_from, intervals): another vehicle's holdings from release_from on,
-# postponed to these (a commit's `amends`; fleet/planning/reservations.py, Amendment).
-WireAmend = tuple[int, float, list[WireInterval]]
+# (cells, arrivals, dwells): a vehicle's route in time (fleet/planning/reservations.py,
+# TimedRoute), which seed 002's AGVs settle their collisions against.
+WireRoute = tuple[list[tuple[int, int]], list[float], list[float]]
+# (vehicle, release_from, intervals, route): another vehicle's holdings from release_from on,
+# postponed to these, and the route they come from (a commit's `amends`; Amendment).
+WireAmend = tuple[int, float, list[WireInterval], WireRoute | None]
 
 # Reservation owners that are no forklift (forklifts are 1..N), in every commit and change.
 GOODS = 0  # the goods on the stacks
@@ -87,6 +90,7 @@ class CommitRequest(Message):
     # Other vehicles' holdings postponed in the same step, all or nothing (seed 002's
     # collision rules may make an AGV already under way wait).
     amends: list[WireAmend] = field(default_factory=list)
+    route: WireRoute | None = None  # the route in time the intervals come from (seed 002)
 
 
 @dataclass(frozen=True)
@@ -133,6 +137,7 @@ class WireChange(Message):
     # A step of an amending commit before its last (which carries `request_id`): the
     # request it is part of, so a journal cut short inside the steps replays none of them.
     part_of: str = ""
+    route: WireRoute | None = None  # the vehicle's route in time from now on (seed 002)
 
 
 @dataclass(frozen=True)
@@ -144,11 +149,16 @@ class WireSnapshot(Message):
     reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
     changes: list[dict] = field(default_factory=list)  # encoded WireChange bodies, for diffs
     diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
+    routes: list[tuple[int, WireRoute]] = field(default_factory=list)  # vehicle, its route
 
 
 # (manner label, start pose, end pose, t0, t1, v0, v1, swept cells): one maneuver.
 WireStep = tuple[ManeuverLabel, PoseText, PoseText, float, float, int, int,
                  list[tuple[int, int]]]
+
+
+# (vehicle, start, goal, t_start, steps, intervals): a committed leg.
+WireLeg = tuple[int, PoseText, PoseText, float, list[WireStep], list[WireInterval]]
 
 
 @dataclass(frozen=True)
@@ -185,6 +195,7 @@ class TaskResult(Message):
     failure: str = ""  # a FailureReason value when not ok
     detail: str = ""
     rejections: list[str] = field(default_factory=list)  # commits the store refused first
+    amended: list[WireLeg] = field(default_factory=list)  # others' legs it postponed
 
 
 @dataclass(frozen=True)
@@ -371,6 +382,17 @@ class HaltRequest(Message):
 
 
 @dataclass(frozen=True)
+class AmendRequest(Message):
+    """The dispatcher tells an AGV that another's commit postponed its last leg (seed 002's
+    collision rules): it drives `leg` instead, the same leg with waits put in."""
+
+    TYPE: ClassVar[str] = "dispatch.amend_request"
+    request_id: str
+    vehicle: int
+    leg: WireLeg
+
+
+@dataclass(frozen=True)
 class ResumeRequest(Message):
     """A forklift that was down moves again from t_resume: it stood since t_stop part-way
     through `step` (or at rest at `pose`, without one), and completes that maneuver first."""
@@ -528,9 +550,10 @@ TYPES: dict[str, type[Message]] = {
                               SnapshotRequest, WireChange, WireSnapshot, TaskRequest, TaskResult,
                               ClockTick, ClockAck, Progress, MissionDone, MissionStopped,
                               MissionInfo, SubtaskEvent, LegAmended, StackDone, DecisionFailure,
-                              DeadlockSeen, RecorderStatus, HaltRequest, ResumeRequest, Halt,
-                              Resume, StackReopened, ZoneClosed, VehicleFault, InjectFault,
-                              StatusRequest, VehicleStatus, VehicleClaim, ClaimReply)
+                              DeadlockSeen, RecorderStatus, HaltRequest, AmendRequest,
+                              ResumeRequest, Halt, Resume, StackReopened, ZoneClosed,
+                              VehicleFault, InjectFault, StatusRequest, VehicleStatus,
+                              VehicleClaim, ClaimReply)
 }
 
 

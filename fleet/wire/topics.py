@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from enum import Flag, auto
 
 from fleet.wire.protocol import (
+    AmendRequest,
     ClockAck,
     ClockTick,
     CommitRequest,
@@ -152,7 +153,8 @@ class Keys:
     vehicle_state = Topic("vehicle/{vehicle}/state", TopicKind.PUBLICATION, (VehicleState,),
                           VEHICLE)
     vehicle_task = Topic("vehicle/{vehicle}/task", TopicKind.QUERYABLE,
-                         (TaskRequest, HaltRequest, ResumeRequest, StatusRequest), DISPATCHER)
+                         (TaskRequest, HaltRequest, AmendRequest, ResumeRequest, StatusRequest),
+                         DISPATCHER)
     vehicle_inject = Topic("vehicle/{vehicle}/inject", TopicKind.QUERYABLE, (InjectFault,),
                            INJECTOR)
     vehicle_fault = Topic("vehicle/{vehicle}/fault", TopicKind.PUBLICATION, (VehicleFault,),
