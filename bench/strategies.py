@@ -13,14 +13,14 @@ from pathlib import Path
 from fleet.dispatching.decision import Strategy
 from fleet.dispatching.scorer import load_scorer
 from fleet.mission.engine import EngineOptions, lower_bound, run_mission
-from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.spec import STACK_KINDS, Mission, MissionKind
 from fleet.world.layout_file import load_layout
 
 ORDER = (Strategy.ANN, Strategy.COMPREHENSIVE, Strategy.GREEDY, Strategy.TRAFFIC,
          Strategy.BALANCE)
 
 
-def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = tuple(MissionKind),
+def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = STACK_KINDS,
         weights: Path | None = None,
         progress: Callable[[str, int, int], None] | None = None) -> dict:
     layout = load_layout(layout_name)

@@ -17,6 +17,7 @@ from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.convert import step_from_wire
 from fleet.wire.protocol import GOODS, ProtocolError
 from fleet.world.layout import Layout
+from fleet.world.site import planners_for
 
 
 def pick_up(executor: RemoteExecutor, layout: Layout, kind: MissionKind, vehicles: list[int],
@@ -43,5 +44,5 @@ def pick_up(executor: RemoteExecutor, layout: Layout, kind: MissionKind, vehicle
     stacks = [(s.cluster, s.index, s.cell) for s in layout.stacks]
     last = max(statuses, key=lambda s: s.tick)
     work = stack_work(kind, layout, params, executor.store,
-                      layout.vehicle_kind.planners(layout))
+                      planners_for(layout))
     return recovered_state(stacks, goods, held, last.t, work), last.tick, last.wall

@@ -8,7 +8,9 @@ import math
 from collections import Counter
 
 import pytest
+from mission_check import journal_overlaps
 
+from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy, TaskKind
 from fleet.mission.drive_log import AmendLeg
@@ -19,8 +21,14 @@ from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.lane_schedule import Schedule
 from fleet.planning.reservations import INF, Amendment, Interval, ReservationTable, TimedRoute
 from fleet.planning.trajectory import LaneMove, Pose, Trajectory
+from fleet.recording.inprocess import vehicle_states
+from fleet.recording.reader import read_recording
+from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.vehicles.agv import leg_of, schedule_of
+from fleet.wire.protocol import VehicleState
+from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout
+from fleet.world.site import planners_for
 
 CROSS = load_layout("micro-cross")
 PAPER002 = load_layout("paper002")
@@ -69,7 +77,7 @@ def test_a_committed_agv_from_the_horizontal_lane_is_made_to_wait_for_one_from_t
     2 northbound plans after, and (13) gives it priority: AGV 1's committed leg is amended to
     wait at (3, 4), its last node before the crossroad, in the same commit."""
     kind = CROSS.vehicle_kind
-    executor = LocalExecutor(kind, kind.planners(CROSS))
+    executor = LocalExecutor(kind, planners_for(CROSS))
     executor.park(1, Pose((2, 4), 0))
     executor.park(2, Pose((5, 2), 0))
     first = executor.execute(Task(1, TaskKind.FETCH, Pose((2, 4), 0), 0.0,
@@ -183,3 +191,25 @@ def test_an_amendment_with_a_route_may_retake_later_a_cell_its_agv_had_just_left
     gap = (Interval((0, 0), 4.0, 8.0), *waited[1:])  # leaves the cell it stands on a while
     refused = arrived().commit(2, [], None, [Amendment(1, 2.0, gap, route)])
     assert not refused.ok and "cell (0, 0)" in refused.reason
+
+
+def test_fast_mode_agv_processes_equal_the_inprocess_reference(tmp_path):
+    """One agent process per AGV on zenoh: the legs amended by the collision rules go through
+    the reservation service and the dispatcher tells each AGV, so the record is the one the
+    engine keeps in process, bit for bit, and every AGV drives as there."""
+    mission = orders(40, 8, seed=2)
+    engine = Engine(mission)
+    reference = engine.run()
+    assert any(isinstance(o, AmendLeg) for log in engine.drive_log.values() for o in log)
+    outcome = run_processes(RunSpec(mission, 8, tmp_path))
+    assert outcome.error == ""
+    assert outcome.done.digest == digest(reference)
+    assert journal_overlaps(tmp_path / "reservation.journal") == []
+    recording = read_recording(tmp_path / "run.mcap")
+    report = analyze(recording)
+    assert report.passed and report.complete and report.finished
+    assert (len(report.overlaps), len(report.outside_reservation)) == (0, 0)
+    recorded = sorted((r.key, r.envelope.sim_time, m) for r, m in recording.of(VehicleState))
+    driven = sorted((o.key, o.sim_time, o.message)
+                    for o in vehicle_states(reference, PAPER002, Keys(), engine.drive_log))
+    assert recorded == driven

@@ -531,7 +531,7 @@ def test_run_help_gives_each_strategy_a_line_and_every_default(capsys):
     text = " ".join(out.split())
     for name, line in STRATEGIES.items():
         assert f"{name} {' '.join(line.split())}" in text
-    for option, default in (("--strategy", "default ann"), ("--mission", "default fill"),
+    for option, default in (("--strategy", "default ann"), ("--mission", "else fill"),
                             ("--seed", "default 0"), ("--speed", "default 1"),
                             ("--layout", "default paper")):
         [entry] = [line for line in out.split("\n  -") if line.startswith(option[1:])]

@@ -20,6 +20,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
 from fleet.world.generator import Shape, generate_layout
 from fleet.world.layout_file import load_layout
+from fleet.world.site import planners_for
 
 
 def waiting(vehicle: int, *blockers: int) -> Wait:
@@ -61,7 +62,7 @@ def small_with_one_stack_left():
     layout = load_layout("small")
     kind = layout.vehicle_kind
     filled = frozenset(s.cell for s in layout.stacks if s.cell != (3, 2))
-    planner = kind.planners(layout).get(filled)
+    planner = planners_for(layout).get(filled)
     table = ReservationTable()
     me, other = Pose.parse("4,6,S"), Pose.parse("4,4,E")
     table.park(1, kind.body_cells_at_rest(me), 0.0)

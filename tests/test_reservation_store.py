@@ -174,7 +174,7 @@ def crossing(store):
             [(7, 0, t0 + 3, INF)]
     assert store.handle(CommitRequest("v2", 2, driving(0.0))).reply.ok
     request = CommitRequest("v1", 1, [(5, 1, 0.0, 2.0), (5, 0, 1.0, 4.0), (5, -1, 3.0, INF)],
-                            0.0, amends=[(2, 0.0, driving(2.0))])
+                            0.0, amends=[(2, 0.0, driving(2.0), None)])
     return request, driving(2.0)
 
 
@@ -228,7 +228,7 @@ def test_an_amendment_of_a_vehicle_halted_since_is_refused():
 def test_malformed_amendments_are_refused_with_a_reason():
     store = ReservationStore()
     request, _ = crossing(store)
-    bad = dataclasses.replace(request, amends=[(2, 0.0, [(3, 0, 5.0, 5.0)])])
+    bad = dataclasses.replace(request, amends=[(2, 0.0, [(3, 0, 5.0, 5.0)], None)])
     assert "must have t0 < t1" in store.handle(bad).reply.reason
     with pytest.raises(ProtocolError, match="amends"):
         build(CommitRequest, {**body_of(request), "amends": [[2, "soon", []]]})

@@ -12,6 +12,7 @@ from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.registry import UnknownVehicleKind, vehicle_kind
 from fleet.world.layout import LayoutError
 from fleet.world.layout_file import layout_source, load_layout, parse_layout
+from fleet.world.site import planners_for
 
 
 def test_the_registry_refuses_an_unknown_kind_naming_the_known_ones():
@@ -57,7 +58,7 @@ def test_the_forklift_drives_inside_what_its_planner_commits(other):
         table.commit(2, [other])
     planned = kind.planner(layout.grid_map()).plan(1, start, 3.0, [Pose((1, 4), 2)], table)
     assert isinstance(planned, Trajectory)
-    leg = kind.planners(layout).policy.commitment(planned, table)
+    leg = planners_for(layout).policy.commitment(planned, table)
     assert not isinstance(leg, PlanFailure)
     assert leg.write(table).ok
     traj = leg.trajectory

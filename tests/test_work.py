@@ -22,6 +22,7 @@ from fleet.params import DispatchParams
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import Trajectory
 from fleet.world.layout_file import load_layout
+from fleet.world.site import planners_for
 
 sys.path.insert(0, str(Path(__file__).parent))
 from mission_check import mission_problems
@@ -31,7 +32,7 @@ SMALL = load_layout("small")
 
 def work_of(kind: MissionKind):
     return stack_work(kind, SMALL, DispatchParams(), ReservationTable(),
-                        SMALL.vehicle_kind.planners(SMALL))
+                        planners_for(SMALL))
 
 
 def leg_ending(t_end: float) -> Trajectory:

@@ -55,6 +55,7 @@ from fleet.wire.protocol import (
 )
 from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
+from fleet.world.site import planners_for
 from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 from vehicle_agent.clock import SimClock, tick_problem
@@ -109,7 +110,7 @@ class Agent:
         self.sender = vehicle_sender(vehicle)
         self.mirror = TableMirror()
         self.vehicle_kind = layout.vehicle_kind
-        self.planners = self.vehicle_kind.planners(layout)
+        self.planners = planners_for(layout)
         self.drive = Drive(vehicle, start, layout)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()

@@ -25,6 +25,7 @@ from fleet.vehicles.kind import Planners
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.places import filled_counts, resolve
+from fleet.world.site import planners_for
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -218,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                         f"{forklifts}" if forklifts else
                         f"--vehicle {args.vehicle}: layout {layout.name} has no forklifts "
                         f"(no start poses)")
-    planners = layout.vehicle_kind.planners(layout)
+    planners = planners_for(layout)
     table = ReservationTable()
     scene = load_scene(args.reserved, layout, planners, table, args.vehicle, args.start)
     goals = resolve(layout, args.goal, scene.filled)

@@ -4,6 +4,7 @@ decision it answers with (fleet/dispatching/policy.py has the policy interface).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -90,3 +91,7 @@ class DispatchOutcome:
     # least one when there is no decision.
     failures: list[FailedChoice] = field(default_factory=list)
     postponements: dict[int, float] = field(default_factory=dict)  # vehicle -> new t_free
+
+
+# Where a vehicle may go next, as the mission's work offers it (what a policy asks).
+TargetsFor = Callable[[VehicleView], list[Target]]

@@ -6,8 +6,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from fleet.dispatching.decision import Decision, DispatchOutcome, FailedChoice, VehicleView
-from fleet.dispatching.policy import TargetsFor
+from fleet.dispatching.decision import (
+    Decision,
+    DispatchOutcome,
+    FailedChoice,
+    TargetsFor,
+    VehicleView,
+)
 
 
 class OrderBookPolicy:

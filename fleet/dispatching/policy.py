@@ -22,15 +22,14 @@ from fleet.dispatching.decision import (
     STACK_STRATEGIES,
     DispatchOutcome,
     Strategy,
-    Target,
+    TargetsFor,
     VehicleView,
 )
+from fleet.dispatching.order_book_policy import OrderBookPolicy
 from fleet.params import DispatchParams
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
 from fleet.world.layout import Layout
-
-TargetsFor = Callable[[VehicleView], list[Target]]
 
 
 class DispatchPolicy(Protocol):
@@ -64,8 +63,6 @@ def algorithm1(setup: PolicySetup) -> Algorithm1:
 
 
 def order_book(setup: PolicySetup) -> DispatchPolicy:
-    from fleet.dispatching.order_book_policy import OrderBookPolicy  # it imports this module
-
     return OrderBookPolicy()
 
 

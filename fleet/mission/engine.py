@@ -29,6 +29,7 @@ from fleet.mission.deadlock import Wait, WaitKind, deadlocks
 from fleet.mission.drive_log import AddLeg, AmendLeg, DriveLog
 from fleet.mission.fault_response import FaultResponse
 from fleet.mission.freeze import Disruption, VehicleDown
+from fleet.mission.mission_work import mission_work
 from fleet.mission.order_work import order_fleet
 from fleet.mission.pickup import Recovered
 from fleet.mission.record import (
@@ -43,7 +44,6 @@ from fleet.mission.spec import Mission, MissionKind
 from fleet.mission.standstill import Cause, Standstill, failure_text, standstill
 from fleet.mission.step_aside import SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
-from fleet.mission.work import mission_work
 from fleet.params import DispatchParams
 from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
@@ -53,6 +53,7 @@ from fleet.vehicles.kind import Planner
 from fleet.wire.protocol import DeadlockSeen, DecisionFailure, Message, StackDone
 from fleet.world.layout import Layout, LayoutError
 from fleet.world.layout_file import load_layout
+from fleet.world.site import planners_for
 
 # A vehicle whose plans failed this often since the last subtask, on a way nobody parked
 # for good closes, waits for those on its shortest way (see Engine._wait).
@@ -140,7 +141,7 @@ class Engine:
         self.options = options or EngineOptions()
         self.layout = layout or load_layout(mission.layout)
         self.vehicle_kind = self.layout.vehicle_kind
-        self.planners = self.vehicle_kind.planners(self.layout)
+        self.planners = planners_for(self.layout)
         self.executor = executor or LocalExecutor(self.vehicle_kind, self.planners)
         self.pacer = pacer or NoPacer()
         starts = list(mission.starts or self.layout.vehicle_starts)
@@ -549,7 +550,7 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
     order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
     empty = ReservationTable()
-    planners = layout.vehicle_kind.planners(layout)
+    planners = planners_for(layout)
     for done, stack in enumerate(order, 1):
         key = frozenset(present - {stack.cell})
         planner = planners.get(key)

@@ -73,10 +73,10 @@ class OrderWork:
             raise UserError(f"layout {layout.name}: packing stations of different dwells "
                             f"({sorted(dwells)}) are not supported")
         try:
-            self.book = OrderBook(layout, vehicles,
-                                  release_orders(layout, mission.orders, mission.seed))
-        except ValueError as exc:
-            raise UserError(f"layout {layout.name}: {exc}") from None
+            self.book = OrderBook(layout, vehicles, release_orders(
+                layout, mission.orders, mission.seed, mission.order_area or None))
+        except ValueError as exc:  # it names the layout, the area or the order
+            raise UserError(str(exc)) from None
         self.layout = layout
         self.dwell = dwells.pop() if dwells else 0.0
         self.trips: dict[int, Target] = {}  # each AGV's next trip, decided, not yet committed

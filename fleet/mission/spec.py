@@ -35,3 +35,4 @@ class Mission:
     seed: int = 0
     starts: tuple[Pose, ...] = field(default=())  # empty: the layout's start poses
     orders: int = 0  # how many orders an order mission releases (drawn with `seed`)
+    order_area: str = ""  # draw them only on this area's shelves ("lower-left": Figure 19)

@@ -17,9 +17,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
-from fleet.dispatching.decision import Decision, Strategy, Target, TaskKind, VehicleView
-from fleet.errors import UserError
-from fleet.mission.spec import Mission, MissionKind
+from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
+from fleet.mission.spec import MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationView
@@ -391,28 +390,6 @@ class EmptyWork(StackWork):
 
 STACK_WORK: dict[MissionKind, type[StackWork]] = {MissionKind.FILL: FillWork,
                                                  MissionKind.EMPTY: EmptyWork}
-
-
-def mission_work(mission: Mission, layout: Layout, params: DispatchParams,
-                 store: ReservationView, planners: Planners, vehicles: int) -> MissionWork:
-    """The work of the mission on the layout, or a UserError saying why the layout cannot
-    host it (stack missions need stacks, order missions slots, packing stations and piles),
-    and which strategy each kind takes."""
-    nearest = mission.strategy is Strategy.NEAREST
-    if mission.kind is MissionKind.ORDERS:
-        from fleet.mission.order_work import OrderWork  # seed 002: a pack of its own
-
-        if not nearest:
-            raise UserError(f"order missions are dispatched by the order book (strategy "
-                            f"nearest), not {mission.strategy.value}")
-        return OrderWork(layout, mission, vehicles)
-    if not layout.stacks:
-        raise UserError(f"layout {layout.name} has no stacks for a {mission.kind.value} "
-                        f"mission: it runs order missions (fleet run --orders N)")
-    if nearest:
-        raise UserError(f"strategy nearest dispatches order missions (--orders N), not "
-                        f"{mission.kind.value} missions")
-    return stack_work(mission.kind, layout, params, store, planners)
 
 
 def stack_work(kind: MissionKind, layout: Layout, params: DispatchParams,

@@ -119,6 +119,9 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--orders", type=positive_int, default=None, metavar="N",
                    help=f"an order mission of N orders, released at once on shelves drawn "
                    f"with --seed (default {DEFAULT_ORDERS} for an order mission)")
+    p.add_argument("--order-area", default="", metavar="AREA",
+                   help="draw the orders on this shelf area's shelves only: a shelf area of "
+                   "the layout, or lower-left (seed 002's Figure 19; default: every shelf)")
     p.add_argument("--strategy", choices=[s.value for s in Strategy], default=None,
                    help="how the dispatcher picks each vehicle's next goal (default ann; "
                    "nearest, the only one, for order missions; each is described below)")
@@ -143,8 +146,9 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
     else:
         kind = MissionKind.FILL
     orders = kind is MissionKind.ORDERS
-    if args.orders is not None and not orders:
-        raise UserError(f"--orders is for order missions, not --mission {kind.value}")
+    for flag, given in (("--orders", args.orders is not None), ("--order-area", args.order_area)):
+        if given and not orders:
+            raise UserError(f"{flag} is for order missions, not --mission {kind.value}")
     if args.strategy is None:
         strategy = Strategy.NEAREST if orders else Strategy.ANN
     else:
@@ -153,13 +157,16 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
         raise UserError(f"--strategy {strategy.value} does not dispatch {kind.value} missions: "
                         f"order missions take nearest, fill and empty the other strategies")
     return Mission(layout=args.layout, kind=kind, strategy=strategy, vehicles=args.vehicles,
-                   seed=args.seed, orders=(args.orders or DEFAULT_ORDERS) if orders else 0)
+                   seed=args.seed, orders=(args.orders or DEFAULT_ORDERS) if orders else 0,
+                   order_area=args.order_area)
 
 
 def mission_argv(mission: Mission) -> list[str]:
     """The flags that give `mission` (its layout's start poses: it has no others)."""
     fleet = [] if mission.vehicles is None else ["--vehicles", str(mission.vehicles)]
     orders = ["--orders", str(mission.orders)] if mission.kind is MissionKind.ORDERS else []
+    if mission.order_area:
+        orders += ["--order-area", mission.order_area]
     return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
             "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
 

@@ -18,13 +18,15 @@ STRATEGIES = {
     "traffic": "traffic-jam removal: travel time, and how long other forklifts hold the "
                "target's cells after arrival",
     "balance": "the cluster with the most stacks still to do",
+    "nearest": "order missions only (seed 002): each order's shelf to the nearest idle AGV, "
+               "then the nearest free packing station and the nearest vacant slot",
 }
 
 
 def strategies_epilog() -> str:
     width = max(map(len, STRATEGIES))
     lines = [f"  {name:<{width}}  {text}" for name, text in STRATEGIES.items()]
-    return "strategies (how the dispatcher picks each forklift's next goal):\n" + \
+    return "strategies (how the dispatcher picks each vehicle's next goal):\n" + \
         "\n".join(lines)
 
 

@@ -17,9 +17,9 @@ is drawn and checked without a heading: every pose says E (docs/agv-002.md, "The
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 from fleet.params import VehicleDims
 from fleet.planning.blockage import Blockage
@@ -38,10 +38,7 @@ from fleet.planning.trajectory import (
     Trajectory,
 )
 from fleet.planning.velocity import Speed
-from fleet.vehicles.kind import AmendedLeg, Commitment, Outline, Placement
-
-if TYPE_CHECKING:
-    from fleet.world.layout import Layout
+from fleet.vehicles.kind import AmendedLeg, Commitment, Outline, Placement, Site
 
 SPEED_CELLS_PER_S = 1.0  # the seed's "constant velocity v" (note A.3: 1 m/s on 1 m cells)
 BODY_CELLS = 0.7  # side of the square body, in cells
@@ -139,7 +136,7 @@ class SettleByRules:
     """Settle a leg's timed route against every route the store holds, by Section 5.3's
     rules: waits go into this leg or into legs already committed (amendments)."""
 
-    def __init__(self, areas: dict[Cell, Area], seconds_per_cell: float) -> None:
+    def __init__(self, areas: Mapping[Cell, Area], seconds_per_cell: float) -> None:
         self.areas = areas
         self.seconds_per_cell = seconds_per_cell
 
@@ -198,13 +195,10 @@ class LanePlanners:
     """One lane planner for the whole warehouse (shelves in their slots block no lane), and
     the rules that settle its legs."""
 
-    def __init__(self, layout: Layout, speed_cells_per_s: float) -> None:
-        from fleet.world.lanes import collision_areas, lane_graph  # the world wing is above
-
-        graph = lane_graph(layout)
-        routes = LaneRoutes(graph, speed_cells_per_s * layout.cell_size)
+    def __init__(self, layout: Site, speed_cells_per_s: float) -> None:
+        routes = LaneRoutes(layout.lane_graph, speed_cells_per_s * layout.cell_size)
         self.planner = LanePlanner(routes)
-        self.policy = SettleByRules(collision_areas(layout), routes.seconds_per_cell)
+        self.policy = SettleByRules(layout.cell_areas, routes.seconds_per_cell)
 
     def get(self, filled: frozenset[Cell]) -> LanePlanner:
         return self.planner
@@ -262,6 +256,6 @@ class Agv:
     def planner(self, grid: GridMap) -> LanePlanner:
         raise TypeError("an AGV plans on a layout's lanes, not on a grid: use planners(layout)")
 
-    def planners(self, layout: Layout) -> LanePlanners:
+    def planners(self, layout: Site) -> LanePlanners:
         return LanePlanners(layout, SPEED_CELLS_PER_S)
 

@@ -10,7 +10,7 @@ stays inside the reservation.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 from fleet.params import ManeuverTimes, VehicleDims
 from fleet.planning.geometry import Cell
@@ -26,10 +26,7 @@ from fleet.planning.maneuvers import (
 from fleet.planning.planner import HybridAStar, PlannerCache
 from fleet.planning.reservations import ReservationView
 from fleet.planning.trajectory import PlanFailure, Pose, Step, Trajectory
-from fleet.vehicles.kind import Commitment, ConflictPolicy, Outline, Placement
-
-if TYPE_CHECKING:
-    from fleet.world.layout import Layout
+from fleet.vehicles.kind import Commitment, ConflictPolicy, Outline, Placement, Site
 
 
 class ReserveWholeTrajectory:
@@ -89,7 +86,7 @@ class Forklift:
     def planner(self, grid: GridMap) -> HybridAStar:
         return HybridAStar(grid, self.dims)
 
-    def planners(self, layout: Layout) -> ForkliftPlanners:
+    def planners(self, layout: Site) -> ForkliftPlanners:
         return ForkliftPlanners(layout.grid_map, self.dims)
 
 

@@ -21,13 +21,15 @@ kind about a label without knowing its manners.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Protocol
+from typing import ClassVar, Protocol
 
 from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
+from fleet.planning.lane_conflicts import Area
+from fleet.planning.lane_route import LaneGraph
 from fleet.planning.reservations import (
     Amendment,
     Interval,
@@ -37,9 +39,6 @@ from fleet.planning.reservations import (
     WriteResult,
 )
 from fleet.planning.trajectory import PlanFailure, Pose, Step, Trajectory
-
-if TYPE_CHECKING:  # the world wing sits above this one (it checks layouts with a kind)
-    from fleet.world.layout import Layout
 
 
 @dataclass(frozen=True)
@@ -139,6 +138,28 @@ class ConflictPolicy(Protocol):
         ...
 
 
+class Site(Protocol):
+    """The warehouse a kind's planners are built for, as they read it: the world wing's
+    `Layout` is one (this wing sits below it, since a layout is checked with its kind)."""
+
+    name: str
+    cell_size: float
+
+    def grid_map(self, filled: Iterable[Cell] = (), under_shelves: bool = False) -> GridMap:
+        """The drivable grid with these stacks filled (forklifts)."""
+        ...
+
+    @property
+    def lane_graph(self) -> LaneGraph:
+        """Its lanes' moves for the route search (seed 002's AGVs)."""
+        ...
+
+    @property
+    def cell_areas(self) -> Mapping[Cell, Area]:
+        """Each lane cell's set of Section 5.3 (seed 002's collision rules)."""
+        ...
+
+
 class Planners(Protocol):
     """Planners by fill state (the stacks holding goods), built on demand, and the conflict
     policy their legs are committed by, for one warehouse."""
@@ -191,6 +212,6 @@ class VehicleKind(Protocol):
     # -- the planner ---------------------------------------------------------------------------
     def planner(self, grid: GridMap) -> Planner: ...
 
-    def planners(self, layout: Layout) -> Planners:
+    def planners(self, layout: Site) -> Planners:
         """Planners for the fill states of one warehouse, and its conflict policy."""
         ...
