@@ -22,6 +22,7 @@ from websockets.sync.client import connect
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
+from fleet.mission.driving import states_until
 from fleet.mission.engine import Engine, run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import ClockMode, Mission, MissionKind
@@ -203,8 +204,9 @@ def test_hostile_messages_in_fast_mode_change_nothing(tmp_path):
     assert report.passed, report.lines()
     assert report.malformed == 3 * (4 + 2)  # the garbage put on 6 keys, recorded as it came
     assert report.foreign == intruder.forged == 2  # recorded, and believed nowhere
-    last_tick = max(reference.end_time, reference.all_parked_time)
+    last_tick = states_until(max(reference.end_time, reference.all_parked_time))
     grid = [k * 0.5 for k in range(int(last_tick / 0.5) + 1) if k * 0.5 < last_tick]
+    assert grid[-1] >= max(reference.end_time, reference.all_parked_time)  # seen as it ends
     for vehicle in intruder.vehicle_ids:  # every instant of the shared grid, exactly once
         times = [r.envelope.sim_time for r, m in recording.of(VehicleState)
                  if m.vehicle == vehicle and r.envelope.sender == f"vehicle-{vehicle}"]

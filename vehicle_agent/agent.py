@@ -265,7 +265,7 @@ class Agent:
                 request_id=f"{self.sender}:{message.task_id}:{attempt}")
             if written.ok:
                 with self.drive_lock:
-                    self.drive.add(result, task.loaded)
+                    self.drive.add(result, task.loaded, task.after)
                 self.last_kind = message.kind
                 return result_to_wire(message.task_id, self.vehicle, result, written.revision,
                                       rejections, [a.trajectory for a in leg.amends])

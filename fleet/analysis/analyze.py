@@ -25,6 +25,16 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from fleet.analysis.failure_count import failure_counts
+from fleet.analysis.lane_traffic import (
+    ExecutedViolation,
+    Grid,
+    Meeting,
+    Seen,
+    cell_names,
+    lane_breaches,
+    meetings,
+    tracks,
+)
 from fleet.analysis.motion import at_rest, grid_pose, impossible_states
 from fleet.analysis.report import Report
 from fleet.analysis.safety import (
@@ -43,6 +53,8 @@ from fleet.analysis.served import (
     out_of_order,
     services,
 )
+from fleet.analysis.shelves import Announced as OrderAnnounced
+from fleet.analysis.shelves import Carrying, OrdersVerdict, orders_verdict
 from fleet.analysis.streams import (
     LOSS_NOTICED_WALL_S,
     Hole,
@@ -86,6 +98,7 @@ from fleet.wire.protocol import (
     WireChange,
 )
 from fleet.wire.topics import message_type
+from fleet.world.layout import Layout
 
 Finding = TypeVar("Finding")
 # A vehicle's states further apart than this many state periods leave a hole between them:
@@ -153,13 +166,16 @@ def analyze(recording: Recording) -> Report:
     served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
     restarts = dispatcher_restarts(recording)
     final = final_record(recording, restarts)
+    finished = bool(done) and done[-1].ok
+    breaches, met = ([], []) if not layout.has_lanes else \
+        _lane_traffic(layout, usable, STATE_GAP_PERIODS * period)
     from_record = stacks_not_recorded(done, unrecorded, expected - set(stacks), any(
         cls is StackDone for _, cls in uncounted_tails(recording, restarts, final is not None)))
     return Report(
         path=str(recording.path), complete=recording.complete, problem=recording.problem,
         recovered_span_s=recording.span_s, recovered_sim_s=recording.last_sim_time,
         mission=_mission(info),
-        finished=bool(done) and done[-1].ok,
+        finished=finished,
         mission_error=done[-1].error if done else "",
         end_time_s=record.end_time_s,
         all_parked_s=record.all_parked_s,
@@ -210,7 +226,43 @@ def analyze(recording: Recording) -> Report:
         double_bookings_unverified=bookings_unknown,
         stacks_not_recorded=sorted(f"{c}#{i}" for c, i in from_record),
         incomplete=list(record.incomplete),
+        vehicle_noun=kind.noun,
+        lane_layout=layout.has_lanes,
+        orders=_orders(recording, layout, usable, finished)
+        if info.kind == MissionKind.ORDERS.value else None,
+        lane_breaches=breaches,
+        meetings=met,
     )
+
+
+def _lane_traffic(layout: Layout, states: list[tuple[float, VehicleState]], max_gap: float
+                  ) -> tuple[list[ExecutedViolation], list[Meeting]]:
+    """Seed 002's traffic verdicts on the AGVs' executed moves (fleet/analysis/
+    lane_traffic.py): moves against the lane rules, and AGVs meeting as the paper's
+    collision classes forbid."""
+    pieces = tracks([Seen(m.vehicle, t, m.x, m.y) for t, m in states],
+                    Grid(layout.origin, layout.cell_size), max_gap)
+    move_s = layout.cell_size / layout.vehicle_kind.max_speed_mps
+    return lane_breaches(layout, pieces), meetings(pieces, move_s, cell_names(layout))
+
+
+def _orders(recording: Recording, layout: Layout, states: list[tuple[float, VehicleState]],
+            finished: bool) -> OrdersVerdict:
+    """What became of an order mission's orders and shelves (fleet/analysis/shelves.py)."""
+    grid = Grid(layout.origin, layout.cell_size)
+    last: dict[int, Seen] = {}
+    seen = []
+    for t, m in sorted(states, key=lambda s: (s[1].vehicle, s[0])):
+        now, before = Seen(m.vehicle, t, m.x, m.y), last.get(m.vehicle)
+        passed = grid.passed(before, now) if before is not None else []
+        cell = grid.cell_of(m.x, m.y)
+        through = frozenset(c for c, _, _ in passed) or frozenset([cell] if cell else [])
+        standing = before is not None and (before.x, before.y) == (m.x, m.y)
+        seen.append(Carrying(m.vehicle, t, cell, through, m.loaded, standing))
+        last[m.vehicle] = now
+    announced = [OrderAnnounced(m.cluster, m.index, m.vehicle, m.t)
+                 for _, m in recording.of(StackDone)]
+    return orders_verdict(layout, list(recording.info.released), seen, announced, finished)
 
 
 def _mission(info: MissionInfo) -> dict:

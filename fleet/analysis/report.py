@@ -4,14 +4,17 @@
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fleet.analysis.failure_count import FailureCount
+from fleet.analysis.lane_traffic import ExecutedViolation, Meeting
 from fleet.analysis.motion import Impossible
 from fleet.analysis.served import NotServed, OutOfOrder
+from fleet.analysis.shelves import OrdersVerdict
 from fleet.analysis.streams import Gap
 from fleet.analysis.time_use import VehicleStats
 from fleet.analysis.windows import SILENT, NotRecorded, RecorderDown, SegmentRead, Unverified
@@ -81,13 +84,29 @@ class Report:
     # something out: what a dispatcher announced that neither a recorder nor its final record
     # kept (fleet.recording.mission_record). Empty: they are whole.
     incomplete: list[str] = field(default_factory=list)
+    vehicle_noun: str = "forklift"  # what the layout's vehicle kind is called
+    lane_layout: bool = False  # seed 002's lanes: the lane verdicts apply
+    # An order mission's work (seed 002), in place of the stacks: fleet/analysis/shelves.py.
+    orders: OrdersVerdict | None = None
+    # A lane layout's traffic (seed 002), from the executed moves: fleet/analysis/
+    # lane_traffic.py. Moves against the lane rules, and AGVs at one node, swapping or
+    # crossing diagonals.
+    lane_breaches: list[ExecutedViolation] = field(default_factory=list)
+    meetings: list[Meeting] = field(default_factory=list)
 
     @property
     def safe(self) -> bool:
-        return not (self.overlaps or self.outside_reservation or self.double_bookings)
+        return not (self.overlaps or self.outside_reservation or self.double_bookings
+                    or self.meetings)
+
+    @property
+    def lanes_kept(self) -> bool:
+        return not self.lane_breaches
 
     @property
     def work_done(self) -> bool:
+        if self.orders is not None:
+            return self.finished and self.orders.passed and not self.impossible_states
         return (self.finished and self.stacks_done == self.stacks_expected
                 and not (self.stacks_duplicated or self.stacks_lost or self.stacks_not_served
                          or self.stacks_out_of_order or self.impossible_states))
@@ -103,17 +122,22 @@ class Report:
 
     @property
     def passed(self) -> bool:
-        return self.safe and self.work_done and self.messages_whole
+        return self.safe and self.lanes_kept and self.work_done and self.messages_whole
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
         for name in ("overlaps", "outside_reservation", "double_bookings",
                      "outside_reservation_unverified", "double_bookings_unverified",
-                     "stacks_not_served", "stacks_out_of_order", "impossible_states"):
+                     "stacks_not_served", "stacks_out_of_order", "impossible_states",
+                     "lane_breaches", "meetings"):
             data[name] = len(getattr(self, name))
             data[f"{name}_first"] = [_jsonable(asdict(x)) for x in getattr(self, name)[:20]]
         data["overlaps_between"] = sum(o.between for o in self.overlaps)
-        data.update(safe=self.safe, work_done=self.work_done,
+        if self.orders is not None:
+            faults = self.orders.shelf_faults
+            data["orders"]["shelf_faults"] = len(faults)
+            data["orders"]["shelf_faults_first"] = [_jsonable(asdict(f)) for f in faults[:20]]
+        data.update(safe=self.safe, lanes_kept=self.lanes_kept, work_done=self.work_done,
                     messages_whole=self.messages_whole, passed=self.passed)
         return _jsonable(data)
 
@@ -132,10 +156,19 @@ class Report:
                 f"{silent} of a forklift {SILENT}" if silent else "") if part)
             unchecked = (f"; {len(self.unverified)} windows not verified ({why})"
                          + (f", {set_aside} findings in them not judged" if set_aside else ""))
+        kinds = Counter(m.kind for m in self.meetings)
+        lanes = [] if not self.lane_layout else [
+            f"lanes              {mark(self.lanes_kept)}: {len(self.lane_breaches)} moves "
+            f"against the lane rules"]
         return [
             f"safety             {mark(self.safe)}: {len(self.overlaps)} overlaps, "
             f"{len(self.outside_reservation)} moments outside a reservation, "
-            f"{len(self.double_bookings)} double-booked cells{unchecked}",
+            f"{len(self.double_bookings)} double-booked cells"
+            + (f", {kinds['node']} AGVs met at a node, {kinds['swap']} swaps, "
+               f"{kinds['diagonal']} crossed diagonals" if self.lane_layout else "")
+            + unchecked,
+            *lanes,
+            self._orders_line(mark) if self.orders is not None else
             f"work               {mark(self.work_done)}: {self.stacks_done} of "
             f"{self.stacks_expected} stacks served"
             + (f" ({self.stacks_announced} announced)"
@@ -162,18 +195,38 @@ class Report:
             + "".join(f"; {c.line()}" for c in self.failures_unannounced),
         ]
 
+    def _orders_line(self, mark: Callable[[bool], str]) -> str:
+        o = self.orders
+        assert o is not None
+        return (f"work               {mark(self.work_done)}: {o.done} of {o.expected} orders "
+                f"done (packed, shelf put back)"
+                + (f" ({o.announced} announced)" if o.announced != o.done else "")
+                + f", {len(o.duplicated)} twice, {len(o.lost)} lost"
+                + (f", {len(o.not_served)} announced but not done" if o.not_served else "")
+                + (f", {len(o.misnamed)} misnamed" if o.misnamed else "")
+                + f", {len(o.shelf_faults)} shelf faults, "
+                f"{len(self.impossible_states)} impossible states"
+                + ("" if self.finished else "; the mission did not finish"
+                   + (f" ({self.mission_error})" if self.mission_error
+                      else " (no result recorded)")))
+
     def numbers_lines(self) -> list[str]:
         """End time, subtasks, decision failures and waiting: as `fleet run` and `fleet analyze`
         print them (docs/metrics.md)."""
         no_goal = self.decision_failures - self.plans_failed
         stopped = sum(v.stopped_s for v in self.vehicles)
         postponed = sum(v.postponed_s for v in self.vehicles)
+        o = self.orders
+        work = (f"  stacks             {self.stacks_done} of {self.stacks_expected}"
+                + (f" ({self.stacks_announced} announced)"
+                   if self.stacks_announced != self.stacks_done else "")) if o is None else \
+            (f"  orders             {o.done} of {o.expected}"
+             + (f" ({o.announced} announced)" if o.announced != o.done else ""))
         return [
-            f"  end time           {self.end_time_s:.2f} s (last stack done); every forklift "
-            f"parked at {self.all_parked_s:.2f} s",
-            f"  stacks             {self.stacks_done} of {self.stacks_expected}"
-            + (f" ({self.stacks_announced} announced)"
-               if self.stacks_announced != self.stacks_done else ""),
+            f"  end time           {self.end_time_s:.2f} s (last "
+            f"{'stack' if o is None else 'order'} done); every {self.vehicle_noun} parked at "
+            f"{self.all_parked_s:.2f} s",
+            work,
             f"  subtasks           {self.subtasks}",
             f"  decision failures  {self.decision_failures}: {self.plans_failed} plans failed, "
             f"{no_goal} choices without a goal"
@@ -194,7 +247,7 @@ class Report:
         """Each forklift's time (fleet.analysis.time_use), with its distance if asked; a down
         column only when some forklift was down."""
         down = any(v.down_s for v in self.vehicles)
-        head = "  forklift" + (" distance m" if distance else "") + \
+        head = f"  {self.vehicle_noun:>8}" + (" distance m" if distance else "") + \
             " busy s stopped s postponed s handling s" + (" down s" if down else "") + \
             " idle s busy %"
         out = [head]
@@ -222,7 +275,7 @@ class Report:
                        f"and {Path(g.before).name}{sim}")
         out += [
             f"  mission            {m.get('kind')} on {m.get('layout')} with "
-            f"{m.get('vehicles')} forklifts, strategy {m.get('strategy')}, clock "
+            f"{m.get('vehicles')} {self.vehicle_noun}s, strategy {m.get('strategy')}, clock "
             f"{m.get('clock')}, seed {m.get('seed')}",
             f"  finished           {'yes' if self.finished else 'no'}"
             + (f" ({self.mission_error})" if self.mission_error else ""),
@@ -238,6 +291,16 @@ class Report:
         if self.stacks_not_recorded:
             out.append(f"  done, not recorded {', '.join(self.stacks_not_recorded[:20])}"
                        + (" ..." if len(self.stacks_not_recorded) > 20 else ""))
+        if self.orders is not None:
+            o = self.orders
+            for label, rows in (("done twice", o.duplicated), ("misnamed", o.misnamed),
+                                ("not done", o.not_served), ("lost", o.lost)):
+                out += [f"  {label:<19}{row}" for row in rows[:10]]
+                if len(rows) > 10:
+                    out.append(f"  {label:<19}... {len(rows) - 10} more")
+            out += [f"  shelf fault        t={f.t:.2f} s"
+                    + ("" if f.vehicle is None else f" AGV {f.vehicle}") + f": {f.why}"
+                    for f in o.shelf_faults[:10]]
         if self.stacks_lost:
             out.append(f"  not done           {', '.join(self.stacks_lost[:20])}"
                        + (" ..." if len(self.stacks_lost) > 20 else ""))
@@ -292,6 +355,10 @@ FINDINGS = (
             f"on {list(o.cells)}"),
     Listing("double_bookings", "double-booked", lambda d: f"cell {d.cell} by {d.vehicles} "
             f"over [{d.t0:.2f}, {d.t1:.2f})"),
+    Listing("lane_breaches", "against the lanes", lambda b: f"t={b.t:.2f} s AGV {b.vehicle} "
+            f"{b.move[0]} -> {b.move[1]}: {b.rule}: {b.detail}", more="moves"),
+    Listing("meetings", "met", lambda m: f"t={m.t:.2f} s AGVs {m.vehicles}: {m.kind} at "
+            f"{m.where} {list(m.cells)}", more="meetings"),
     Listing("stacks_duplicated", "done twice", str),
     Listing("stacks_not_served", "not served", lambda n: f"{n.stack}, announced done by "
             f"forklift {n.vehicle} at t={n.t:.2f} s: {n.why}", more="stacks"),

@@ -99,7 +99,7 @@ def summary_lines(report: Report, wall_s: float, digest: str,
     m = report.mission
     under = " " * VALUE_COLUMN
     labelled = [
-        f"mission {m['kind']} on {m['layout']} with {m['vehicles']} forklifts, "
+        f"mission {m['kind']} on {m['layout']} with {m['vehicles']} {report.vehicle_noun}s, "
         f"strategy {m['strategy']}",
         *report.numbers_lines(),
         f"  wall time          {wall_s:.1f} s",

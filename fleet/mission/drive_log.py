@@ -15,6 +15,7 @@ class AddLeg:
 
     trajectory: Trajectory
     loaded: bool  # carrying goods on it
+    after: bool | None = None  # carrying goods once arrived (None: as on it; Task.after)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,14 @@ FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
 REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (10 Hz)
 
 
+def states_until(t_end: float) -> float:
+    """Where the states of a mission that ended at t_end stop (exclusive): past the first
+    instant of the fast grid at or after t_end, so the recording shows every vehicle as the
+    mission leaves it (an AGV's last shelf put down at t_end)."""
+    k = math.ceil(t_end / FAST_STATE_PERIOD_S - 1e-9)
+    return (k + 1) * FAST_STATE_PERIOD_S
+
+
 def state_period(mode: str, speed: float) -> float:
     """Sim seconds between two states: the fast grid, or 10 Hz of wall time but never coarser
     than the fast grid, so the recording's safety check sees as much at any speed. `mode` is a
@@ -38,10 +46,15 @@ def state_period(mode: str, speed: float) -> float:
 class Leg:
     trajectory: Trajectory
     loaded: bool
+    after: bool | None = None  # loaded once arrived (None: as on the leg)
     # A vehicle that went down stands still over [pause_from, pause_to) part-way through
     # its step, then completes it: the leg runs that much later.
     pause_from: float = math.inf
     pause_to: float = math.inf
+
+    @property
+    def carries_after(self) -> bool:
+        return self.loaded if self.after is None else self.after
 
     @property
     def t_end(self) -> float:
@@ -71,8 +84,8 @@ class Drive:
         """Where the vehicle will stand once every committed leg is driven."""
         return self.legs[-1].trajectory.goal if self.legs else self.rest_pose
 
-    def add(self, trajectory: Trajectory, loaded: bool) -> None:
-        self.legs.append(Leg(trajectory, loaded))
+    def add(self, trajectory: Trajectory, loaded: bool, after: bool | None = None) -> None:
+        self.legs.append(Leg(trajectory, loaded, after))
 
     def amend(self, trajectory: Trajectory) -> None:
         """The last leg is postponed: drive `trajectory` instead (the same start, the same
@@ -82,7 +95,7 @@ class Drive:
             raise ValueError(f"vehicle {self.vehicle}: the amended leg from "
                              f"t={trajectory.t_start} is not its last, from "
                              f"t={last.trajectory.t_start}")
-        self.legs[-1] = Leg(trajectory, last.loaded)
+        self.legs[-1] = Leg(trajectory, last.loaded, last.after)
 
     def cut(self, t: float) -> None:
         """Drive nothing committed after the step in progress at t (legs not started by t go;
@@ -96,7 +109,7 @@ class Drive:
                 traj = leg.trajectory
                 leg = Leg(Trajectory(traj.vehicle, traj.start, steps[-1].end, traj.t_start,
                                      steps, (), traj.expansions), leg.loaded,
-                          leg.pause_from, leg.pause_to)
+                          None, leg.pause_from, leg.pause_to)
             kept.append(leg)
         self.legs = kept
 
@@ -122,7 +135,7 @@ class Drive:
         if step is not None:
             self.rest_pose = step.start
             traj = Trajectory(self.vehicle, step.start, step.end, step.t0, (step,), (), 0)
-            self.legs = [Leg(traj, loaded, t_stop, t_resume)]
+            self.legs = [Leg(traj, loaded, None, t_stop, t_resume)]
 
     def skip_to(self, t: float, period: float) -> None:
         """Publish no state for instants before t (the vehicle was down: nothing was said)."""
@@ -133,7 +146,7 @@ class Drive:
         carries); the last leg stays."""
         while len(self.legs) > 1 and self.legs[0].t_end < t:
             leg = self.legs.pop(0)
-            self.rest_pose, self.loaded = leg.trajectory.goal, leg.loaded
+            self.rest_pose, self.loaded = leg.trajectory.goal, leg.carries_after
 
     def state_at(self, t: float) -> VehicleState:
         pose, loaded = self.rest_pose, self.loaded
@@ -143,7 +156,7 @@ class Drive:
                 break
             loaded = leg.loaded
             if t >= leg.t_end:
-                pose = traj.goal
+                pose, loaded = traj.goal, leg.carries_after
                 continue
             tau = leg.local(t)
             for step in traj.steps:

@@ -27,6 +27,7 @@ from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks
 from fleet.mission.drive_log import AddLeg, AmendLeg, DriveLog
+from fleet.mission.driving import states_until
 from fleet.mission.fault_response import FaultResponse
 from fleet.mission.freeze import Disruption, VehicleDown
 from fleet.mission.mission_work import mission_work
@@ -220,7 +221,7 @@ class Engine:
             self._decide(active)
         rec = self.record
         rec.all_parked_time = max((s.t_end for s in rec.subtasks), default=0.0)
-        self.pacer.finish(max(rec.end_time, rec.all_parked_time))
+        self.pacer.finish(states_until(max(rec.end_time, rec.all_parked_time)))
         rec.busy_s = {v.vehicle: v.busy_s for v in self.fleet.values()}
         rec.wait_s = {v.vehicle: v.wait_s for v in self.fleet.values()}
         return rec
@@ -482,7 +483,8 @@ class Engine:
         v = self.fleet[decision.vehicle]
         return self.executor.execute(Task(v.vehicle, decision.kind, v.pose, decision.t_i,
                                           decision.target.goals, self.work.filled,
-                                          loaded=self.work.loaded(decision.kind)))
+                                          loaded=self.work.loaded(decision.kind),
+                                          after=self.work.carried_after(decision.kind)))
 
     def _apply(self, decision: Decision, traj: Trajectory) -> None:
         v = self.fleet[decision.vehicle]
@@ -502,7 +504,8 @@ class Engine:
                      if self.vehicle_kind.is_wait(s.manner.label))
         v.drive(decision.kind, target.name, traj, t_done, waited,
                 self.work.next_task(decision.kind))
-        self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(decision.kind)))
+        self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(decision.kind),
+                                                self.work.carried_after(decision.kind)))
         subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,
                           target.stack_cell, decision.t_i, traj.t_end, t_done, traj,
                           decision.postponed)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.errors import UserError
-from fleet.mission.orders import OrderBook, release_orders
+from fleet.mission.orders import Order, OrderBook, release_orders
 from fleet.mission.spec import Mission
 from fleet.mission.work import StackServed
 from fleet.planning.geometry import Cell
@@ -47,6 +47,15 @@ def order_fleet(layout: Layout, vehicles: int | None) -> int:
         raise UserError(f"--vehicles {n}: the AGVs of layout {layout.name} start on its "
                         f"{len(layout.piles)} charging piles, one each")
     return n
+
+
+def mission_orders(mission: Mission, layout: Layout) -> tuple[Order, ...]:
+    """The orders the mission releases (drawn with its seed on its area's shelves), or a
+    UserError naming what is wrong (the area, the count)."""
+    try:
+        return release_orders(layout, mission.orders, mission.seed, mission.order_area or None)
+    except ValueError as exc:  # it names the layout, the area or the count
+        raise UserError(str(exc)) from None
 
 
 @dataclass(order=True)
@@ -72,11 +81,7 @@ class OrderWork:
         if len(dwells) > 1:
             raise UserError(f"layout {layout.name}: packing stations of different dwells "
                             f"({sorted(dwells)}) are not supported")
-        try:
-            self.book = OrderBook(layout, vehicles, release_orders(
-                layout, mission.orders, mission.seed, mission.order_area or None))
-        except ValueError as exc:  # it names the layout, the area or the order
-            raise UserError(str(exc)) from None
+        self.book = OrderBook(layout, vehicles, mission_orders(mission, layout))
         self.layout = layout
         self.dwell = dwells.pop() if dwells else 0.0
         self.trips: dict[int, Target] = {}  # each AGV's next trip, decided, not yet committed
@@ -127,6 +132,11 @@ class OrderWork:
 
     def loaded(self, kind: TaskKind) -> bool:
         return kind in (TaskKind.PACK, TaskKind.STOW)
+
+    def carried_after(self, kind: TaskKind) -> bool:
+        """An AGV lifts the shelf as it arrives under it, and puts it down as it arrives in
+        the slot (note A.3: no lift or drop time)."""
+        return kind in (TaskKind.FETCH, TaskKind.PACK)
 
     def handling(self, kind: TaskKind) -> float:
         """The packing dwell at a station; lifting and putting down take no time (note A.3)."""

@@ -48,6 +48,10 @@ class Task:
     goals: tuple[Pose, ...]
     filled: frozenset[Cell]
     loaded: bool  # carrying goods on this trip
+    # What it carries once arrived, when that changes at the arrival (seed 002's AGVs lift
+    # and drop shelves at once); None: as on the trip, until its next (a forklift unloads
+    # over a handling time, then drives on).
+    after: bool | None = None
 
 
 class Executor(Protocol):

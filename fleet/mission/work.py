@@ -83,6 +83,10 @@ class MissionWork(Protocol):
     def loaded(self, kind: TaskKind) -> bool:
         """Whether a vehicle carries goods on a subtask of this kind."""
 
+    def carried_after(self, kind: TaskKind) -> bool | None:
+        """Whether it carries goods once it arrives, when that changes at the arrival (None:
+        as on the subtask, until its next; `Task.after`)."""
+
     @abstractmethod
     def handling(self, kind: TaskKind) -> float:
         """Seconds from arrival to being free again (claiming or unloading)."""
@@ -172,6 +176,9 @@ class StackWork(ABC):
 
     @abstractmethod
     def loaded(self, kind: TaskKind) -> bool: ...
+
+    def carried_after(self, kind: TaskKind) -> bool | None:
+        return None  # a forklift unloads (claims) over a handling time, then drives on
 
     @abstractmethod
     def handling(self, kind: TaskKind) -> float: ...

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fleet.mission.drive_log import AddLeg, AmendLeg, CutAt, DriveLog, ResumeAt, StopAt
-from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive
+from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive, states_until
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import Scenario
 from fleet.mission.freeze import Disruption, ScheduledPacer
@@ -53,15 +53,15 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log:
     (`until`: the instant a mission that did not finish reached), driven as its agent was
     told to (`Engine.drive_log`); a forklift that is down says nothing until it moves again."""
     if until is None:
-        until = max(record.end_time, record.all_parked_time)
+        until = states_until(max(record.end_time, record.all_parked_time))
     out = []
     for vehicle, start in zip(record.vehicles, record.starts, strict=True):
         drive = Drive(vehicle, start, layout)
         silent: list[tuple[float, float]] = []
         for order in drive_log[vehicle]:
             match order:
-                case AddLeg(trajectory, loaded):
-                    drive.add(trajectory, loaded)
+                case AddLeg(trajectory, loaded, after):
+                    drive.add(trajectory, loaded, after)
                 case AmendLeg(trajectory):
                     drive.amend(trajectory)
                 case CutAt(t):

@@ -21,6 +21,7 @@ from mcap.writer import CompressionType, Writer
 
 from fleet import __version__
 from fleet.mission.battery import start_piles
+from fleet.mission.order_work import mission_orders
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.trajectory import Pose
 from fleet.recording.format import (
@@ -58,10 +59,12 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
         starts = [Pose(p.cell, 0) for p in start_piles(layout, vehicles)]
     versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
                 "mcap": _package_version("mcap")}
+    released = [o.shelf for o in mission_orders(mission, layout)] \
+        if mission.kind is MissionKind.ORDERS else []
     return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
                        mission.strategy.value, vehicles, mission.seed, clock, speed,
                        [str(p) for p in starts], command or " ".join(sys.argv), versions,
-                       mission.orders)
+                       mission.orders, mission.order_area, released)
 
 
 def _package_version(name: str) -> str:

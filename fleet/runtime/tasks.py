@@ -23,7 +23,7 @@ from fleet.wire.protocol import ProtocolError, TaskRequest, TaskResult
 def task_to_wire(task: Task, task_id: str, revision: int) -> TaskRequest:
     return TaskRequest(task_id, task.vehicle, task.kind.value, str(task.start), task.t_i,
                        [str(g) for g in task.goals], sorted(task.filled), task.loaded,
-                       revision)
+                       revision, task.after)
 
 
 def task_from_wire(message: TaskRequest) -> Task:
@@ -35,7 +35,7 @@ def task_from_wire(message: TaskRequest) -> Task:
         raise ProtocolError("dispatch.task.goals: no goal pose")
     return Task(message.vehicle, kind, pose_from_wire(message.start, "dispatch.task.start"),
                 message.t_i, tuple(pose_from_wire(g, "dispatch.task.goals") for g in message.goals),
-                frozenset(message.filled), message.loaded)
+                frozenset(message.filled), message.loaded, message.after)
 
 
 def result_to_wire(task_id: str, vehicle: int, result: Trajectory | PlanFailure, revision: int,

@@ -209,6 +209,7 @@ class Agv:
     dims: VehicleDims = VehicleDims()  # a forklift's; the AGV's body is BODY_CELLS square
     cell_size: float = 1.0
     name: ClassVar[str] = "agv"
+    noun: ClassVar[str] = "AGV"
 
     @property
     def seconds_per_cell(self) -> float:

@@ -44,6 +44,7 @@ class Forklift:
     dims: VehicleDims = VehicleDims()
     cell_size: float = 2.0
     name: ClassVar[str] = "forklift"
+    noun: ClassVar[str] = "forklift"
 
     @property
     def outline(self) -> Outline:

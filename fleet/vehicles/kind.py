@@ -172,6 +172,7 @@ class Planners(Protocol):
 
 class VehicleKind(Protocol):
     name: ClassVar[str]  # what a layout's [vehicle] kind says
+    noun: ClassVar[str]  # what a user calls one ("forklift", "AGV")
 
     @property
     def outline(self) -> Outline: ...

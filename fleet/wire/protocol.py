@@ -175,6 +175,7 @@ class TaskRequest(Message):
     filled: list[tuple[int, int]]  # stacks holding goods: the static map to plan on
     loaded: bool
     revision: int  # plan on a table at least this recent
+    after: bool | None = None  # loaded once arrived, if that changes then (Task.after)
 
 
 @dataclass(frozen=True)
@@ -294,6 +295,8 @@ class MissionInfo(Message):
     command: str = ""
     versions: dict = field(default_factory=dict)
     orders: int = 0  # an order mission's orders (kind "orders")
+    order_area: str = ""  # the shelf area its orders were drawn on ("": every shelf)
+    released: list[str] = field(default_factory=list)  # the shelf of order 1, 2, ...
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,242 @@
+"""Seed 002's verdicts from a recording alone (fleet/analysis/lane_traffic.py,
+fleet/analysis/shelves.py): the AGVs' executed moves judged by the lane rules, nodes shared,
+swaps and crossed diagonals named; every order packed and its shelf put back once, shelves
+conserved. Each check on states made by hand, then on a real order mission's recording, as it
+is and with one thing broken in it."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+from pathlib import Path
+
+import pytest
+
+from fleet.analysis.lane_traffic import Grid, Seen, lane_breaches, meetings, tracks
+from fleet.analysis.shelves import Announced, Carrying, orders_verdict
+from fleet.cli import main
+from fleet.dispatching.decision import Strategy
+from fleet.mission.spec import Mission, MissionKind
+from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
+from fleet.runtime.args import engine_options
+from fleet.wire.protocol import MissionInfo, StackDone, VehicleState
+from fleet.world.layout_file import load_layout
+
+CHANNEL = load_layout("micro-channel")
+PAPER002 = load_layout("paper002")
+GRID = Grid(CHANNEL.origin, CHANNEL.cell_size)
+PERIOD = 0.5
+
+
+def driven(vehicle: int, cells: list[tuple[int, int]], t0: float = 0.0,
+           layout=CHANNEL) -> list[Seen]:
+    """States every PERIOD of an AGV driving through `cells` at one cell a second, a
+    diagonal in 1.4 s, a repeated cell standing a second there."""
+    ox, oy = layout.origin
+    size = layout.cell_size
+    knots = [(t0, cells[0])]
+    for a, b in itertools.pairwise(cells):
+        d = 1.4 if a[0] != b[0] and a[1] != b[1] else 1.0
+        knots.append((knots[-1][0] + d, b))
+    out, t = [], t0
+    while t <= knots[-1][0] + 1e-9:
+        for (ta, a), (tb, b) in itertools.pairwise(knots):
+            if ta <= t <= tb:
+                s = (t - ta) / (tb - ta)
+                x, y = a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1])
+                break
+        else:
+            x, y = knots[-1][1]
+        out.append(Seen(vehicle, round(t, 9), ox + x * size, oy + y * size))
+        t += PERIOD
+    return out
+
+
+def met(*routes: list[Seen]) -> list[tuple[str, tuple[int, int]]]:
+    pieces = tracks([s for r in routes for s in r], GRID, 1.5 * PERIOD)
+    return [(m.kind, m.vehicles) for m in meetings(pieces, 1.0, {})]
+
+
+def test_a_follower_one_cell_behind_meets_nobody():
+    leader = driven(1, [(1, 0), (2, 0), (3, 0), (4, 0), (5, 0)])
+    follower = driven(2, [(0, 0), (1, 0), (2, 0), (3, 0), (4, 0)])
+    assert met(leader, follower) == []
+
+
+def test_two_agvs_on_one_node_at_once_meet_there():
+    east = driven(1, [(0, 0), (1, 0), (2, 0), (3, 0)])
+    later = driven(2, [(1, 0), (2, 0)], t0=1.5)  # on (2, 0) from 2.5 s: east is there until 2.5
+    later_still = driven(2, [(1, 0), (2, 0)], t0=2.0)  # enters (2, 0) as east leaves it
+    assert ("node", (1, 2)) in met(east, later)
+    assert met(east, later_still) == []
+
+
+def test_a_swap_along_an_edge_is_named_a_swap():
+    west_bound = driven(1, [(3, 1), (2, 1)])
+    east_bound = driven(2, [(2, 1), (3, 1)])  # they pass through each other at 0.5 s
+    assert met(west_bound, east_bound) == [("swap", (1, 2))]
+
+
+def test_crossing_diagonals_of_one_block_are_caught_and_one_diagonal_later_is_not():
+    ne = driven(1, [(0, 0), (1, 1)])
+    nw = driven(2, [(1, 0), (0, 1)])
+    assert met(ne, nw) == [("diagonal", (1, 2))]
+    assert met(ne, driven(2, [(1, 0), (0, 1)], t0=1.4)) == []
+
+
+def test_executed_moves_are_judged_by_the_lane_rules():
+    legal = driven(1, [(0, 0), (1, 0), (2, 0), (3, 0)])  # h1-east, eastward
+    wrong_way = driven(2, [(3, 0), (2, 0), (1, 0)], t0=10.0)
+    pieces = tracks(legal + wrong_way, GRID, 1.5 * PERIOD)
+    breaches = lane_breaches(CHANNEL, pieces)
+    assert {b.vehicle for b in breaches} == {2}
+    assert {b.rule for b in breaches} == {"wrong-way"}
+    assert breaches[0].move == ((3, 0), (2, 0)) and breaches[0].t == pytest.approx(10.5)
+
+
+def test_a_slot_driven_straight_through_is_a_breach_and_one_stopped_at_is_not():
+    # Slot (2, 2) is entered from the near lane (2, 1); (2, 3) is a slot too.
+    through = driven(1, [(2, 1), (2, 2), (2, 3)])
+    stopped = driven(2, [(3, 1), (2, 1), (2, 2), (2, 2), (2, 1)], t0=20.0)
+    pieces = tracks(through + stopped, GRID, 1.5 * PERIOD)
+    assert {(b.vehicle, b.rule) for b in lane_breaches(CHANNEL, pieces)} >= {
+        (1, "through-place")}
+    assert all(b.vehicle == 1 for b in lane_breaches(CHANNEL, pieces))
+
+
+def test_states_further_apart_than_the_gap_are_not_joined():
+    jumped = driven(1, [(0, 0), (1, 0)]) + driven(1, [(5, 0), (6, 0)], t0=5.0)
+    pieces = tracks(jumped, GRID, 1.5 * PERIOD)
+    assert len(pieces[1]) == 2 and lane_breaches(CHANNEL, pieces) == []
+
+
+# -- shelves and orders ------------------------------------------------------------------------
+
+SLOT = PAPER002.shelves["s-3-3"]
+OTHER = PAPER002.shelves["s-4-3"]
+STATION = PAPER002.packing[0]
+
+
+def carrying(vehicle: int, plan: list[tuple[float, tuple[int, int] | None, bool, bool]]
+             ) -> list[Carrying]:
+    """States from (t, cell, loaded, standing), each passing through its own cell only."""
+    return [Carrying(vehicle, t, cell, frozenset([cell]) if cell else frozenset(), loaded,
+                     standing) for t, cell, loaded, standing in plan]
+
+
+def trip(vehicle: int, slot, back, t0: float = 0.0, dwell: float = 10.0) -> list[Carrying]:
+    """Lift at `slot`, stand `dwell` at the packing station, put down at `back`."""
+    s, p, b = tuple(slot.cell), tuple(STATION.cell), tuple(back.cell)
+    plan = [(t0, s, False, False), (t0 + 0.5, s, True, False),
+            (t0 + 20.0, p, True, False)]
+    plan += [(t0 + 20.0 + k * 0.5, p, True, True) for k in range(1, int(dwell * 2) + 1)]
+    plan += [(t0 + 50.0, b, True, False), (t0 + 50.5, b, False, False)]
+    return carrying(vehicle, plan)
+
+
+def test_an_order_is_done_once_its_shelf_is_packed_and_put_back():
+    verdict = orders_verdict(PAPER002, ["s-3-3"], trip(1, SLOT, SLOT),
+                             [Announced("s-3-3", 1, 1, 50.5)], finished=True)
+    assert verdict.passed and verdict.done == 1 and verdict.last_done_s == 50.5
+
+
+def test_a_shelf_left_at_the_station_too_soon_packs_nothing():
+    verdict = orders_verdict(PAPER002, ["s-3-3"], trip(1, SLOT, SLOT, dwell=5.0),
+                             [Announced("s-3-3", 1, 1, 50.5)], finished=True)
+    assert not verdict.passed and verdict.lost == ["order 1 (s-3-3)"]
+    assert "before its dwell of 10.0 s" in verdict.shelf_faults[0].why
+    assert verdict.not_served == ["order 1 (s-3-3)"]
+
+
+def test_a_shelf_put_down_on_another_is_a_fault_and_one_lifted_from_nothing_too():
+    onto_other = orders_verdict(PAPER002, ["s-3-3"], trip(1, SLOT, OTHER), [], True)
+    assert ["put s-3-3 down on s-4-3" in f.why for f in onto_other.shelf_faults] == [True]
+    twice = trip(1, SLOT, SLOT) + trip(2, SLOT, SLOT, t0=10.0)  # the slot is empty then
+    faults = orders_verdict(PAPER002, ["s-3-3"], twice, [], True).shelf_faults
+    assert [f.vehicle for f in faults] == [2] and "vacant slot" in faults[0].why
+
+
+def test_shelves_still_carried_at_the_end_break_conservation():
+    unfinished = trip(1, SLOT, SLOT)[:-1]  # never put down
+    verdict = orders_verdict(PAPER002, ["s-3-3"], unfinished, [], finished=True)
+    assert "still carried s-3-3 at the end" in verdict.shelf_faults[-1].why
+    assert orders_verdict(PAPER002, ["s-3-3"], unfinished, [], finished=False
+                          ).shelf_faults == []
+
+
+def test_announcements_must_name_a_released_order_and_its_shelf_once():
+    states = trip(1, SLOT, SLOT)
+    wrong_shelf = orders_verdict(PAPER002, ["s-3-3"], states,
+                                 [Announced("s-4-3", 1, 1, 50.5)], True)
+    assert wrong_shelf.misnamed and not wrong_shelf.passed
+    twice = orders_verdict(PAPER002, ["s-3-3"], states,
+                           [Announced("s-3-3", 1, 1, 50.5)] * 2, True)
+    assert twice.duplicated == ["order 1"] and not twice.passed
+    unknown = orders_verdict(PAPER002, ["s-3-3"], states,
+                             [Announced("s-3-3", 1, 1, 50.5), Announced("s-3-3", 7, 1, 60)],
+                             True)
+    assert unknown.misnamed == ["order 7 announced for s-3-3 by AGV 1 at t=60.00 s"]
+
+
+def test_two_orders_of_one_shelf_need_two_packings():
+    once = orders_verdict(PAPER002, ["s-3-3", "s-3-3"], trip(1, SLOT, SLOT), [], True)
+    assert once.done == 1 and once.lost == ["order 2 (s-3-3)"]
+    both = trip(1, SLOT, SLOT) + trip(1, SLOT, SLOT, t0=100.0)
+    assert orders_verdict(PAPER002, ["s-3-3", "s-3-3"], both, [], True).done == 2
+
+
+# -- a real recording ----------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def order_stream() -> list[Outgoing]:
+    mission = Mission("paper002", MissionKind.ORDERS, Strategy.NEAREST, vehicles=6, seed=3,
+                      orders=24)
+    return recorded_run(mission, PAPER002, engine_options(mission, PAPER002, None))[1]
+
+
+def judged(tmp_path: Path, stream: list[Outgoing], capsys) -> tuple[int, dict]:
+    path = tmp_path / "run.mcap"
+    write_recording(path, stream, PAPER002)
+    status = main(["analyze", str(path), "--json"])
+    return status, json.loads(capsys.readouterr().out)
+
+
+def test_an_order_mission_passes_every_verdict_from_its_recording(order_stream, tmp_path,
+                                                                  capsys):
+    status, report = judged(tmp_path, order_stream, capsys)
+    assert status == 0 and report["passed"]
+    orders = report["orders"]
+    assert orders["expected"] == orders["done"] == orders["announced"] == 24
+    assert orders["shelf_faults"] == 0 and orders["lost"] == []
+    assert report["lane_breaches"] == 0 and report["meetings"] == 0
+    [info] = [o.message for o in order_stream if isinstance(o.message, MissionInfo)]
+    assert len(info.released) == 24
+    # the makespan is the last shelf put down, as the dispatcher's record says too (the
+    # states show it at the next instant of their grid)
+    assert report["end_time_s"] <= orders["last_done_s"] < report["end_time_s"] + PERIOD
+
+
+def test_an_agv_moved_onto_another_is_caught_as_a_meeting(order_stream, tmp_path, capsys):
+    states = [k for k, o in enumerate(order_stream) if isinstance(o.message, VehicleState)]
+    moving = next(k for k in states if order_stream[k].message.vehicle == 1
+                  and order_stream[k].message.maneuver == "move" and order_stream[k].sim_time > 5)
+    t = order_stream[moving].sim_time
+    [other] = [k for k in states if order_stream[k].message.vehicle == 2
+               and order_stream[k].sim_time == t]
+    broken = list(order_stream)
+    m1 = order_stream[moving].message
+    broken[other] = dataclasses.replace(order_stream[other], message=dataclasses.replace(
+        order_stream[other].message, x=m1.x, y=m1.y))
+    status, report = judged(tmp_path, broken, capsys)
+    assert status == 1 and not report["safe"]
+    assert report["meetings"] >= 1 and report["meetings_first"][0]["vehicles"] == [1, 2]
+
+
+def test_an_announcement_repeated_fails_the_work_verdict(order_stream, tmp_path, capsys):
+    [first] = [k for k, o in enumerate(order_stream) if isinstance(o.message, StackDone)][:1]
+    broken = list(order_stream)
+    broken.insert(first + 1, order_stream[first])
+    status, report = judged(tmp_path, broken, capsys)
+    assert status == 1 and not report["work_done"]
+    assert report["orders"]["duplicated"] == [f"order {order_stream[first].message.index}"]
