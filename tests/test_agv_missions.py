@@ -211,5 +211,7 @@ def test_fast_mode_agv_processes_equal_the_inprocess_reference(tmp_path):
     assert (len(report.overlaps), len(report.outside_reservation)) == (0, 0)
     recorded = sorted((r.key, r.envelope.sim_time, m) for r, m in recording.of(VehicleState))
     driven = sorted((o.key, o.sim_time, o.message)
-                    for o in vehicle_states(reference, PAPER002, Keys(), engine.drive_log))
+                    for o in vehicle_states(reference, PAPER002, Keys(), engine.drive_log,
+                                            info=recording.info))
+    assert all(0 < m.battery <= 100 for _, _, m in recorded)  # each AGV's charge, as driven
     assert recorded == driven

@@ -1,8 +1,9 @@
 """Seed 002's verdicts from a recording alone (fleet/analysis/lane_traffic.py,
-fleet/analysis/shelves.py): the AGVs' executed moves judged by the lane rules, nodes shared,
-swaps and crossed diagonals named; every order packed and its shelf put back once, shelves
-conserved. Each check on states made by hand, then on a real order mission's recording, as it
-is and with one thing broken in it."""
+fleet/analysis/shelves.py, fleet/analysis/battery.py): the AGVs' executed moves judged by the
+lane rules, nodes shared, swaps and crossed diagonals named; every order packed and its shelf
+put back once, shelves conserved; batteries within their bounds, rates and the 20 % rule.
+Each check on states made by hand, then on a real order mission's recording, as it is and
+with one thing broken in it."""
 
 from __future__ import annotations
 
@@ -13,12 +14,17 @@ from pathlib import Path
 
 import pytest
 
+from fleet.analysis.battery import Charge, battery_verdict
 from fleet.analysis.lane_traffic import Grid, Seen, lane_breaches, meetings, tracks
 from fleet.analysis.shelves import Announced, Carrying, orders_verdict
 from fleet.cli import main
-from fleet.dispatching.decision import Strategy
+from fleet.dispatching.decision import Strategy, TaskKind
+from fleet.mission.drive_log import AmendLeg
+from fleet.mission.engine import Engine
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
+from fleet.recording.mission_record import summary_of
+from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
 from fleet.wire.protocol import MissionInfo, StackDone, VehicleState
 from fleet.world.layout_file import load_layout
@@ -240,3 +246,117 @@ def test_an_announcement_repeated_fails_the_work_verdict(order_stream, tmp_path,
     status, report = judged(tmp_path, broken, capsys)
     assert status == 1 and not report["work_done"]
     assert report["orders"]["duplicated"] == [f"order {order_stream[first].message.index}"]
+
+
+def test_an_order_whose_last_leg_is_postponed_is_done_when_it_arrives(tmp_path):
+    """A collision rule postpones a committed stow leg: the order is done, and the mission
+    ends, when the postponed leg puts the shelf down, in the record and in the recording."""
+    mission = Mission("paper002", MissionKind.ORDERS, Strategy.NEAREST, vehicles=6, seed=3,
+                      orders=24)
+    engine = Engine(mission)
+    record = engine.run()
+    stows = [s for s in record.subtasks if s.kind is TaskKind.STOW]
+    postponed = [s for s in stows if any(
+        isinstance(o, AmendLeg) and o.trajectory.t_start == s.trajectory.t_start
+        for o in engine.drive_log[s.vehicle])]
+    assert postponed  # seed 3 has two
+    assert sorted(t for _, _, t in record.stacks_done) == sorted(s.t_done for s in stows)
+    assert record.end_time == max(s.t_done for s in stows)
+    _, stream = recorded_run(mission, PAPER002, engine_options(mission, PAPER002, None))
+    write_recording(tmp_path / "run.mcap", stream, PAPER002)
+    summary = summary_of(read_recording(tmp_path / "run.mcap"))
+    assert sorted(s.t for s in summary.stacks_done) == sorted(s.t_done for s in stows)
+    assert summary.end_time_s == record.end_time
+
+
+# -- batteries -------------------------------------------------------------------------------
+
+PILE = tuple(PAPER002.piles[0].cell)
+PILES, PLACES = {PILE}, {PILE, tuple(SLOT.cell), tuple(STATION.cell)}
+DRAIN, CHARGE = 100 / 14_400, 100 / 3_600
+
+
+def charges(plan: list[tuple[float, float, tuple[int, int] | None, bool, bool]]
+            ) -> list[Charge]:
+    """States of AGV 1 from (t, soc, cell, moved, loaded)."""
+    return [Charge(1, t, soc, cell, moved, loaded) for t, soc, cell, moved, loaded in plan]
+
+
+def judge(plan) -> list[str]:
+    return [f.why for f in battery_verdict(charges(plan), PILES, PLACES, DRAIN, CHARGE,
+                                           20.0).faults]
+
+
+def test_a_battery_that_drains_driving_and_charges_on_a_pile_passes():
+    lane = (5, 5)
+    plan = [(0.0, 50.0, lane, False, False), (10.0, 50.0 - 10 * DRAIN, lane, True, False),
+            (20.0, 50.0 - 10 * DRAIN, PILE, True, False),
+            (30.0, 50.0 - 10 * DRAIN + 10 * CHARGE, PILE, False, False)]
+    verdict = battery_verdict(charges(plan), PILES, PLACES, DRAIN, CHARGE, 20.0)
+    assert verdict.passed and verdict.charged == 1
+    assert verdict.lowest == pytest.approx(50.0 - 10 * DRAIN)
+
+
+def test_a_charge_off_bounds_or_against_its_rates_is_a_fault():
+    lane = (5, 5)
+    assert "outside 0..100 %" in judge([(0.0, -1.0, lane, False, False)])[0]
+    assert "off a pile" in judge([(0.0, 50.0, lane, False, False),
+                                  (1.0, 50.5, lane, False, False)])[0]
+    assert "faster than its rate" in judge([(0.0, 50.0, PILE, False, False),
+                                            (1.0, 51.0, PILE, False, False)])[0]
+    assert "standing still" in judge([(0.0, 50.0, lane, False, False),
+                                      (1.0, 49.0, lane, False, False)])[0]
+    assert "faster than its rate" in judge([(0.0, 50.0, lane, False, False),
+                                            (1.0, 49.0, (5, 6), True, False)])[0]
+
+
+def test_a_shelf_put_down_below_the_threshold_sends_the_agv_to_a_pile_next():
+    slot, station = tuple(SLOT.cell), tuple(STATION.cell)
+    drop = [(0.0, 15.0, slot, False, True), (0.5, 15.0, slot, False, False)]
+    to_pile = [(30.0, 15.0 - 29.5 * DRAIN, PILE, True, False),
+               (31.0, 15.0 - 29.5 * DRAIN, PILE, False, False)]
+    to_station = [(30.0, 15.0 - 29.5 * DRAIN, station, True, False),
+                  (31.0, 15.0 - 29.5 * DRAIN, station, False, False)]
+    assert judge(drop + to_pile) == []
+    assert "not a pile" in judge(drop + to_station)[0]
+    above = [(0.0, 25.0, slot, False, True), (0.5, 25.0, slot, False, False)]
+    then = [(30.0, 25.0 - 29.5 * DRAIN, station, True, False),
+            (31.0, 25.0 - 29.5 * DRAIN, station, False, False)]
+    assert judge(above + then) == []
+
+
+def test_low_batteries_charge_and_pass_every_verdict_as_the_seed_pack_asks(tmp_path, capsys):
+    """The note's A-BAT-1, shortened: start charges drawn in 15..40 %, N_op 6 of 10 AGVs."""
+    code = main(["run", "--inprocess", "--layout", "paper002", "--orders", "60",
+                 "--vehicles", "10", "--battery", "start=15..40,n_op=6", "--out",
+                 str(tmp_path / "run"), "--json"])
+    summary = json.loads(capsys.readouterr().out)
+    assert code == 0 and summary["verdicts"]["passed"] and summary["verdicts"]["battery"]
+    battery = summary["battery"]
+    assert battery["charged"] >= 4 and battery["faults"] == []
+    assert 10.0 < battery["lowest"] < 20.0  # one drew below 20 % and went to charge
+    assert summary["orders"]["done"] == 60
+
+
+@pytest.mark.parametrize("flag, named", [
+    ("start=15..abc", "start='abc' is not a number"),
+    ("start=40..15", "runs backwards"),
+    ("below=120", "between 0 and 100 %"),
+    ("drive_hours=0", "drive_hours=0 must be more than 0"),
+    ("volts=48", "KEY=VALUE with KEY one of start, below"),
+])
+def test_nonsense_battery_numbers_are_refused_naming_them(flag, named, capsys):
+    with pytest.raises(SystemExit) as refused:  # argparse refuses by exiting
+        main(["run", "--inprocess", "--layout", "paper002", "--battery", flag])
+    assert refused.value.code == 2
+    err = capsys.readouterr().err
+    last = err.strip().splitlines()[-1]  # under argparse's usage lines
+    assert last.startswith("fleet run: error: argument --battery: ") and named in last
+    assert "Traceback" not in err
+
+
+def test_more_agvs_kept_operational_than_the_fleet_is_refused(capsys):
+    assert main(["run", "--inprocess", "--layout", "paper002", "--vehicles", "4",
+                 "--battery", "n_op=6"]) == 2
+    assert "n_op (AGVs kept operational) is 6 but the fleet has only 4" in \
+        capsys.readouterr().err

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from fleet.mission.battery import Battery
 from fleet.mission.driving import FAST_STATE_PERIOD_S, REALTIME_STATE_PERIOD_S, Drive, state_period
 from fleet.mission.seam import Task
 from fleet.mission.spec import ClockMode
@@ -102,7 +103,7 @@ class _Done:
 
 class Agent:
     def __init__(self, session: zenoh.Session, keys: Keys, vehicle: int, layout: Layout,
-                 start: Pose) -> None:
+                 start: Pose, battery: Battery | None = None) -> None:
         self.session = session
         self.keys = keys
         self.vehicle = vehicle
@@ -111,7 +112,7 @@ class Agent:
         self.mirror = TableMirror()
         self.vehicle_kind = layout.vehicle_kind
         self.planners = planners_for(layout)
-        self.drive = Drive(vehicle, start, layout)
+        self.drive = Drive(vehicle, start, layout, battery)
         self.drive_lock = threading.Lock()
         self.clock = SimClock()
         self.reservations = ReservationClient(session, keys, Requester(session, self.sender),

@@ -11,6 +11,7 @@ from contextlib import suppress
 import zenoh
 
 from fleet.errors import UserError
+from fleet.mission.battery import battery_of
 from fleet.planning.trajectory import Pose
 from fleet.runtime.access import read_dictionary
 from fleet.runtime.bus import Requester, RequestFailed, open_session
@@ -51,10 +52,12 @@ def serve(config: AgentConfig) -> int:
             raise UserError(f"--logins {config.logins} has no login for {user}")
         bus = dataclasses.replace(bus, user=user, password=logins[user])
     with open_session(bus) as session:
+        battery = None
         if given is not None:
             layout, starts, whose = given, given.vehicle_starts, f"layout {given.name}"
         else:
-            layout, starts = mission_layout(session, keys)
+            info, layout, starts = mission_layout(session, keys)
+            battery = battery_of(info, vehicle, layout)
             whose = "the mission"
         start = config.start
         if start is None:
@@ -65,18 +68,18 @@ def serve(config: AgentConfig) -> int:
         if config.id_file is not None:
             config.id_file.parent.mkdir(parents=True, exist_ok=True)
             config.id_file.write_text(f"{vehicle}\n")
-        agent = Agent(session, keys, vehicle, layout, start)
+        agent = Agent(session, keys, vehicle, layout, start, battery)
         stop_on_signals(agent.stop)
         with suppress(Stopped):  # a clean stop: the session is closed on the way out
             agent.run(exit_when_done=config.exit_when_done)
     return 0
 
 
-def mission_layout(session: zenoh.Session, keys: Keys,
-                   timeout_s: float = MISSION_WAIT_S) -> tuple[Layout, tuple[Pose, ...]]:
-    """The layout the dispatcher's mission runs on and its forklifts' start poses, from what
-    the dispatcher says the run is (dispatch/mission, as a recorder learns it), so every
-    process plans on the very map the dispatcher decides on; asked until it answers."""
+def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSION_WAIT_S
+                   ) -> tuple[MissionInfo, Layout, tuple[Pose, ...]]:
+    """What the dispatcher says the run is (dispatch/mission, as a recorder learns it), the
+    layout its mission runs on and its vehicles' start poses, so every process plans on the
+    very map the dispatcher decides on; asked until it answers."""
     deadline = time.monotonic() + timeout_s
     said = False
     while True:
@@ -85,8 +88,8 @@ def mission_layout(session: zenoh.Session, keys: Keys,
             if info is not None:
                 try:
                     starts = tuple(Pose.parse(p) for p in info.starts)
-                    return parse_layout(info.layout_toml, f"the mission's layout "
-                                        f"{info.layout}"), starts
+                    return info, parse_layout(info.layout_toml, f"the mission's layout "
+                                              f"{info.layout}"), starts
                 except ValueError as exc:  # a LayoutError too
                     raise UserError(f"the dispatcher's mission: {exc}") from None
         if time.monotonic() > deadline:

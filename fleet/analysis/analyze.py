@@ -24,6 +24,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import TypeVar
 
+from fleet.analysis.battery import BatteryVerdict, Charge, battery_verdict
 from fleet.analysis.failure_count import failure_counts
 from fleet.analysis.lane_traffic import (
     ExecutedViolation,
@@ -232,7 +233,28 @@ def analyze(recording: Recording) -> Report:
         if info.kind == MissionKind.ORDERS.value else None,
         lane_breaches=breaches,
         meetings=met,
+        battery=_battery(info, layout, usable),
     )
+
+
+def _battery(info: MissionInfo, layout: Layout, states: list[tuple[float, VehicleState]]
+             ) -> BatteryVerdict | None:
+    """The batteries' verdict (fleet/analysis/battery.py), where the states carry a charge."""
+    if not any(m.battery is not None for _, m in states):
+        return None
+    grid = Grid(layout.origin, layout.cell_size)
+    last: dict[int, tuple[float, float]] = {}
+    seen = []
+    for t, m in sorted(states, key=lambda s: (s[1].vehicle, s[0])):
+        if m.battery is None:
+            continue
+        moved = last.get(m.vehicle, (m.x, m.y)) != (m.x, m.y)
+        seen.append(Charge(m.vehicle, t, m.battery, grid.cell_of(m.x, m.y), moved, m.loaded))
+        last[m.vehicle] = (m.x, m.y)
+    piles = {tuple(p.cell) for p in layout.piles}
+    places = piles | {tuple(p.cell) for group in (layout.slots, layout.packing) for p in group}
+    return battery_verdict(seen, piles, places, info.drain_per_s, info.charge_per_s,
+                           info.charge_below)
 
 
 def _lane_traffic(layout: Layout, states: list[tuple[float, VehicleState]], max_gap: float
@@ -267,9 +289,13 @@ def _orders(recording: Recording, layout: Layout, states: list[tuple[float, Vehi
 
 def _mission(info: MissionInfo) -> dict:
     """Which run it was, as the recording's mission message says."""
-    return {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
-            "vehicles": info.vehicles, "seed": info.seed, "clock": info.clock,
-            "speed": info.speed}
+    out = {"layout": info.layout, "kind": info.kind, "strategy": info.strategy,
+           "vehicles": info.vehicles, "seed": info.seed, "clock": info.clock,
+           "speed": info.speed}
+    if info.kind == MissionKind.ORDERS.value:
+        out.update(orders=info.orders, order_area=info.order_area,
+                   charge_below=info.charge_below)
+    return out
 
 
 def _cut_off_windows(cut_off: list[Hole]) -> list[Unverified]:

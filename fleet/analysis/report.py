@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fleet.analysis.battery import BatteryVerdict
 from fleet.analysis.failure_count import FailureCount
 from fleet.analysis.lane_traffic import ExecutedViolation, Meeting
 from fleet.analysis.motion import Impossible
@@ -93,6 +94,9 @@ class Report:
     # crossing diagonals.
     lane_breaches: list[ExecutedViolation] = field(default_factory=list)
     meetings: list[Meeting] = field(default_factory=list)
+    # Seed 002's batteries, from the states' charge (fleet/analysis/battery.py); None: the
+    # states carry none.
+    battery: BatteryVerdict | None = None
 
     @property
     def safe(self) -> bool:
@@ -121,8 +125,13 @@ class Report:
         return self.messages_lost == 0 and not self.failures_unannounced
 
     @property
+    def batteries_kept(self) -> bool:
+        return self.battery is None or self.battery.passed
+
+    @property
     def passed(self) -> bool:
-        return self.safe and self.lanes_kept and self.work_done and self.messages_whole
+        return (self.safe and self.lanes_kept and self.work_done and self.batteries_kept
+                and self.messages_whole)
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
@@ -137,7 +146,12 @@ class Report:
             faults = self.orders.shelf_faults
             data["orders"]["shelf_faults"] = len(faults)
             data["orders"]["shelf_faults_first"] = [_jsonable(asdict(f)) for f in faults[:20]]
+        if self.battery is not None:
+            faults = self.battery.faults
+            data["battery"]["faults"] = len(faults)
+            data["battery"]["faults_first"] = [_jsonable(asdict(f)) for f in faults[:20]]
         data.update(safe=self.safe, lanes_kept=self.lanes_kept, work_done=self.work_done,
+                    batteries_kept=self.batteries_kept,
                     messages_whole=self.messages_whole, passed=self.passed)
         return _jsonable(data)
 
@@ -168,6 +182,11 @@ class Report:
                f"{kinds['diagonal']} crossed diagonals" if self.lane_layout else "")
             + unchecked,
             *lanes,
+            *([] if self.battery is None else [
+                f"battery            {mark(self.batteries_kept)}: lowest "
+                f"{self.battery.lowest:.1f} %, {self.battery.charged} charges, "
+                f"{len(self.battery.faults)} faults (bounds, rates, the "
+                f"{self.mission.get('charge_below', 20):g} % rule)"]),
             self._orders_line(mark) if self.orders is not None else
             f"work               {mark(self.work_done)}: {self.stacks_done} of "
             f"{self.stacks_expected} stacks served"
@@ -298,6 +317,9 @@ class Report:
                 out += [f"  {label:<19}{row}" for row in rows[:10]]
                 if len(rows) > 10:
                     out.append(f"  {label:<19}... {len(rows) - 10} more")
+            if self.battery is not None:
+                out += [f"  battery fault      t={f.t:.2f} s AGV {f.vehicle}: {f.why}"
+                        for f in self.battery.faults[:10]]
             out += [f"  shelf fault        t={f.t:.2f} s"
                     + ("" if f.vehicle is None else f" AGV {f.vehicle}") + f": {f.why}"
                     for f in o.shelf_faults[:10]]

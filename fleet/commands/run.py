@@ -180,7 +180,11 @@ def summary_json(report: Report, wall_s: float, digest: str,
         "digest": digest,
         "recording": report.path,
         "verdicts": {"safety": report.safe, "work": report.work_done,
-                     "messages": report.messages_whole, "passed": report.passed},
+                     "messages": report.messages_whole, "passed": report.passed,
+                     **({"lanes": report.lanes_kept} if report.lane_layout else {}),
+                     **({"battery": report.batteries_kept} if report.battery else {})},
+        **({"orders": asdict(report.orders)} if report.orders is not None else {}),
+        **({"battery": asdict(report.battery)} if report.battery is not None else {}),
     }
 
 

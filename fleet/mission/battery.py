@@ -20,9 +20,13 @@ shelf is carried. Which pile, and the queue when all are busy, is the order book
 
 from __future__ import annotations
 
+import math
+import random
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from fleet.planning.geometry import Cell
+from fleet.wire.protocol import MissionInfo
 from fleet.world.layout import Layout, Pile
 
 FULL = 100.0
@@ -78,6 +82,92 @@ class BatteryParams:
 
     def time_to_full(self, soc: float) -> float:
         return (FULL - soc) / self.charge_per_s
+
+
+BATTERY_KEYS = {
+    "start": "each AGV's charge at the start, % (LOW..HIGH: drawn with the seed; default 100)",
+    "below": "it goes to charge below this %, at a task's end (default 20, the seed's)",
+    "n_op": "AGVs kept operational by staggered charging (default: all)",
+    "drive_hours": "hours of driving from full to empty (default 4)",
+    "charge_hours": "hours on a pile from empty to full (default 1)",
+}
+
+
+def parse_battery(text: str) -> tuple[tuple[float, float], BatteryParams]:
+    """`start=15..40,below=20,n_op=6,drive_hours=4,charge_hours=1` (any of them, in any
+    order): the start charge range and the battery's numbers; ValueError naming what is
+    wrong."""
+    given: dict[str, str] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or key not in BATTERY_KEYS:
+            raise ValueError(f"{item!r} is not KEY=VALUE with KEY one of "
+                             f"{', '.join(BATTERY_KEYS)}")
+        if key in given:
+            raise ValueError(f"{key} is given twice")
+        given[key] = value.strip()
+    low_text, _, high_text = given.get("start", "100").partition("..")
+    low = _number("start", low_text)
+    high = _number("start", high_text) if high_text else low
+    start_charges(low, high, 1, 0)  # checks the range
+    hours = {key: _number(key, given.get(key, default))
+             for key, default in (("drive_hours", "4"), ("charge_hours", "1"))}
+    for key, value in hours.items():
+        if value <= 0:
+            raise ValueError(f"{key}={given[key]} must be more than 0")
+    n_op = None
+    if "n_op" in given:
+        try:
+            n_op = int(given["n_op"])
+        except ValueError:
+            raise ValueError(f"n_op={given['n_op']!r} is not a whole number") from None
+    params = BatteryParams(FULL / (3600.0 * hours["drive_hours"]),
+                           FULL / (3600.0 * hours["charge_hours"]),
+                           _number("below", given.get("below", "20")), n_op)
+    return (low, high), params
+
+
+def _number(key: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{key}={text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{key}={text!r} is not a finite number")
+    return value
+
+
+def start_charges(low: float, high: float, n: int, seed: int) -> tuple[float, ...]:
+    """Each AGV's SOC at the start: `low` for all when `high` is the same, else drawn
+    uniformly in [low, high] with the mission's seed (the note's A-BAT-1 draws 15..40 %)."""
+    _check_soc("the start charge", low)
+    _check_soc("the start charge", high)
+    if low > high:
+        raise ValueError(f"the start charge {low:g}..{high:g} % runs backwards")
+    if low == high:
+        return (float(low),) * n
+    rng = random.Random(f"battery {seed}")  # apart from the orders' draw
+    return tuple(round(rng.uniform(low, high), 6) for _ in range(n))
+
+
+@dataclass(frozen=True)
+class Battery:
+    """One AGV's battery as it drives (fleet.mission.driving): it drains while the AGV
+    moves, and charges while the AGV is parked on a pile (between legs: a wait inside a leg
+    is no docking), never above 100 %."""
+
+    params: BatteryParams
+    start_soc: float
+    piles: frozenset[Cell]
+
+
+def battery_of(info: MissionInfo, vehicle: int, layout: Layout) -> Battery | None:
+    """The battery a mission gives the vehicle (None: the mission models none)."""
+    if not 1 <= vehicle <= len(info.soc_start):
+        return None
+    params = BatteryParams(info.drain_per_s, info.charge_per_s, info.charge_below)
+    return Battery(params, info.soc_start[vehicle - 1], frozenset(p.cell for p in layout.piles))
 
 
 def start_piles(layout: Layout, n: int) -> tuple[Pile, ...]:

@@ -15,7 +15,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from fleet.mission.battery import Battery
 from fleet.mission.spec import ClockMode
+from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.vehicles.kind import Placement
 from fleet.wire.protocol import VehicleState
@@ -70,7 +72,8 @@ class Leg:
 
 
 class Drive:
-    def __init__(self, vehicle: int, pose: Pose, layout: Layout) -> None:
+    def __init__(self, vehicle: int, pose: Pose, layout: Layout,
+                 battery: Battery | None = None) -> None:
         self.vehicle = vehicle
         self.layout = layout
         self.vehicle_kind = layout.vehicle_kind
@@ -78,6 +81,9 @@ class Drive:
         self.legs: list[Leg] = []
         self.loaded = False
         self.next_k = 0  # grid index of the next state to publish
+        self.battery = battery
+        # The charge known at an instant; later ones are worked out from the legs since.
+        self.charged_at = (0.0, battery.start_soc if battery is not None else 0.0)
 
     @property
     def pose(self) -> Pose:
@@ -143,10 +149,55 @@ class Drive:
 
     def forget_before(self, t: float) -> None:
         """Drop legs that ended before t (their goal becomes the rest pose, their load what it
-        carries); the last leg stays."""
+        carries, the charge at their end known); the last leg stays."""
         while len(self.legs) > 1 and self.legs[0].t_end < t:
+            end = self.legs[0].t_end
+            if self.battery is not None and end > self.charged_at[0]:
+                self.charged_at = (end, self.soc_at(end))
             leg = self.legs.pop(0)
             self.rest_pose, self.loaded = leg.trajectory.goal, leg.carries_after
+
+    def soc_at(self, t: float) -> float:
+        """The battery's state of charge at t (from the last instant it is known at on): it
+        drains while the vehicle moves and charges while it is parked on a pile."""
+        assert self.battery is not None
+        params, piles = self.battery.params, self.battery.piles
+        t_known, soc = self.charged_at
+        for t0, t1, doing, cell in self._spans(t_known, t):
+            if doing == "moving":
+                soc = params.after_driving(soc, t1 - t0)
+            elif doing == "parked" and cell in piles:
+                soc = params.after_charging(soc, t1 - t0)
+        return soc
+
+    def _spans(self, t0: float, t1: float) -> list[tuple[float, float, str, Cell]]:
+        """[t0, t1) cut into spans moving, standing (inside a leg) and parked (between
+        legs), in time order, with the cell each starts on."""
+        out: list[tuple[float, float, str, Cell]] = []
+
+        def add(a: float, b: float, doing: str, cell: Cell) -> None:
+            a, b = max(a, t0), min(b, t1)
+            if b > a:
+                out.append((a, b, doing, cell))
+
+        cursor, pose = t0, self.rest_pose
+        for leg in self.legs:
+            traj = leg.trajectory
+            add(cursor, traj.t_start, "parked", pose.cell)
+            for step in traj.steps:
+                doing = "standing" if self.vehicle_kind.is_wait(step.manner.label) else \
+                    "moving"
+                if step.t0 < leg.pause_from < step.t1:  # down part-way through the step
+                    add(step.t0, leg.pause_from, doing, step.start.cell)
+                    add(leg.pause_from, leg.pause_to, "standing", step.start.cell)
+                    add(leg.pause_to, step.t1 + leg.pause_to - leg.pause_from, doing,
+                        step.start.cell)
+                else:
+                    shift = 0.0 if step.t1 <= leg.pause_from else leg.pause_to - leg.pause_from
+                    add(step.t0 + shift, step.t1 + shift, doing, step.start.cell)
+            cursor, pose = max(cursor, leg.t_end), traj.goal
+        add(cursor, math.inf, "parked", pose.cell)
+        return out
 
     def state_at(self, t: float) -> VehicleState:
         pose, loaded = self.rest_pose, self.loaded
@@ -161,8 +212,8 @@ class Drive:
             tau = leg.local(t)
             for step in traj.steps:
                 if step.t0 <= tau < step.t1:
-                    return self._state(self.vehicle_kind.on_step(step, tau), loaded)
-        return self._state(self.vehicle_kind.at_rest(pose), loaded)
+                    return self._state(self.vehicle_kind.on_step(step, tau), loaded, t)
+        return self._state(self.vehicle_kind.at_rest(pose), loaded, t)
 
     def due(self, until: float, period: float, before: bool = False) -> list[float]:
         """The grid instants k * period up to `until` (with `before`, only those before it)
@@ -178,7 +229,8 @@ class Drive:
         self.next_k = max(self.next_k, last + 1)
         return out
 
-    def _state(self, at: Placement, loaded: bool) -> VehicleState:
+    def _state(self, at: Placement, loaded: bool, t: float) -> VehicleState:
         ox, oy = self.layout.origin
+        soc = None if self.battery is None else round(self.soc_at(t), 6)
         return VehicleState(self.vehicle, str(at.pose), at.speed, at.step, loaded, at.x + ox,
-                            at.y + oy, at.theta)
+                            at.y + oy, at.theta, soc)

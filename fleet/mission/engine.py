@@ -170,6 +170,9 @@ class Engine:
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
         self.failed_at: dict[int, float] = {}  # the instant each vehicle last failed at
         self.asides = 0  # vehicles sent aside since the last subtask of the work
+        # The stack (order) each subtask served, by their indices in the record: a subtask
+        # postponed later (seed 002) serves it that much later.
+        self.served_by: dict[int, int] = {}
         self.said_walled: set[tuple[int, int]] = set()  # (vehicle, revision) reported
         self.now = 0.0  # the instant the clock was last moved to
         self.decisions_at_now = 0  # decisions taken since the clock last moved
@@ -494,6 +497,7 @@ class Engine:
         if served is not None:
             if served.goods is not None:
                 self.executor.reserve_goods([served.goods])
+            self.served_by[len(self.record.subtasks)] = len(self.record.stacks_done)
             self.record.stacks_done.append((served.cluster, served.index, t_done))
             # Announced as it is committed (the clock at `now`), as a dispatcher of processes
             # publishes it: a reopening then follows the announcement it takes back.
@@ -528,6 +532,10 @@ class Engine:
         after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
                                     t_done=leg.t_end + self.work.handling(before.kind))
         self.record.subtasks[k] = after
+        if k in self.served_by:  # what it served is done later (its announcement said then)
+            cluster, index, _ = self.record.stacks_done[self.served_by[k]]
+            self.record.stacks_done[self.served_by[k]] = (cluster, index, after.t_done)
+            self.record.end_time = max(self.record.end_time, after.t_done)
         v.amended(delay, after.t_done)
         self.drive_log[v.vehicle].append(AmendLeg(leg))
         self.work.amended(leg)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.errors import UserError
+from fleet.mission.battery import BatteryParams, parse_battery, start_charges
 from fleet.mission.orders import Order, OrderBook, release_orders
 from fleet.mission.spec import Mission
 from fleet.mission.work import StackServed
@@ -58,6 +59,21 @@ def mission_orders(mission: Mission, layout: Layout) -> tuple[Order, ...]:
         raise UserError(str(exc)) from None
 
 
+def mission_battery(mission: Mission) -> tuple[tuple[float, float], BatteryParams]:
+    """The start charge range and the battery's numbers of the mission, or a UserError
+    naming what is wrong in its `--battery` text."""
+    try:
+        return parse_battery(mission.battery)
+    except ValueError as exc:
+        raise UserError(f"--battery {mission.battery}: {exc}") from None
+
+
+def mission_charges(mission: Mission, vehicles: int) -> tuple[float, ...]:
+    """Each AGV's charge at the start of the mission (drawn with its seed)."""
+    (low, high), _ = mission_battery(mission)
+    return start_charges(low, high, vehicles, mission.seed)
+
+
 @dataclass(order=True)
 class _Event:
     t: float
@@ -81,7 +97,12 @@ class OrderWork:
         if len(dwells) > 1:
             raise UserError(f"layout {layout.name}: packing stations of different dwells "
                             f"({sorted(dwells)}) are not supported")
-        self.book = OrderBook(layout, vehicles, mission_orders(mission, layout))
+        _, params = mission_battery(mission)
+        try:
+            self.book = OrderBook(layout, vehicles, mission_orders(mission, layout), params,
+                                  mission_charges(mission, vehicles))
+        except ValueError as exc:  # it names the number that is wrong (n_op, the fleet)
+            raise UserError(f"--battery: {exc}") from None
         self.layout = layout
         self.dwell = dwells.pop() if dwells else 0.0
         self.trips: dict[int, Target] = {}  # each AGV's next trip, decided, not yet committed

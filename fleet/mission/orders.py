@@ -394,7 +394,8 @@ class OrderBook:
             agv.slot = self._slot_of(order.shelf)
             agv.leg_start = now
             charge = None
-            if agv.pile is not None:  # it leaves its pile
+            if agv.pile is not None:  # it leaves its pile, charged while it stood there
+                agv.soc = self.battery.after_charging(agv.soc, max(0.0, now - agv.since))
                 self.pile_agv[agv.pile.name] = None
                 agv.pile = None
                 charge = self._serve_pile_queue(now)

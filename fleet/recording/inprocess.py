@@ -15,6 +15,7 @@ from collections import defaultdict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from fleet.mission.battery import battery_of
 from fleet.mission.drive_log import AddLeg, AmendLeg, CutAt, DriveLog, ResumeAt, StopAt
 from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive, states_until
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
@@ -48,7 +49,8 @@ def outgoing(keys: Keys, topic: Topic, message: Message, sim_time: float,
 
 
 def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log: DriveLog,
-                   until: float | None = None) -> list[Outgoing]:
+                   until: float | None = None, info: MissionInfo | None = None
+                   ) -> list[Outgoing]:
     """Each forklift's state on the fast-mode grid, from t = 0 to the mission's last tick
     (`until`: the instant a mission that did not finish reached), driven as its agent was
     told to (`Engine.drive_log`); a forklift that is down says nothing until it moves again."""
@@ -56,7 +58,8 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log:
         until = states_until(max(record.end_time, record.all_parked_time))
     out = []
     for vehicle, start in zip(record.vehicles, record.starts, strict=True):
-        drive = Drive(vehicle, start, layout)
+        drive = Drive(vehicle, start, layout,
+                      None if info is None else battery_of(info, vehicle, layout))
         silent: list[tuple[float, float]] = []
         for order in drive_log[vehicle]:
             match order:
@@ -90,7 +93,7 @@ def inprocess_stream(info: MissionInfo, record: MissionRecord, layout: Layout,
     stream += [outgoing(keys, Keys.reservation_change, c, change_time(c)) for c in changes]
     stream += [outgoing(keys, dispatcher[type(m)], m, t) for m, t in events]
     stream += vehicle_states(record, layout, keys, drive_log,
-                             None if stopped is None else stopped.t)
+                             None if stopped is None else stopped.t, info)
     stream.sort(key=lambda o: o.sim_time)  # stable: table changes before what they cause
     if stopped is not None:
         stream.append(outgoing(keys, Keys.dispatch_stopped, stopped.message(), stopped.t))

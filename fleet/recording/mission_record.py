@@ -103,8 +103,10 @@ def summary_of(recording: Recording) -> MissionSummary:
     final = final_record(recording, restarts)
     incomplete = unknown(recording, restarts, final is not None)
     heard = recording.of(SubtaskEvent)
-    subtasks = amended(heard, recording.of(LegAmended))
-    stacks = [StackRecord(m.cluster, m.index, m.t) for _, m in recording.of(StackDone)]
+    subtasks, later = amended(heard, recording.of(LegAmended))
+    # A stack (order) is done when the subtask that served it is, postponed or not.
+    stacks = [StackRecord(m.cluster, m.index, later.get((m.vehicle, m.t), m.t))
+              for _, m in recording.of(StackDone)]
     failures = [m for _, m in recording.of(DecisionFailure)]
     if final is not None:
         # Those of the dispatchers before it as recorded, then all it announced.
@@ -137,11 +139,14 @@ def summary_of(recording: Recording) -> MissionSummary:
 
 
 def amended(heard: list[tuple[Recorded, SubtaskEvent]],
-            amendments: list[tuple[Recorded, LegAmended]]) -> list[SubtaskRecord]:
+            amendments: list[tuple[Recorded, LegAmended]]
+            ) -> tuple[list[SubtaskRecord], dict[tuple[int, float], float]]:
     """The subtasks as announced, each postponed by the amendments announced after it (seed
-    002's collision rules): the vehicle's latest subtask decided at the amendment's t_i."""
+    002's collision rules): the vehicle's latest subtask decided at the amendment's t_i; and
+    (vehicle, the done time announced) -> the done time after every postponement."""
     subtasks = [SubtaskRecord.of_event(m) for _, m in heard]
     at = [r.log_ns for r, _ in heard]
+    announced = [(s.vehicle, s.t_done) for s in subtasks]
     for r, a in amendments:
         k = max((i for i, s in enumerate(subtasks)
                  if s.vehicle == a.vehicle and s.t_i == a.t_i and at[i] <= r.log_ns),
@@ -152,7 +157,9 @@ def amended(heard: list[tuple[Recorded, SubtaskEvent]],
             subtasks[k], t_end=a.t_end, t_done=a.t_done,
             steps=tuple(tuple(st) for st in a.steps),
             intervals=tuple(tuple(iv) for iv in a.intervals))
-    return subtasks
+    later = {was: s.t_done for was, s in zip(announced, subtasks, strict=True)
+             if was[1] != s.t_done}
+    return subtasks, later
 
 
 def dispatcher_restarts(recording: Recording) -> list[Restart]:

@@ -21,7 +21,7 @@ from mcap.writer import CompressionType, Writer
 
 from fleet import __version__
 from fleet.mission.battery import start_piles
-from fleet.mission.order_work import mission_orders
+from fleet.mission.order_work import mission_battery, mission_charges, mission_orders
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.trajectory import Pose
 from fleet.recording.format import (
@@ -59,12 +59,15 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
         starts = [Pose(p.cell, 0) for p in start_piles(layout, vehicles)]
     versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
                 "mcap": _package_version("mcap")}
-    released = [o.shelf for o in mission_orders(mission, layout)] \
-        if mission.kind is MissionKind.ORDERS else []
+    orders = mission.kind is MissionKind.ORDERS
+    released = [o.shelf for o in mission_orders(mission, layout)] if orders else []
+    _, battery = mission_battery(mission)
     return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
                        mission.strategy.value, vehicles, mission.seed, clock, speed,
                        [str(p) for p in starts], command or " ".join(sys.argv), versions,
-                       mission.orders, mission.order_area, released)
+                       mission.orders, mission.order_area, released,
+                       list(mission_charges(mission, vehicles)) if orders else [],
+                       battery.drain_per_s, battery.charge_per_s, battery.threshold)
 
 
 def _package_version(name: str) -> str:

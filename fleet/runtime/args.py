@@ -12,10 +12,12 @@ from pathlib import Path
 
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.battery import BATTERY_KEYS
 from fleet.mission.engine import EngineOptions
 from fleet.mission.order_work import DEFAULT_ORDERS
 from fleet.mission.spec import Mission, MissionKind
 from fleet.runtime.argtypes import (
+    battery_arg,
     endpoint,
     integer,
     layout_arg,
@@ -122,15 +124,19 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--order-area", default="", metavar="AREA",
                    help="draw the orders on this shelf area's shelves only: a shelf area of "
                    "the layout, or lower-left (seed 002's Figure 19; default: every shelf)")
+    p.add_argument("--battery", type=battery_arg, default="", metavar="KEY=VALUE,...",
+                   help="seed 002's batteries in an order mission: " + "; ".join(
+                       f"{key}: {text}" for key, text in BATTERY_KEYS.items())
+                   + " (e.g. start=15..40,n_op=6; default: the defaults of each)")
     p.add_argument("--strategy", choices=[s.value for s in Strategy], default=None,
                    help="how the dispatcher picks each vehicle's next goal (default ann; "
                    "nearest, the only one, for order missions; each is described below)")
     p.add_argument("--vehicles", type=positive_int, default=None,
                    help="fleet size (default: every start pose of the layout)")
     p.add_argument("--seed", type=integer, default=0,
-                   help="the mission's seed, kept in its record (the dispatching itself "
-                   "draws no random numbers: a mission gives the same record every time; "
-                   "default 0)")
+                   help="the mission's seed, kept in its record: it draws an order "
+                   "mission's orders and start charges (the dispatching itself draws no "
+                   "random numbers: a mission gives the same record every time; default 0)")
     p.add_argument("--weights", type=text_file, metavar="FILE",
                    help="MLP weights for --strategy ann (default: the weights shipped for the "
                    "layout)")
@@ -146,7 +152,8 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
     else:
         kind = MissionKind.FILL
     orders = kind is MissionKind.ORDERS
-    for flag, given in (("--orders", args.orders is not None), ("--order-area", args.order_area)):
+    for flag, given in (("--orders", args.orders is not None), ("--order-area", args.order_area),
+                        ("--battery", args.battery)):
         if given and not orders:
             raise UserError(f"{flag} is for order missions, not --mission {kind.value}")
     if args.strategy is None:
@@ -158,7 +165,7 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
                         f"order missions take nearest, fill and empty the other strategies")
     return Mission(layout=args.layout, kind=kind, strategy=strategy, vehicles=args.vehicles,
                    seed=args.seed, orders=(args.orders or DEFAULT_ORDERS) if orders else 0,
-                   order_area=args.order_area)
+                   order_area=args.order_area, battery=args.battery)
 
 
 def mission_argv(mission: Mission) -> list[str]:
@@ -167,6 +174,8 @@ def mission_argv(mission: Mission) -> list[str]:
     orders = ["--orders", str(mission.orders)] if mission.kind is MissionKind.ORDERS else []
     if mission.order_area:
         orders += ["--order-area", mission.order_area]
+    if mission.battery:
+        orders += ["--battery", mission.battery]
     return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
             "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
 

@@ -13,6 +13,8 @@ import re
 import socket
 from pathlib import Path
 
+from fleet.mission.battery import parse_battery
+
 # The zenoh link protocols whose address is HOST:PORT, and the one whose address is a path.
 HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
 PATH_PROTOCOLS = ("unixsock-stream",)
@@ -193,6 +195,15 @@ def text_file(text: str) -> Path:
     if problem is not None:
         raise _refuse(text, problem)
     return path
+
+
+def battery_arg(text: str) -> str:
+    """A `--battery` text (fleet.mission.battery.parse_battery), checked, kept as given."""
+    try:
+        parse_battery(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def layout_arg(text: str) -> str:

@@ -72,6 +72,7 @@ class VehicleState(Message):
     x: float = 0.0  # world position of the rear axle point (metres) and heading (radians)
     y: float = 0.0
     theta: float = 0.0
+    battery: float | None = None  # state of charge, % (None: no battery is modelled)
 
 
 @dataclass(frozen=True)
@@ -297,6 +298,12 @@ class MissionInfo(Message):
     orders: int = 0  # an order mission's orders (kind "orders")
     order_area: str = ""  # the shelf area its orders were drawn on ("": every shelf)
     released: list[str] = field(default_factory=list)  # the shelf of order 1, 2, ...
+    # Seed 002's batteries (fleet/mission/battery.py): each AGV's charge at the start, in %
+    # (empty: no battery is modelled), and the rates and the threshold they run with.
+    soc_start: list[float] = field(default_factory=list)
+    drain_per_s: float = 0.0  # % per second of driving
+    charge_per_s: float = 0.0  # % per second parked on a pile
+    charge_below: float = 0.0  # % below which an AGV goes to charge at a task's end
 
 
 @dataclass(frozen=True)
