@@ -12,16 +12,19 @@ import numpy as np
 import pytest
 from matplotlib.patches import Rectangle
 from PIL import Image
+from test_scene import decode
 
 from fleet.cli import main
 from fleet.commands.plot import read_run
 from fleet.mission.record import MissionHeader, MissionSummary, StackRecord, SubtaskRecord
 from fleet.views import order_plots
 from fleet.views.order_timeline import cell_seconds, timeline, tracks
-from fleet.wire.protocol import LegAmended, VehicleState
+from fleet.views.scene import SceneViews
+from fleet.wire.protocol import LegAmended, SubtaskEvent, VehicleState
 from fleet.world.layout_file import load_layout
 
 MICRO_T = load_layout("micro-t")
+BASE = 1_700_000_000 * 10**9
 
 
 def subtask(vehicle, kind, target, t_i, t_end, t_done, *steps):
@@ -219,3 +222,72 @@ def test_the_orders_curve_steps_at_each_completion(read):
     xs, ys = done.get_data()
     assert list(xs[1:-1]) == [c.t for c in tl.completions]
     assert list(ys[1:-1]) == list(range(1, recording.info.orders + 1))
+
+
+def test_the_foxglove_scene_shows_the_shelves_where_the_plots_do(read):
+    recording, record, _ = read
+    layout = recording.layout()
+    tl = timeline(layout, record)
+    views = SceneViews(layout, BASE, kind="orders", vehicles=recording.info.vehicles)
+    start = {topic: decode(message) for topic, message, _ in views.start()}
+    (shelves,) = start["/view/goods"].entities
+    assert len(shelves.cubes) == len(layout.slots)
+    frames = carried_seen = 0
+    for r in recording.messages:
+        if not r.genuine:
+            continue
+        out = views.on_message(r.key, r.envelope.message, r.envelope.sim_time)
+        agvs = [decode(m) for topic, m, _ in out if topic == "/view/forklifts"]
+        if not agvs:
+            continue
+        t = views.shown_until
+        expected = tl.shelves_at(t)
+        assert set(views.shelves.in_slot) == set(expected.in_slot), t
+        assert views.shelves.carried == expected.on_agv, t
+        frames += 1
+        for entity in agvs[-1].entities:
+            v = int(entity.id.split("/")[1])
+            assert len(entity.cubes) == (2 if v in expected.on_agv else 1), (t, v)
+            carried_seen += v in expected.on_agv
+        goods = [decode(m) for topic, m, _ in out if topic == "/view/goods"]
+        if goods:
+            cells = {(round(c.pose.position.x - layout.origin[0]),
+                      round(c.pose.position.y - layout.origin[1]))
+                     for c in goods[-1].entities[0].cubes}
+            assert cells == set(expected.in_slot), t
+    assert frames > 100 and carried_seen > 0
+
+
+def test_the_scene_of_a_lane_layout_draws_its_lanes_slots_stations_and_piles():
+    views = SceneViews(MICRO_T, BASE, kind="orders", vehicles=2)
+    (warehouse,) = [decode(m) for topic, m, _ in views.start() if topic == "/view/warehouse"]
+    by_id = {e.id: e for e in warehouse.entities}
+    junctions = {c for j in MICRO_T.junctions for c in j.cells}
+    arrows = sum(len(d) for c, d in MICRO_T.lane_directions.items() if c not in junctions)
+    tiles, heads = by_id["lanes"].triangles
+    assert len(heads.points) == 3 * arrows and len(tiles.points) == 6 * len(junctions)
+    assert len(by_id["slots"].cubes) == len(MICRO_T.slots)
+    assert {i for i in by_id if i.startswith("packing/")} == {f"packing/{p.name}"
+                                                              for p in MICRO_T.packing}
+    assert {i for i in by_id if i.startswith("pile/")} == {f"pile/{p.name}" for p in MICRO_T.piles}
+    # An arrowhead points its lane's way: the tip lies ahead of the cell's centre.
+    lane = MICRO_T.lanes[0]
+    cell = next(c for c in lane.cells if c not in junctions)
+    x, y = MICRO_T.cell_center(cell)
+    tips = [p for p in heads.points if abs(p.x - x) < 0.5 and abs(p.y - y) < 0.5]
+    ahead = {"E": (1, 0), "W": (-1, 0), "N": (0, 1), "S": (0, -1)}[lane.direction]
+    assert max((p.x - x) * ahead[0] + (p.y - y) * ahead[1] for p in tips) == pytest.approx(0.3)
+
+
+def test_a_stow_postponed_puts_its_shelf_down_later():
+    views = SceneViews(MICRO_T, BASE, kind="orders", vehicles=1)
+    tracker = views.shelves
+    stand = VehicleState(1, "3,2,E", 0, "", True, 3.5, 2.5, 0.0)
+    assert tracker.on_state(VehicleState(1, "3,2,E", 0, "", False, 3.5, 2.5, 0.0), 0.0) is False
+    assert tracker.on_state(stand, 0.5) is True and tracker.carried == {1: "s-3-2"}
+    views.on_message("k", SubtaskEvent(1, "stow", "s-3-2", None, 1.0, 5.0, 5.0, False, [], []),
+                     1.0)
+    views.on_message("k", LegAmended(1, 1.0, 7.0, 7.0, [], []), 2.0)
+    assert tracker.on_state(stand, 6.0) is False and tracker.carried == {1: "s-3-2"}
+    assert tracker.on_state(stand, 7.0) is True and tracker.in_slot[3, 2] == "s-3-2"
+    assert tracker.on_state(stand, 7.5) is False  # still "loaded" until its next trip
