@@ -5,11 +5,13 @@ out below, and on a real in-process mission of twelve orders on micro-t (a secon
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.container import ErrorbarContainer
 from matplotlib.patches import Rectangle
 from PIL import Image
 from test_scene import decode
@@ -18,6 +20,7 @@ from fleet.cli import main
 from fleet.commands.plot import read_run
 from fleet.mission.record import MissionHeader, MissionSummary, StackRecord, SubtaskRecord
 from fleet.views import order_plots
+from fleet.views.makespan import curves, figure
 from fleet.views.order_timeline import cell_seconds, timeline, tracks
 from fleet.views.scene import SceneViews
 from fleet.wire.protocol import LegAmended, SubtaskEvent, VehicleState
@@ -291,3 +294,79 @@ def test_a_stow_postponed_puts_its_shelf_down_later():
     assert tracker.on_state(stand, 6.0) is False and tracker.carried == {1: "s-3-2"}
     assert tracker.on_state(stand, 7.0) is True and tracker.in_slot[3, 2] == "s-3-2"
     assert tracker.on_state(stand, 7.5) is False  # still "loaded" until its next trip
+
+
+# ------------------------------------------------------------------ makespan curves
+
+
+def point(orders, agvs, bi, uni, bi_sd=5.0, uni_sd=8.0):
+    return {"orders": orders, "agvs": agvs, "bi_s": bi, "uni_s": uni, "bi_sd": bi_sd,
+            "uni_sd": uni_sd, "saving": 1 - bi / uni}
+
+
+def bench_result() -> dict:
+    return {"seeds": 3,
+            "fig17": [point(50, 10, 400.0, 520.0), point(100, 10, 700.0, 950.0, 12.0, 20.0)],
+            "fig18": [point(50, 5, 800.0, 990.0), point(50, 10, 400.0, 520.0),
+                      point(50, 15, 330.0, 450.0), point(50, 20, 300.0, 420.0)],
+            "fig19": [point(10, 10, 150.0, 190.0), point(20, 10, 260.0, 380.0)],
+            "checks": {"fig17_rises_with_orders": True}}
+
+
+def test_a_makespan_figure_has_the_points_of_the_result():
+    result = bench_result()
+    by_name = {c.name: c for c in curves(result, "r.json")}
+    assert [by_name[n].varies for n in ("fig17", "fig18", "fig19")] == ["orders", "agvs",
+                                                                        "orders"]
+    ax = figure(by_name["fig18"], 3).axes[0]
+    bars = {c.get_label(): c for c in ax.containers if isinstance(c, ErrorbarContainer)}
+    assert len(bars) == 2
+    for key, container in bars.items():
+        which = "bi" if key.startswith("bidirectional") else "uni"
+        line, _, (spread,) = container
+        xs, ys = line.get_data()
+        assert list(xs) == [5, 10, 15, 20]
+        assert list(ys) == [p[f"{which}_s"] for p in result["fig18"]]
+        lows_highs = [tuple(sorted(seg[:, 1])) for seg in spread.get_segments()]
+        assert lows_highs == pytest.approx([(p[f"{which}_s"] - p[f"{which}_sd"],
+                                             p[f"{which}_s"] + p[f"{which}_sd"])
+                                            for p in result["fig18"]])
+    savings = [t.get_text() for t in ax.texts]
+    assert savings == [f"{p['saving']:.0%}" for p in result["fig18"]]
+    assert "3 order seeds" in ax.get_title()
+
+
+def test_plot_of_a_bench_result_writes_one_figure_per_experiment(tmp_path, capsys):
+    path = tmp_path / "seed002.json"
+    path.write_text(json.dumps(bench_result()))
+    assert main(["plot", str(path), "--out", str(tmp_path / "figs")]) == 0
+    printed = capsys.readouterr().out
+    for name in ("fig17.png", "fig18.png", "fig19.png"):
+        assert (tmp_path / "figs" / name).read_bytes()[:4] == b"\x89PNG"
+        assert f"wrote {tmp_path / 'figs' / name}" in printed
+
+
+@pytest.mark.parametrize("change, says", [
+    (lambda r: r["fig17"][1].pop("uni_s"), "fig17[1].uni_s: missing; it must be a finite"),
+    (lambda r: r["fig19"][0].update(bi_sd=-1.0), "fig19[0].bi_sd: -1.0 must not be negative"),
+    (lambda r: r["fig18"][2].update(orders=60), "fig18: both orders and AGVs vary"),
+    (lambda r: r.update(fig17=[]), "fig17 must be a non-empty list of points"),
+    (lambda r: r["fig17"][0].update(agvs="ten"), "fig17[0].agvs: 'ten'"),
+])
+def test_a_bad_bench_result_is_refused_in_one_line(tmp_path, capsys, change, says):
+    result = bench_result()
+    change(result)
+    path = tmp_path / "seed002.json"
+    path.write_text(json.dumps(result))
+    assert main(["plot", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and says in err, err
+    assert err.startswith(f"fleet plot: error: {path}: ")
+
+
+def test_snapshots_of_the_bench_result_are_refused(tmp_path, capsys):
+    path = tmp_path / "seed002.json"
+    path.write_text(json.dumps(bench_result()))
+    assert main(["plot", str(path), "--at", "5"]) == 2
+    assert "it has no instants to draw a snapshot at" in capsys.readouterr().err
+

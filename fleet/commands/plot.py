@@ -1,11 +1,13 @@
 """`fleet plot RUN.mcap`: the filling sequence, a Gantt chart, a heat map of occupancy and
 snapshots as PNG files, and an animation of the run, all from its recording; of an order
 mission (seed 002) the orders completed over time instead of the filling sequence, and the
-lane layout with its shelves, stations and piles."""
+lane layout with its shelves, stations and piles. `fleet plot RESULT.json` draws the makespan
+curves of a `fleet bench seed002` result (seed 002's Figures 17-19)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -18,6 +20,7 @@ from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
 
 if TYPE_CHECKING:
     from fleet.mission.record import MissionSummary
+    from fleet.views.makespan import Curve
     from fleet.views.order_timeline import OrderTimeline
 
 FRAMES = 150
@@ -34,10 +37,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "(seed 002): the orders completed over time (orders.png) instead of the "
                        "filling sequence, a Gantt chart of every AGV's trips, the time on "
                        "each cell and the congestion (heatmap.png), and the lanes, shelves, "
-                       "packing stations and piles in the snapshots and the animation.")
+                       "packing stations and piles in the snapshots and the animation. Of a "
+                       "`fleet bench seed002 --json` result: the makespan curves of seed "
+                       "002's Figures 17-19 (fig17.png, fig18.png, fig19.png).")
     p.add_argument("recording", type=Path,
                    help=f"the run's MCAP recording, or the directory holding {RUN_FILE} (and "
-                   f"the later segments of a restarted recorder: read as one)")
+                   f"the later segments of a restarted recorder: read as one); or a JSON "
+                   f"result of fleet bench seed002")
     p.add_argument("--out", type=writable_dir, metavar="DIR",
                    help="directory for the files (default: beside the recording)")
     p.add_argument("--at", type=sim_seconds, action="append", default=[],
@@ -75,9 +81,57 @@ def read_run(path: Path) -> tuple[Recording, MissionSummary]:
     return recording, record
 
 
+def bench_result(path: Path) -> dict | None:
+    """The parsed `fleet bench seed002` result a path names, or None when it names none (a
+    recording, or a file the recording reader will name and refuse)."""
+    try:
+        if not path.is_file():
+            return None
+        with open(path, "rb") as stream:
+            looks_json = stream.read(64).lstrip()[:1] == b"{"
+        if not (looks_json or path.suffix.lower() == ".json"):
+            return None
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    from fleet.views.makespan import is_result
+
+    return data if is_result(data) else None
+
+
+def plot_bench(args: argparse.Namespace, result: dict) -> int:
+    """The makespan figures of a `fleet bench seed002` result, beside it or in --out."""
+    from fleet.views.makespan import curves
+
+    if args.at:
+        raise UserError(f"--at: {args.recording} is a fleet bench seed002 result (makespan "
+                        f"curves); it has no instants to draw a snapshot at")
+    out = args.out or args.recording.parent
+    out.mkdir(parents=True, exist_ok=True)
+    for path in write_makespan(curves(result, str(args.recording)), result.get("seeds"), out):
+        print(f"wrote {path}")
+    return 0
+
+
+def write_makespan(found: list[Curve], seeds: object, out: Path) -> list[Path]:
+    """One PNG per experiment of a seed 002 result: OUT/fig17.png, fig18.png, fig19.png."""
+    from fleet.views.drawing import save_figure
+    from fleet.views.makespan import figure
+
+    count = seeds if isinstance(seeds, int) and not isinstance(seeds, bool) else None
+    written = []
+    for curve in found:
+        written.append(out / f"{curve.name}.png")
+        save_figure(figure(curve, count), str(written[-1]))
+    return written
+
+
 def run(args: argparse.Namespace) -> int:
     from fleet.wire.protocol import MissionDone
 
+    result = bench_result(args.recording)
+    if result is not None:
+        return plot_bench(args, result)
     recording, record = read_run(args.recording)
     layout = recording.layout()
     tl = None
