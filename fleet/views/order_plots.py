@@ -20,13 +20,23 @@ from matplotlib.axes import Axes
 from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, to_rgba
 from matplotlib.figure import Figure
+from matplotlib.font_manager import FontProperties
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch, Rectangle
+from matplotlib.patches import Patch, PathPatch, Rectangle
+from matplotlib.path import Path
+from matplotlib.textpath import TextPath
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+from matplotlib.transforms import Affine2D
 
 from fleet.mission.record import MissionSummary
 from fleet.planning.geometry import Cell
-from fleet.views.drawing import Z_FORKLIFT, Z_FORKLIFT_TEXT, legend_below, map_figure
+from fleet.views.drawing import (
+    Z_FORKLIFT,
+    Z_FORKLIFT_TEXT,
+    inches_per_metre,
+    legend_below,
+    map_figure,
+)
 from fleet.views.lane_drawing import (
     CARRIED_SIDE,
     SHELF_SIDE,
@@ -285,6 +295,15 @@ def _map_legend(ax: Axes, floor: list, vehicles: Iterable[int]) -> None:
                  ncols=4, **style)
 
 
+BOLD = FontProperties(weight="bold")
+
+
+def _centred(path: Path) -> Path:
+    """A glyph path moved so its box is centred on the origin."""
+    (x0, y0), (x1, y1) = path.get_extents().get_points()
+    return path.transformed(Affine2D().translate(-(x0 + x1) / 2, -(y0 + y1) / 2))
+
+
 class _OrderArtists:
     """The moving parts of an order mission's animation over the lane floor drawn once:
     shelves in slots, stations in use, AGVs with the shelves they carry, their ids and the
@@ -292,7 +311,7 @@ class _OrderArtists:
 
     def __init__(self, ax: Axes, layout: Layout, record: MissionSummary, tl: OrderTimeline,
                  orders: int | None) -> None:
-        self.layout, self.tl, self.orders = layout, tl, orders
+        self.layout, self.tl, self.orders, self.ax = layout, tl, orders, ax
         self.heading = heading(record, orders)
         self.slots = [s.cell for s in layout.slots]
         self.shelves = ax.add_collection(PatchCollection(
@@ -316,8 +335,13 @@ class _OrderArtists:
                                                  facecolor=forklift_color(v),
                                                  edgecolor="black", lw=0.6, zorder=Z_FORKLIFT))
                        for v in self.tracks}
-        self.labels = {v: ax.text(0, 0, str(v), ha="center", va="center", fontsize=6,
-                                  color="white", weight="bold", zorder=Z_FORKLIFT_TEXT)
+        # Ids as glyph outlines moved by a transform: a frame draws them as paths, far
+        # faster than laying out a text per AGV per frame.
+        size = 6 / 72 / inches_per_metre(layout)  # 6 pt on a map_figure(), in metres
+        self.labels = {v: ax.add_patch(PathPatch(_centred(TextPath((0, 0), str(v), size=size,
+                                                                   prop=BOLD)),
+                                                 facecolor="white", edgecolor="none",
+                                                 zorder=Z_FORKLIFT_TEXT))
                        for v in self.tracks}
         self.title = ax.set_title("", fontsize=10)
         self.artists = [self.shelves, self.stations, *self.carried.values(),
@@ -345,7 +369,7 @@ class _OrderArtists:
             body.set_xy((x - body.get_width() / 2, y - body.get_height() / 2))
             carried.set_xy((x - carried.get_width() / 2, y - carried.get_height() / 2))
             carried.set_visible(v in shelves.on_agv)
-            self.labels[v].set_position((x, y))
+            self.labels[v].set_transform(Affine2D().translate(x, y) + self.ax.transData)
         self.title.set_text(f"The warehouse at t = {t:.1f} s: {tl.completed_by(t)} orders "
                             f"complete, {len(shelves.on_agv)} shelves on AGVs\n{self.heading}")
 
