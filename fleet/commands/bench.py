@@ -71,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     seed002.add_argument("--plots", type=writable_dir, metavar="DIR",
                          help="also draw the makespan curves into DIR: fig17.png, fig18.png, "
                          "fig19.png (mean with one standard deviation as error bars; `fleet "
-                         "plot RESULT.json` draws them from a saved --json result)")
+                         "plot RESULT.json` draws them from a saved --json result; default: "
+                         "none)")
     seed002.set_defaults(handler=run_seed002)
     runtime = which.add_parser("runtime", help="the distributed runtime: commit round trip, "
                                "multi-process / in-process wall time, largest real-time fleet",
