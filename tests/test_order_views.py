@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from matplotlib.container import ErrorbarContainer
 from matplotlib.patches import Rectangle
 from PIL import Image
@@ -23,6 +25,7 @@ from fleet.views import order_plots
 from fleet.views.makespan import curves, figure
 from fleet.views.order_timeline import cell_seconds, timeline, tracks
 from fleet.views.scene import SceneViews
+from fleet.views.shelf_tracker import ShelfTracker
 from fleet.wire.protocol import LegAmended, SubtaskEvent, VehicleState
 from fleet.world.layout_file import load_layout
 
@@ -294,6 +297,45 @@ def test_a_stow_postponed_puts_its_shelf_down_later():
     assert tracker.on_state(stand, 6.0) is False and tracker.carried == {1: "s-3-2"}
     assert tracker.on_state(stand, 7.0) is True and tracker.in_slot[3, 2] == "s-3-2"
     assert tracker.on_state(stand, 7.5) is False  # still "loaded" until its next trip
+
+
+CELLS = st.tuples(st.integers(-1, MICRO_T.cols), st.integers(-1, MICRO_T.rows))
+TIMES = st.floats(allow_nan=True, allow_infinity=True)
+NAMES = st.sampled_from([s.name for s in MICRO_T.slots[:4]] + ["p1", "c2", "nowhere"])
+MESSAGES = st.one_of(
+    st.builds(lambda v, cell, loaded, x: VehicleState(v, f"{cell[0]},{cell[1]},E", 0, "",
+                                                      loaded, x, cell[1] + 0.5, 0.0),
+              st.integers(1, 3), CELLS, st.booleans(), TIMES),
+    st.builds(lambda v, kind, target, t: SubtaskEvent(v, kind, target, None, 0.0, t, t, False,
+                                                      [], []),
+              st.integers(1, 3), st.sampled_from(["fetch", "pack", "stow", "charge"]), NAMES,
+              TIMES),
+    st.builds(lambda v, t: LegAmended(v, 0.0, t, t, [], []), st.integers(1, 3), TIMES))
+
+
+def replay(messages) -> ShelfTracker:
+    """The scene's shelves after these messages, one every 0.5 s of sim time."""
+    views = SceneViews(MICRO_T, BASE, kind="orders", vehicles=1)  # each state a frame
+    for k, message in enumerate(messages):
+        views.on_message("k", message, 0.5 * k)
+    return views.shelves
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(st.lists(MESSAGES, max_size=40))
+def test_whatever_the_messages_say_no_shelf_is_lost_or_doubled(messages):
+    """The scene survives any sequence of states and trips (a forged one included) and every
+    shelf stays in exactly one place: a slot or one AGV."""
+    tracker = replay(messages)
+    where = list(tracker.in_slot.values()) + list(tracker.carried.values())
+    assert sorted(where) == sorted(s.name for s in MICRO_T.slots)
+    assert set(tracker.in_slot) <= {s.cell for s in MICRO_T.slots}
+
+
+def test_replayed_states_do_move_shelves():
+    standing, lifting = (VehicleState(2, "3,2,E", 0, "", loaded, 3.5, 2.5, 0.0)
+                         for loaded in (False, True))
+    assert replay([standing, lifting]).carried == {2: "s-3-2"}
 
 
 # ------------------------------------------------------------------ makespan curves

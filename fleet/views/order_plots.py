@@ -183,6 +183,8 @@ def gantt(record: MissionSummary, tl: OrderTimeline, orders: int | None = None) 
     ax.set_xlim(0, 1.01 * last)
     ax.set_xlabel("simulated time [s]")
     handles = [Patch(color=c, label=TRIP_NAMES[k]) for k, c in TRIP_COLORS.items()]
+    if any(t.kind not in TRIP_COLORS for t in tl.trips):
+        handles.append(Patch(color=OTHER_TRIP, label="out of another AGV's way (aside)"))
     handles += [Patch(color=DWELL_COLOR, label="packing (the station's dwell)"),
                 Patch(color="black", label="waiting: a collision rule"),
                 Patch(label="waiting loaded under the slot for a free station", **STATION_WAIT),
