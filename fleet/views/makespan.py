@@ -127,11 +127,13 @@ def figure(curve: Curve, seeds: int | None = None) -> Figure:
     ax.set_ylabel("makespan [s] (the last shelf put down)")
     ax.set_ylim(0, 1.12 * top or 1)
     ax.grid(alpha=0.3)
-    spread = f"mean ± one standard deviation over {seeds} order seeds" if seeds else \
-        "mean ± one standard deviation over the order seeds"
+    if seeds == 1:
+        spread = "one order seed (no spread)"
+    else:
+        spread = f"mean ± one standard deviation over {seeds or 'the'} order seeds"
     mean = sum(p.saving for p in curve.points) / len(curve.points)
     ax.set_title(f"Seed 002, {TITLES.get(curve.name, curve.name)}, {curve.fixed}\n{spread};\n"
                  f"above each point the saving 1 - bi / uni, {mean:.0%} on average",
                  fontsize=9)
-    legend_below(ax, ax.get_legend_handles_labels()[0], ncols=2)
+    legend_below(ax, ax.get_legend_handles_labels()[0][::-1], ncols=2)  # bidirectional first
     return fig
