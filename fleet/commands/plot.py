@@ -19,9 +19,12 @@ from fleet.recording.segments import RUN_FILE
 from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from fleet.mission.record import MissionSummary
     from fleet.views.makespan import Curve
     from fleet.views.order_timeline import OrderTimeline
+    from fleet.wire.protocol import VehicleState
 
 FRAMES = 150
 FPS = 10
@@ -162,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def states_of(recording: Recording) -> list:
+def states_of(recording: Recording) -> list[tuple[float, VehicleState]]:
     from fleet.wire.protocol import VehicleState
 
     states = [(r.envelope.sim_time, m) for r, m in recording.of(VehicleState)]
@@ -171,7 +174,8 @@ def states_of(recording: Recording) -> list:
     return states
 
 
-def animated(args: argparse.Namespace, out: Path, draw) -> Path:
+def animated(args: argparse.Namespace, out: Path,
+             draw: Callable[[str, Callable[[int, int], None]], int]) -> Path:
     """The animation's file, drawn by `draw(path, progress)` with a progress bar."""
     path = out / ("run.mp4" if args.mp4 else "run.gif")
     bar = ProgressBar(args.frames, path.name, unit="frames")

@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from itertools import pairwise
 from pathlib import Path
+from typing import Protocol
 
 import matplotlib
 
@@ -24,6 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib import animation
 from matplotlib.artist import Artist
+from matplotlib.axes import Axes
 from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, to_rgba
 from matplotlib.figure import Figure
@@ -455,8 +457,17 @@ def animate(path: str, layout: Layout, record: MissionSummary, fps: int = FPS, f
         plt.close(fig)
 
 
-def write_frames(writer: animation.AbstractMovieWriter, path: str, dpi: int, ax,
-                 artists, times: list[float],
+class MovingArtists(Protocol):
+    """What changes between an animation's frames: `show(t)` sets it to instant t, and
+    `artists` are drawn over the background, in order."""
+
+    artists: list[Artist]
+
+    def show(self, t: float) -> None: ...
+
+
+def write_frames(writer: animation.AbstractMovieWriter, path: str, dpi: int, ax: Axes,
+                 artists: MovingArtists, times: list[float],
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Each instant of `times` as a frame: the figure drawn once as the background, then
     for each frame `artists.show(t)` and the moving `artists.artists` drawn over it."""
