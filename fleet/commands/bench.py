@@ -68,6 +68,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     seed002.add_argument("--seeds", type=positive_int, default=10,
                          help="order seeds per point (default 10)")
     seed002.add_argument("--json", action="store_true", help="print one JSON object")
+    seed002.add_argument("--plots", type=writable_dir, metavar="DIR",
+                         help="also draw the makespan curves into DIR: fig17.png, fig18.png, "
+                         "fig19.png (mean with one standard deviation as error bars; `fleet "
+                         "plot RESULT.json` draws them from a saved --json result; default: "
+                         "none)")
     seed002.set_defaults(handler=run_seed002)
     runtime = which.add_parser("runtime", help="the distributed runtime: commit round trip, "
                                "multi-process / in-process wall time, largest real-time fleet",
@@ -237,6 +242,14 @@ def run_seed002(args: argparse.Namespace) -> int:
     bar.close()
     if not emitted_json(result, args.json):
         print(seed002.table(result))
+    if args.plots is not None:
+        from fleet.commands.plot import write_makespan
+        from fleet.views.makespan import curves
+
+        args.plots.mkdir(parents=True, exist_ok=True)
+        for path in write_makespan(curves(result, "fleet bench seed002"), args.seeds,
+                                   args.plots):
+            print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
     return 0 if result["lane_violations"] == 0 and result["double_bookings"] == 0 else 1
 
 

@@ -20,6 +20,12 @@ GOODS_COLOR: RGB = (0.60, 0.40, 0.20)  # goods on a stack, or on a forklift's fo
 RACK_COLOR: RGB = (0.45, 0.50, 0.60)  # an empty stack's rack
 STATION_COLOR: RGB = (0.95, 0.80, 0.10)
 
+# Seed 002's lane layouts: a shelf is goods on legs (GOODS_COLOR, in a slot or on an AGV);
+# a packing station is a station (STATION_COLOR) and turns orange while an AGV packs at it.
+SHELF_COLOR: RGB = GOODS_COLOR
+PACKING_COLOR: RGB = (0.93, 0.45, 0.10)  # a packing station with an AGV dwelling on it
+PILE_COLOR: RGB = (0.35, 0.70, 0.35)  # a charging pile
+
 
 def forklift_color(vehicle: int) -> RGB:
     """Forklift `vehicle`'s colour (forklifts are numbered from 1): its body, its reserved

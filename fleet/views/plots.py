@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from itertools import pairwise
 from pathlib import Path
+from typing import Protocol
 
 import matplotlib
 
@@ -24,6 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib import animation
 from matplotlib.artist import Artist
+from matplotlib.axes import Axes
 from matplotlib.collections import PatchCollection
 from matplotlib.colors import LogNorm, to_rgba
 from matplotlib.figure import Figure
@@ -429,6 +431,12 @@ def movie_writer(path: str, fps: int) -> animation.AbstractMovieWriter:
                     f"{suffix or 'a name without extension'}")
 
 
+def check_movie(frames: int, fps: int) -> None:
+    if frames < 1 or fps < 1:
+        raise UserError(f"an animation needs at least one frame and one frame per second, "
+                        f"not {frames} frames at {fps} fps")
+
+
 def animate(path: str, layout: Layout, record: MissionSummary, fps: int = FPS, frames: int = FRAMES,
             ahead: float = SHOW_AHEAD_S, dpi: int = GIF_DPI,
             progress: Callable[[int, int], None] | None = None) -> int:
@@ -436,39 +444,55 @@ def animate(path: str, layout: Layout, record: MissionSummary, fps: int = FPS, f
     at one of `frames` instants spread over the mission. The layout is drawn once as the
     background; each frame restores it and draws the moving artists on it. Returns the
     frames written; `progress(done, total)` is told after each."""
-    if frames < 1 or fps < 1:
-        raise UserError(f"an animation needs at least one frame and one frame per second, "
-                        f"not {frames} frames at {fps} fps")
+    check_movie(frames, fps)
     writer = movie_writer(path, fps)
     fig, ax = map_figure(layout, dpi=dpi)
     try:
         handles = draw_layout(ax, layout, filled=())
         artists = _RunArtists(ax, layout, record, ahead)
         legend_below(ax, handles + fleet_handles(artists.tracks, ahead), ncols=5)
-        times = frame_times(record, frames)
-        artists.show(times[-1])  # the longest title, for the layout to make room
-        # Setting up may resize the figure (even pixel sizes for h264): background after it,
-        # drawn once, which also fixes the layout for every frame.
-        with writer.saving(fig, path, dpi):
-            canvas = fig.canvas
-            canvas.draw()
-            background = canvas.copy_from_bbox(fig.bbox)
-
-            def draw(t: float) -> None:
-                canvas.restore_region(background)
-                artists.show(t)
-                for artist in artists.artists:
-                    ax.draw_artist(artist)
-
-            if isinstance(writer, _GifWriter):  # the palette sees early, busy and late frames
-                for t in (times[0], times[len(times) // 2], times[-1]):
-                    draw(t)
-                    writer.sample()
-            for k, t in enumerate(times, start=1):
-                draw(t)
-                writer.grab_frame()
-                if progress is not None:
-                    progress(k, len(times))
+        return write_frames(writer, path, dpi, ax, artists, frame_times(record, frames),
+                            progress)
     finally:
         plt.close(fig)
+
+
+class MovingArtists(Protocol):
+    """What changes between an animation's frames: `show(t)` sets it to instant t, and
+    `artists` are drawn over the background, in order."""
+
+    artists: list[Artist]
+
+    def show(self, t: float) -> None: ...
+
+
+def write_frames(writer: animation.AbstractMovieWriter, path: str, dpi: int, ax: Axes,
+                 artists: MovingArtists, times: list[float],
+                 progress: Callable[[int, int], None] | None = None) -> int:
+    """Each instant of `times` as a frame: the figure drawn once as the background, then
+    for each frame `artists.show(t)` and the moving `artists.artists` drawn over it."""
+    fig = ax.figure
+    artists.show(times[-1])  # the longest title, for the layout to make room
+    # Setting up may resize the figure (even pixel sizes for h264): background after it,
+    # drawn once, which also fixes the layout for every frame.
+    with writer.saving(fig, path, dpi):
+        canvas = fig.canvas
+        canvas.draw()
+        background = canvas.copy_from_bbox(fig.bbox)
+
+        def draw(t: float) -> None:
+            canvas.restore_region(background)
+            artists.show(t)
+            for artist in artists.artists:
+                ax.draw_artist(artist)
+
+        if isinstance(writer, _GifWriter):  # the palette sees early, busy and late frames
+            for t in (times[0], times[len(times) // 2], times[-1]):
+                draw(t)
+                writer.sample()
+        for k, t in enumerate(times, start=1):
+            draw(t)
+            writer.grab_frame()
+            if progress is not None:
+                progress(k, len(times))
     return len(times)

@@ -1,6 +1,8 @@
 """Foxglove views of a run: the warehouse, the forklifts, their reservations ahead and the goods
 on the stacks as Foxglove scene messages (foxglove.messages, protobuf), for the view channels
-of a recording (RecordingWriter.write_view) and for the live view (recorder.live).
+of a recording (RecordingWriter.write_view) and for the live view (recorder.live). On a lane
+layout (seed 002): the lanes with their directions, slots, packing stations and piles; the
+shelves where they stand; the AGVs, each with the shelf it carries.
 
 Pure: messages in, messages out, no I/O. Everything lies in one frame, "warehouse", whose
 x, y are the layout's world metres (z up, the floor at z = 0); /view/tf hangs it under a
@@ -35,12 +37,29 @@ from foxglove.messages import (
     SceneUpdate,
     TextPrimitive,
     Timestamp,
+    TriangleListPrimitive,
     Vector3,
 )
 
 from fleet.planning.geometry import Cell
-from fleet.views.palette import GOODS_COLOR, RACK_COLOR, STATION_COLOR, forklift_color
-from fleet.wire.protocol import GOODS, Message, StackDone, VehicleState, WireChange
+from fleet.views.palette import (
+    GOODS_COLOR,
+    PILE_COLOR,
+    RACK_COLOR,
+    SHELF_COLOR,
+    STATION_COLOR,
+    forklift_color,
+)
+from fleet.views.shelf_tracker import ShelfTracker
+from fleet.wire.protocol import (
+    GOODS,
+    LegAmended,
+    Message,
+    StackDone,
+    SubtaskEvent,
+    VehicleState,
+    WireChange,
+)
 from fleet.world.layout import Layout
 
 FRAME = "warehouse"
@@ -60,6 +79,8 @@ View = tuple[str, Any, int]  # (topic, foxglove message, log time in ns)
 # Heights (metres): low racks under the goods, walls taller than anything that moves.
 RACK_H, GOODS_H, BODY_H, CARGO_H, WALL_H, STATION_H = 0.1, 1.2, 0.5, 1.0, 3.0, 1.0
 RESERVED_H = 0.04
+# Lane layouts: an AGV is low (it drives under shelves), a shelf stands on legs.
+AGV_H, SHELF_H, PILE_H, MARK_Z = 0.3, 1.2, 0.05, 0.012
 
 # Forklifts, goods, racks and stations have the plots' colours (fleet/views/palette.py).
 FLOOR_COLOR = (0.20, 0.20, 0.22)
@@ -67,6 +88,11 @@ OBSTACLE_COLORS = {"firewall": (0.60, 0.15, 0.10)}  # other kinds (walls, pillar
 WALL_COLOR = (0.50, 0.50, 0.50)
 PASSAGE_COLOR = (0.80, 0.75, 0.30)
 WHITE = (1.0, 1.0, 1.0)
+LANE_ARROW_COLOR = (0.85, 0.85, 0.85)  # on the dark floor
+JUNCTION_COLOR = (0.38, 0.38, 0.42)
+# An arrowhead on a lane cell, pointing east, in cells about the cell's centre.
+ARROW = ((0.3, 0.0), (-0.2, 0.25), (-0.2, -0.25))
+TURN = {"E": (1, 0), "N": (0, 1), "W": (-1, 0), "S": (0, -1)}  # (cos, sin) of a direction
 
 
 def _color(rgb: tuple[float, float, float], a: float = 1.0) -> Color:
@@ -137,6 +163,8 @@ class SceneViews:
         # order mission's shelves are in the layout's slots: it has no stacks.)
         self.goods: set[Cell] = {s.cell for s in layout.stacks} if kind == "empty" else set()
         self.reserved: dict[int, list[_Reserved]] = {}  # forklift -> its reservations
+        # A lane layout's shelves: where each stands, which AGV carries which.
+        self.shelves = ShelfTracker(layout) if layout.has_lanes else None
         # Reserved cells are drawn tens of thousands of times: their poses are built once.
         self._cell_pose: dict[Cell, Pose] = {}
 
@@ -164,6 +192,8 @@ class SceneViews:
             return []  # shown with the forklift's next state, at most 0.5 s later
         if isinstance(message, StackDone):
             return self._on_stack(message, sim_time)
+        if self.shelves is not None and isinstance(message, SubtaskEvent | LegAmended):
+            self.shelves.on_trip(message)  # when a stow puts its shelf down
         return []
 
     def log_ns(self, sim_time: float) -> int:
@@ -194,12 +224,17 @@ class SceneViews:
         self.shown_until = t
         ns = self.log_ns(t)
         views: list[View] = []
+        moved = self.shelves is not None and any(  # a list: every state is heard
+            [self.shelves.on_state(states[v], t) for v in sorted(states)])
         if t - self.static_at >= STATIC_PERIOD_S:  # so a viewer that lost it gets it back
             self.static_at = t
             views += [(topic, message, ns) for topic, message, _ in self._static(ns)]
+        elif moved:
+            views.append((GOODS_TOPIC, self._goods_update(ns), ns))
         vehicles = sorted(self.latest)
+        draw = self._forklift if self.shelves is None else self._agv
         views.append((FORKLIFTS, SceneUpdate(
-            entities=[self._forklift(self.latest[v], ns) for v in vehicles]), ns))
+            entities=[draw(self.latest[v], ns) for v in vehicles]), ns))
         views.append((RESERVED, SceneUpdate(
             entities=[self._reserved_ahead(v, t, ns) for v in vehicles]), ns))
         return views
@@ -262,6 +297,25 @@ class SceneViews:
                       KeyValuePair(key="maneuver", value=state.maneuver),
                       KeyValuePair(key="loaded", value=str(state.loaded).lower())])
 
+    def _agv(self, state: VehicleState, ns: int) -> SceneEntity:
+        """A lane layout's AGV: a low square box of its body in its colour (it has no heading),
+        the shelf it carries standing on it, and its number."""
+        assert self.shelves is not None
+        side = self.layout.vehicle_kind.outline.width
+        x, y = state.x, state.y
+        cubes = [_box(x, y, AGV_H / 2, side, side, AGV_H, _color(forklift_color(state.vehicle)))]
+        shelf = self.shelves.carried.get(state.vehicle)
+        if shelf is not None:
+            top = self.layout.cell_size * 0.8
+            cubes.append(_box(x, y, AGV_H + SHELF_H / 2, top, top, SHELF_H,
+                              _color(SHELF_COLOR)))
+        return SceneEntity(
+            timestamp=_stamp(ns), frame_id=FRAME, id=f"agv/{state.vehicle}", cubes=cubes,
+            texts=[_label(str(state.vehicle), x, y, AGV_H + SHELF_H + 0.6)],
+            metadata=[KeyValuePair(key="pose", value=state.pose),
+                      KeyValuePair(key="maneuver", value=state.maneuver),
+                      KeyValuePair(key="shelf", value=shelf or "")])
+
     def _reserved_ahead(self, vehicle: int, t: float, ns: int) -> SceneEntity:
         """The forklift's cells reserved over [t, t + HORIZON_S), the sooner the more opaque.
         Reservations that ended are dropped here: states of a forklift come in time order."""
@@ -294,8 +348,14 @@ class SceneViews:
         return pose
 
     def _goods_update(self, ns: int) -> SceneUpdate:
-        """Every stack's goods in one entity: the last message alone says where they all are."""
+        """Every stack's goods in one entity: the last message alone says where they all are.
+        On a lane layout, the shelves standing in slots (those on AGVs ride with them)."""
         side = self.layout.cell_size * 0.8
+        if self.shelves is not None:
+            cubes = [self._cell_box(cell, side, 0.0, SHELF_H, _color(SHELF_COLOR))
+                     for cell in sorted(self.shelves.in_slot)]
+            return SceneUpdate(entities=[SceneEntity(timestamp=_stamp(ns), frame_id=FRAME,
+                                                     id="shelves", cubes=cubes)])
         cubes = [self._cell_box(cell, side, RACK_H, GOODS_H, _color(GOODS_COLOR))
                  for cell in sorted(self.goods)]
         return SceneUpdate(entities=[SceneEntity(timestamp=_stamp(ns), frame_id=FRAME,
@@ -325,6 +385,8 @@ class SceneViews:
         station."""
         layout, size = self.layout, self.layout.cell_size
         entities = [self._floor(ns)]
+        if layout.has_lanes:
+            entities += self._lane_places(ns)
         for p in layout.passages:
             entities.append(self._group(f"passage/{p.name}", p.cells, size, 0.0, 0.01,
                                         _color(PASSAGE_COLOR, 0.35), ns))
@@ -338,6 +400,43 @@ class SceneViews:
         for st in layout.stations:
             entities.append(self._group(f"station/{st.name}", [st.cell], size * 0.8, 0.0,
                                         STATION_H, _color(STATION_COLOR), ns, st.name))
+        return entities
+
+    def _lane_places(self, ns: int) -> list[SceneEntity]:
+        """A lane layout: the lanes (an arrowhead on each cell outside junctions, pointing
+        its way, and the junctions' cells), the slots (low racks), each packing station and
+        each pile, named."""
+        layout, size = self.layout, self.layout.cell_size
+        junctions = {c for j in layout.junctions for c in j.cells}
+        arrows = []
+        for cell, directions in sorted(layout.lane_directions.items()):
+            if cell in junctions:
+                continue
+            x, y = layout.cell_center(cell)
+            for d in sorted(directions):
+                c, s = TURN[d]
+                arrows += [Point3(x=x + size * (u * c - v * s), y=y + size * (u * s + v * c),
+                                  z=MARK_Z) for u, v in ARROW]
+        tiles = []
+        for cell in sorted(junctions):
+            x, y = layout.cell_center(cell)
+            h = size * 0.48
+            a, b, c, d = ((x - h, y - h), (x + h, y - h), (x + h, y + h), (x - h, y + h))
+            tiles += [Point3(x=px, y=py, z=MARK_Z / 2) for px, py in (a, b, c, a, c, d)]
+        lanes = SceneEntity(timestamp=_stamp(ns), frame_id=FRAME, id="lanes", triangles=[
+            TriangleListPrimitive(pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0),
+                                            orientation=_LEVEL), points=points,
+                                  color=_color(rgb, alpha))
+            for points, rgb, alpha in ((tiles, JUNCTION_COLOR, 1.0),
+                                       (arrows, LANE_ARROW_COLOR, 0.8)) if points])
+        entities = [lanes, self._group("slots", [s.cell for s in layout.slots], size * 0.9, 0.0,
+                                       RACK_H, _color(RACK_COLOR), ns)]
+        for p in layout.packing:
+            entities.append(self._group(f"packing/{p.name}", [p.cell], size * 0.8, 0.0,
+                                        STATION_H, _color(STATION_COLOR), ns, p.name))
+        for p in layout.piles:
+            entities.append(self._group(f"pile/{p.name}", [p.cell], size * 0.8, 0.0, PILE_H,
+                                        _color(PILE_COLOR), ns, p.name))
         return entities
 
     def _floor(self, ns: int) -> SceneEntity:
