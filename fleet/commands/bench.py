@@ -65,6 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                "paper002-uni (one-way lanes), mean and spread of the makespan "
                                "over order seeds, every run judged by the lane oracle and "
                                "the double-booking check (docs/experiment-002.md).")
+    seed002.add_argument("--jobs", type=positive_int, default=None, metavar="N",
+                         help="missions run at once, each in a process of its own (default: "
+                         "one a core); the results do not depend on it")
     seed002.add_argument("--seeds", type=positive_int, default=10,
                          help="order seeds per point (default 10)")
     seed002.add_argument("--json", action="store_true", help="print one JSON object")
@@ -238,7 +241,7 @@ def run_seed002(args: argparse.Namespace) -> int:
         bar.total = total
         bar.update(done)
 
-    result = seed002.run(args.seeds, progress)
+    result = seed002.run(args.seeds, progress, args.jobs)
     bar.close()
     if not emitted_json(result, args.json):
         print(seed002.table(result))
