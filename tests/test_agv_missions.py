@@ -152,11 +152,39 @@ def test_fleet_run_runs_an_order_mission_in_process_and_its_recording_passes(tmp
      "--vehicles 40: the AGVs of layout paper002 start on its 33 charging piles, one each"),
     (["--orders", "10", "--inprocess", "--mission", "fill"],
      "--orders is for order missions, not --mission fill"),
+    (["--orders", "s-3-3,s-99-3,s-4-3,s-0-0"],  # checked before any process starts
+     "--orders: order 2 is for shelf 's-99-3', which layout paper002 does not have (and 1 "
+     "more)"),
+    (["--orders", "s-3-3", "--order-area", "lower-left"],
+     "--order-area draws orders: give it with --orders N"),
+    (["--order-area", "nowhere"], "layout paper002 has no shelf area 'nowhere'"),
+    (["--vehicles", "4", "--battery", "n_op=5"],
+     "--battery: n_op (AGVs kept operational) is 5 but the fleet has only 4 AGVs"),
 ])
 def test_fleet_run_refuses_what_an_order_mission_cannot_do_in_one_line(argv, says, capsys):
     assert main(["run", "--layout", "paper002", *argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err and says in err, err
+
+
+def test_orders_given_by_shelf_are_released_in_their_order(tmp_path, capsys):
+    """`--orders` takes a file of shelf names or the names themselves: the same orders, the
+    same record, as processes too."""
+    listed = tmp_path / "orders.txt"
+    listed.write_text("# three orders, two on one shelf\ns-3-3\ns-14-3  # the next block\n"
+                      "\ns-3-3\n")
+    runs = {}
+    for given, mode in ((str(listed), "--inprocess"), ("s-3-3,s-14-3,s-3-3", None)):
+        out = tmp_path / f"run-{len(runs)}"
+        argv = ["run", "--layout", "paper002", "--orders", given, "--vehicles", "2",
+                "--out", str(out), "--json", *([mode] if mode else [])]
+        assert main(argv) == 0
+        runs[given] = json.loads(capsys.readouterr().out)
+    first, second = runs.values()
+    assert first["digest"] == second["digest"] and first["verdicts"]["passed"]
+    assert first["orders"]["expected"] == first["orders"]["done"] == 3
+    info = read_recording(tmp_path / "run-1" / "run.mcap").info
+    assert info.released == ["s-3-3", "s-14-3", "s-3-3"] and info.orders == 3
 
 
 def test_a_stack_mission_on_a_lane_layout_is_refused_naming_what_it_runs():

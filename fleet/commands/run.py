@@ -21,7 +21,7 @@ from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
-from fleet.mission.order_work import order_fleet
+from fleet.mission.order_work import OrderWork, order_fleet
 from fleet.mission.record import digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Standstill
@@ -195,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
     if mission.kind is MissionKind.ORDERS:
         n = order_fleet(layout, mission.vehicles)
+        OrderWork(layout, mission, n)  # its orders and batteries, checked before any start
         if args.faults:
             raise UserError("order missions take no faults yet (--faults)")
     else:

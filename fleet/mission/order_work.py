@@ -53,6 +53,14 @@ def order_fleet(layout: Layout, vehicles: int | None) -> int:
 def mission_orders(mission: Mission, layout: Layout) -> tuple[Order, ...]:
     """The orders the mission releases (drawn with its seed on its area's shelves), or a
     UserError naming what is wrong (the area, the count)."""
+    if mission.shelves:
+        unknown = [(i, s) for i, s in enumerate(mission.shelves, 1) if s not in layout.shelves]
+        if unknown:
+            i, shelf = unknown[0]
+            more = f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""
+            raise UserError(f"--orders: order {i} is for shelf {shelf!r}, which layout "
+                            f"{layout.name} does not have{more}")
+        return tuple(Order(i, s) for i, s in enumerate(mission.shelves, 1))
     try:
         return release_orders(layout, mission.orders, mission.seed, mission.order_area or None)
     except ValueError as exc:  # it names the layout, the area or the count

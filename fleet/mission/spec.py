@@ -36,6 +36,7 @@ class Mission:
     starts: tuple[Pose, ...] = field(default=())  # empty: the layout's start poses
     orders: int = 0  # how many orders an order mission releases (drawn with `seed`)
     order_area: str = ""  # draw them only on this area's shelves ("lower-left": Figure 19)
+    shelves: tuple[str, ...] = ()  # the orders given, each its shelf (then nothing is drawn)
     # Seed 002's batteries, as `fleet run --battery` gives them ("": the defaults):
     # fleet/mission/battery.py, `parse_battery`.
     battery: str = ""

@@ -21,6 +21,7 @@ from fleet.runtime.argtypes import (
     endpoint,
     integer,
     layout_arg,
+    orders_arg,
     positive_float,
     positive_int,
     text_file,
@@ -118,9 +119,11 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
                    "order; empty: from the stacks back to the stations, in reverse; orders "
                    "(seed 002's lane layouts): shelves fetched to packing stations and put "
                    "back (default: orders on a layout with shelf slots, else fill)")
-    p.add_argument("--orders", type=positive_int, default=None, metavar="N",
+    p.add_argument("--orders", type=orders_arg, default=None, metavar="N|FILE|SHELVES",
                    help=f"an order mission of N orders, released at once on shelves drawn "
-                   f"with --seed (default {DEFAULT_ORDERS} for an order mission)")
+                   f"with --seed; or these orders, released at once: a file of shelf names "
+                   f"(one a line, # for comments) or the names, comma-separated (default "
+                   f"{DEFAULT_ORDERS} drawn, for an order mission)")
     p.add_argument("--order-area", default="", metavar="AREA",
                    help="draw the orders on this shelf area's shelves only: a shelf area of "
                    "the layout, or lower-left (seed 002's Figure 19; default: every shelf)")
@@ -152,6 +155,10 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
     else:
         kind = MissionKind.FILL
     orders = kind is MissionKind.ORDERS
+    given_shelves = isinstance(args.orders, tuple)
+    if given_shelves and args.order_area:
+        raise UserError("--order-area draws orders: give it with --orders N, not with the "
+                        "orders themselves")
     for flag, given in (("--orders", args.orders is not None), ("--order-area", args.order_area),
                         ("--battery", args.battery)):
         if given and not orders:
@@ -164,14 +171,18 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
         raise UserError(f"--strategy {strategy.value} does not dispatch {kind.value} missions: "
                         f"order missions take nearest, fill and empty the other strategies")
     return Mission(layout=args.layout, kind=kind, strategy=strategy, vehicles=args.vehicles,
-                   seed=args.seed, orders=(args.orders or DEFAULT_ORDERS) if orders else 0,
-                   order_area=args.order_area, battery=args.battery)
+                   seed=args.seed,
+                   orders=0 if not orders else len(args.orders) if given_shelves
+                   else args.orders or DEFAULT_ORDERS,
+                   order_area=args.order_area, battery=args.battery,
+                   shelves=args.orders if given_shelves else ())
 
 
 def mission_argv(mission: Mission) -> list[str]:
     """The flags that give `mission` (its layout's start poses: it has no others)."""
     fleet = [] if mission.vehicles is None else ["--vehicles", str(mission.vehicles)]
-    orders = ["--orders", str(mission.orders)] if mission.kind is MissionKind.ORDERS else []
+    orders = [] if mission.kind is not MissionKind.ORDERS else \
+        ["--orders", ",".join(mission.shelves) if mission.shelves else str(mission.orders)]
     if mission.order_area:
         orders += ["--order-area", mission.order_area]
     if mission.battery:

@@ -197,6 +197,34 @@ def text_file(text: str) -> Path:
     return path
 
 
+def orders_arg(text: str) -> int | tuple[str, ...]:
+    """`--orders`: a number of orders (drawn with the seed), a file of shelf names (one a
+    line, `#` starts a comment), or the shelf names themselves, comma-separated; the shelves
+    are checked against the layout later, each order named."""
+    stripped = text.strip()
+    if stripped.isdigit():
+        return positive_int(stripped)
+    path = Path(text)
+    if "," not in text and path.suffix and not path.is_file():
+        raise _refuse(text, "is no number of orders, no file and no list of shelves")
+    if path.is_file():
+        try:
+            lines = path.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise _refuse(text, f"cannot be read: {exc}") from None
+        shelves = tuple(line.split("#", 1)[0].strip() for line in lines)
+        where = f"file {text}"
+    else:
+        shelves = tuple(part.strip() for part in text.split(","))
+        where = "the list"
+    shelves = tuple(s for s in shelves if s) if path.is_file() else shelves
+    if not shelves:
+        raise _refuse(text, "names no shelf")
+    if "" in shelves:
+        raise _refuse(text, f"has an empty shelf name in {where}")
+    return shelves
+
+
 def battery_arg(text: str) -> str:
     """A `--battery` text (fleet.mission.battery.parse_battery), checked, kept as given."""
     try:
