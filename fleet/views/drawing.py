@@ -54,6 +54,17 @@ STACK_NUMBER_PT = 5
 CHAR_WIDTH = 0.62  # a bold character's mean width, in font sizes
 
 
+
+def frame_floor(ax: Axes, layout: Layout) -> None:
+    """The axes fitted to the floor, to scale, in metres."""
+    x0 = layout.origin[0] - layout.cell_size / 2
+    y0 = layout.origin[1] - layout.cell_size / 2
+    ax.set_xlim(x0, x0 + layout.cols * layout.cell_size)
+    ax.set_ylim(y0, y0 + layout.rows * layout.cell_size)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
 def inches_per_metre(layout: Layout) -> float:
     """The scale of a map of the layout (map_figure())."""
     return min(MAP_WIDTH_IN / (layout.cols * layout.cell_size),
@@ -130,13 +141,7 @@ def draw_layout(ax: Axes, layout: Layout, filled: Iterable[Cell] | None = None,
             x, y, rotation = cluster_label_spot(layout, cluster.name)
             ax.text(x, y, cluster.name, rotation=rotation, zorder=Z_LABEL,
                     gid=f"cluster/{cluster.name}", **CLUSTER_LABEL)
-    x0 = layout.origin[0] - layout.cell_size / 2
-    y0 = layout.origin[1] - layout.cell_size / 2
-    ax.set_xlim(x0, x0 + layout.cols * layout.cell_size)
-    ax.set_ylim(y0, y0 + layout.rows * layout.cell_size)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    frame_floor(ax, layout)
     handles: list[Artist] = []
     if filled is not None:
         handles.append(Patch(label="stack, filled", **FILLED_STACK))

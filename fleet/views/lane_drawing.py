@@ -26,6 +26,7 @@ from fleet.views.drawing import (
     Z_FORKLIFT_TEXT,
     Z_LABEL,
     cell_square,
+    frame_floor,
     inches_per_metre,
 )
 from fleet.views.palette import (
@@ -103,13 +104,7 @@ def draw_lane_floor(ax: Axes, layout: Layout, labels: bool = True,
     if labels:
         for place in (*layout.packing, *layout.piles):
             place_label(ax, layout, place.cell, place.name)
-    x0 = layout.origin[0] - layout.cell_size / 2
-    y0 = layout.origin[1] - layout.cell_size / 2
-    ax.set_xlim(x0, x0 + layout.cols * layout.cell_size)
-    ax.set_ylim(y0, y0 + layout.rows * layout.cell_size)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    frame_floor(ax, layout)
     handles: list[Artist] = [
         Line2D([], [], ls="none", marker=">", color=ARROW_COLOR, ms=5,
                label="lane and its direction"),

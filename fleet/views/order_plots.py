@@ -74,7 +74,15 @@ from fleet.views.palette import (
     forklift_color,
     lighter,
 )
-from fleet.views.plots import FPS, FRAMES, GIF_DPI, check_movie, movie_writer, write_frames
+from fleet.views.plots import (
+    FPS,
+    FRAMES,
+    GIF_DPI,
+    check_movie,
+    movie_writer,
+    vehicle_rows,
+    write_frames,
+)
 from fleet.wire.protocol import VehicleState
 from fleet.world.layout import Layout
 
@@ -171,15 +179,7 @@ def gantt(record: MissionSummary, tl: OrderTimeline, orders: int | None = None) 
     for k, stay in enumerate(tl.pile_stays):
         ax.add_patch(_bar(row[stay.vehicle], stay.t0, min(stay.t1, last), 0.3, f"pile/{k}",
                           **ON_PILE))
-    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures
-                if f.stage == "plan" and f.vehicle in row]
-    if failures:
-        ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
-    ax.set_yticks(range(len(vehicles)), [f"AGV {v}" for v in vehicles])
-    for label, v in zip(ax.get_yticklabels(), vehicles, strict=True):
-        label.set_color(forklift_color(v))
-        label.set_fontweight("bold")
-    ax.set_ylim(len(vehicles) - 0.5, -0.6)
+    vehicle_rows(ax, record, row, vehicles, "AGV")
     ax.set_xlim(0, 1.01 * last)
     ax.set_xlabel("simulated time [s]")
     handles = [Patch(color=c, label=TRIP_NAMES[k]) for k, c in TRIP_COLORS.items()]

@@ -65,6 +65,21 @@ SHOW_AHEAD_S = 20.0  # a snapshot shows reserved cells this far ahead
 HELD_NOW_ALPHA, HELD_SOON_ALPHA = 0.35, 0.12  # reserved cells held now, held soon
 
 
+
+def vehicle_rows(ax: Axes, record: MissionSummary, row: dict[int, int], vehicles: list[int],
+                 noun: str) -> None:
+    """A Gantt chart's rows: one a vehicle, named in its colour, the first on top, a cross
+    where a plan of its failed."""
+    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures
+                if f.stage == "plan" and f.vehicle in row]
+    if failures:
+        ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
+    ax.set_yticks(range(len(vehicles)), [f"{noun} {v}" for v in vehicles])
+    for label, v in zip(ax.get_yticklabels(), vehicles, strict=True):
+        label.set_color(forklift_color(v))
+        label.set_fontweight("bold")
+    ax.set_ylim(len(vehicles) - 0.5, -0.6)  # the first on top, room for its crosses
+
 def heading(record: MissionSummary) -> str:
     """Which run a plot is of, for its title."""
     m = record.mission
@@ -129,15 +144,7 @@ def gantt(record: MissionSummary) -> Figure:
         for st in s.steps:
             if st[0] == "stop":
                 ax.barh(y, st[4] - st[3], left=st[3], color="black", height=0.25)
-    failures = [(f.t, row[f.vehicle] - 0.42) for f in record.failures
-                if f.stage == "plan" and f.vehicle in row]
-    if failures:
-        ax.plot(*zip(*failures, strict=True), "kx", ms=4, mew=0.8)
-    ax.set_yticks(range(len(vehicles)), [f"forklift {v}" for v in vehicles])
-    for label, v in zip(ax.get_yticklabels(), vehicles, strict=True):
-        label.set_color(forklift_color(v))
-        label.set_fontweight("bold")
-    ax.set_ylim(len(vehicles) - 0.5, -0.6)  # forklift 1 on top, room for its crosses
+    vehicle_rows(ax, record, row, vehicles, "forklift")
     last = max([record.end_time_s] + [s.t_done for s in record.subtasks])
     ax.set_xlim(0, 1.01 * last or 1.0)
     ax.set_xlabel("simulated time [s]")
