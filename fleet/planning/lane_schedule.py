@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 
 from fleet.planning.geometry import Cell
 from fleet.planning.lane_route import move_length
@@ -69,6 +70,15 @@ class Schedule:
 
     def touches(self) -> list[Touch]:
         """Standing and moving, in time order (zero-length stands left out)."""
+        return self._touches
+
+    @cached_property
+    def touched(self) -> frozenset[Cell]:
+        """Every cell it touches at some time."""
+        return frozenset().union(*(t.cells for t in self._touches))
+
+    @cached_property
+    def _touches(self) -> list[Touch]:  # a schedule is asked again and again while settled
         found = []
         for m, cell in enumerate(self.cells):
             if self.dwells[m] > 0:

@@ -188,7 +188,9 @@ class ReservationTable:
 
     def __init__(self) -> None:
         self._cells: dict[Cell, _CellLine] = {}
-        self._cells_of: dict[int, set[Cell]] = {}
+        # Each vehicle's cells, with the latest end of what it holds there: a release from t
+        # passes over the cells of its past (their holds all end by t) without reading them.
+        self._cells_of: dict[int, dict[Cell, float]] = {}
         self._routes: dict[int, TimedRoute] = {}
         self.revision = 0
         self.changes: list[Change] = []
@@ -224,7 +226,7 @@ class ReservationTable:
     def reservations(self, vehicle: int | None = None) -> list[Reservation]:
         """All reservations (of one vehicle, or of all), sorted by cell then time."""
         out = []
-        cells = self._cells_of.get(vehicle, set()) if vehicle is not None else self._cells
+        cells = self._cells_of.get(vehicle, {}) if vehicle is not None else self._cells
         for cell in sorted(cells):
             line = self._cells[cell]
             for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
@@ -340,7 +342,9 @@ class ReservationTable:
         (held on by its next move, merged into one interval) may be taken again later."""
         on = None if a.route is None else _on_at(a.route, a.release_from)
         before: dict[Cell, list[tuple[float, float, bool]]] = {}  # (t0, t1, held across)
-        for cell in self._cells_of.get(a.vehicle, ()):
+        for cell, last_end in self._cells_of.get(a.vehicle, {}).items():
+            if last_end <= a.release_from:
+                continue  # a cell of its past
             line = self._cells[cell]
             for t0, t1, owner in zip(line.starts, line.ends, line.owners, strict=True):
                 if owner == a.vehicle and t1 > a.release_from:
@@ -406,16 +410,20 @@ class ReservationTable:
         self.changes.append(change)
 
     def _release(self, vehicle: int, from_t: float, only: frozenset[Cell] | None) -> None:
-        for cell in list(self._cells_of.get(vehicle, ())):
-            if only is not None and cell not in only:
-                continue
+        cells = self._cells_of.get(vehicle, {})
+        for cell, last_end in list(cells.items()):
+            if (only is not None and cell not in only) or last_end <= from_t:
+                continue  # not asked, or all it holds here ends by then: unchanged
             line = self._cells[cell]
             keep = [(s, e, o) for s, e, o in zip(line.starts, line.ends, line.owners, strict=True)
                     if o != vehicle or s < from_t]
             keep = [(s, min(e, from_t) if o == vehicle else e, o) for s, e, o in keep]
             self._set_line(cell, keep)
-            if not any(o == vehicle for _, _, o in keep):
-                self._cells_of[vehicle].discard(cell)
+            ends = [e for _, e, o in keep if o == vehicle]
+            if ends:
+                cells[cell] = max(ends)
+            else:
+                del cells[cell]
 
     def _insert(self, vehicle: int, iv: Interval) -> None:
         line = self._cells.get(iv.cell)
@@ -430,7 +438,8 @@ class ReservationTable:
         kept.append((t0, t1, vehicle))
         kept.sort()
         self._set_line(iv.cell, kept)
-        self._cells_of.setdefault(vehicle, set()).add(iv.cell)
+        cells = self._cells_of.setdefault(vehicle, {})
+        cells[iv.cell] = max(cells.get(iv.cell, t1), t1)
 
     def _set_line(self, cell: Cell, entries: list[tuple[float, float, int]]) -> None:
         if not entries:
