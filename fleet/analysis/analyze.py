@@ -82,6 +82,7 @@ from fleet.mission.spec import ClockMode, MissionKind
 from fleet.params import DispatchParams
 from fleet.recording.format import NS
 from fleet.recording.mission_record import (
+    Final,
     dispatcher_restarts,
     final_record,
     summary_of,
@@ -116,7 +117,9 @@ def analyze(recording: Recording) -> Report:
                              f"recorded, so the run is unknown (was the recorder started "
                              f"after the mission?)")
     layout = recording.layout()
-    record = summary_of(recording)
+    restarts = dispatcher_restarts(recording)
+    final = final_record(recording, restarts)
+    record = summary_of(recording, (restarts, final))
     kind = layout.vehicle_kind
     outline = kind.outline  # numbers only: the verifier has its own geometry
     body = Body(outline.front, outline.rear, outline.width, layout.cell_size, layout.origin)
@@ -165,8 +168,6 @@ def analyze(recording: Recording) -> Report:
                       STATE_GAP_PERIODS * period, kind.handled_cell,
                       lambda v, t0, t1: states_unknown(unverified, v, t0, t1))
     served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
-    restarts = dispatcher_restarts(recording)
-    final = final_record(recording, restarts)
     finished = bool(done) and done[-1].ok
     breaches, met = ([], []) if not layout.has_lanes else \
         _lane_traffic(layout, usable, STATE_GAP_PERIODS * period)
@@ -190,7 +191,7 @@ def analyze(recording: Recording) -> Report:
         stacks_unverified=sorted(j.announced.stack for j in judged if j.unverified),
         stacks_out_of_order=out_of_order(
             clusters, (lambda i: i) if fill else (lambda i: -i),
-            [Delivery(s.target, s.stack, s.t_i) for s in decision_order(recording, record)
+            [Delivery(s.target, s.stack, s.t_i) for s in decision_order(recording, record, final)
              if s.kind == DELIVERY and s.stack is not None],
             [(m.cluster, m.index) for _, m in recording.of(StackReopened)]),
         impossible_states=impossible_states(usable, body, kind.max_speed_mps, kind.is_wait),
@@ -336,15 +337,17 @@ def standing_samples(recording: Recording, instants: list[float]) -> list[Sample
     return out
 
 
-def decision_order(recording: Recording, record: MissionSummary) -> list[SubtaskRecord]:
+def decision_order(recording: Recording, record: MissionSummary, final: Final | None = None
+                   ) -> list[SubtaskRecord]:
     """The subtasks whose order of decision is known, in that order: those of the last
     dispatcher's final record (it lists them as decided) and, of a run of processes, those
     recorded as published. An in-process recording holds the events in sim-time order (a
     subtask at its start, which may come after a later decision's): there, only the final
     record's."""
-    final = final_record(recording, dispatcher_restarts(recording))
+    final = final_record(recording, dispatcher_restarts(recording)) if final is None else final
     own = set(final.subtasks) if final is not None else set()
-    return [s for s in record.subtasks if s in own or recording.info.clock != IN_PROCESS]
+    processes = recording.info.clock != IN_PROCESS  # read once: it looks through everything
+    return [s for s in record.subtasks if processes or s in own]
 
 
 def announced_stacks(recording: Recording) -> list[Announced]:

@@ -91,8 +91,8 @@ def replay(changes: list[tuple]) -> list[Held]:
         if release_from is not None:
             kept = []
             for h in held[vehicle]:
-                if only is not None and h.cell not in only:
-                    kept.append(h)
+                if (only is not None and h.cell not in only) or h.t1 <= release_from:
+                    kept.append(h)  # not asked, or over by then: as it was
                 elif h.t0 < release_from:
                     kept.append(Held(vehicle, h.cell, h.t0, min(h.t1, release_from)))
             held[vehicle] = kept

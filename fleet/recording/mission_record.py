@@ -93,14 +93,16 @@ class Final:
     account: Account | None  # None: not in the record in the expected shape
 
 
-def summary_of(recording: Recording) -> MissionSummary:
-    """The mission record of a recording (RecordingError if it holds no mission message)."""
+def summary_of(recording: Recording,
+               known: tuple[list[Restart], Final | None] | None = None) -> MissionSummary:
+    """The mission record of a recording (RecordingError if it holds no mission message);
+    `known`: its dispatcher restarts and final record, when the caller has them already."""
     info = recording.info
     if info is None:
         raise RecordingError(f"{recording.path}: no mission message (dispatch/mission) was "
                              f"recorded, so the run is unknown")
-    restarts = dispatcher_restarts(recording)
-    final = final_record(recording, restarts)
+    restarts, final = known if known is not None else \
+        (restarts := dispatcher_restarts(recording), final_record(recording, restarts))
     incomplete = unknown(recording, restarts, final is not None)
     heard = recording.of(SubtaskEvent)
     subtasks, later = amended(heard, recording.of(LegAmended))

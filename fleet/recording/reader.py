@@ -15,6 +15,7 @@ import math
 import os
 from collections import Counter
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -52,9 +53,10 @@ class Recorded:
     def message(self) -> Message | None:
         return None if self.envelope is None else self.envelope.message
 
-    @property
+    @cached_property
     def genuine(self) -> bool:
-        """A valid message of the type its key carries, from the one sender of that key."""
+        """A valid message of the type its key carries, from the one sender of that key
+        (worked out once: every question about a recording asks it again)."""
         return self.envelope is not None and genuine(self.key, self.envelope)
 
 
@@ -98,6 +100,7 @@ class Recording:
     complete: bool = False  # every file ends with its footer
     problem: str = ""  # why reading stopped before a footer (each segment's, named)
     segments: list[Segment] = field(default_factory=list)  # the files read, in order
+    _index: tuple[int, dict] | None = field(default=None, repr=False, compare=False)
 
     @property
     def gaps(self) -> list[RecorderGap]:
@@ -116,9 +119,24 @@ class Recording:
 
     def of(self, cls: type[Message]) -> list[tuple[Recorded, Any]]:
         """Every genuine message of a type (from its key's sender, on its key), with where
-        and when it was recorded."""
-        return [(r, r.envelope.message) for r in self.messages
-                if r.genuine and isinstance(r.envelope.message, cls)]
+        and when it was recorded, in file order."""
+        found = [entry for kind, entries in self._genuine_by_type().items()
+                 if issubclass(kind, cls) for entry in entries]
+        if len({type(m) for _, (_, m) in found}) > 1:
+            found.sort()
+        return [(r, m) for _, (r, m) in found]
+
+    def _genuine_by_type(self) -> dict[type, list[tuple[int, tuple[Recorded, Any]]]]:
+        """The genuine messages by type, each with its place in the file; sorted once, while
+        `messages` stays as it is (an analysis asks for one type after another)."""
+        if self._index is None or self._index[0] != len(self.messages):
+            index: dict[type, list[tuple[int, tuple[Recorded, Any]]]] = {}
+            for k, r in enumerate(self.messages):
+                if r.genuine:
+                    index.setdefault(type(r.envelope.message), []).append(
+                        (k, (r, r.envelope.message)))
+            self._index = (len(self.messages), index)
+        return self._index[1]
 
     @property
     def foreign(self) -> list[Recorded]:
