@@ -184,6 +184,11 @@ class Drive:
         for leg in self.legs:
             traj = leg.trajectory
             add(cursor, traj.t_start, "parked", pose.cell)
+            if traj.t_start >= t1:
+                return out  # the legs after t1 do not count
+            if leg.t_end <= t0:
+                cursor, pose = max(cursor, leg.t_end), traj.goal
+                continue  # over before t0
             for step in traj.steps:
                 doing = "standing" if self.vehicle_kind.is_wait(step.manner.label) else \
                     "moving"

@@ -75,9 +75,10 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log:
                 case ResumeAt(t):
                     drive.resume(t)
                     silent[-1] = (silent[-1][0], t)
-        out += [outgoing(keys, Keys.vehicle_state, drive.state_at(t), t, vehicle)
-                for t in drive.due(until, FAST_STATE_PERIOD_S, before=True)
-                if not any(t0 <= t < t1 for t0, t1 in silent)]
+        for t in drive.due(until, FAST_STATE_PERIOD_S, before=True):
+            if not any(t0 <= t < t1 for t0, t1 in silent):
+                out.append(outgoing(keys, Keys.vehicle_state, drive.state_at(t), t, vehicle))
+            drive.forget_before(t)  # as its agent does: each state reads the legs from t on
     return out
 
 
