@@ -27,11 +27,12 @@ from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
+from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.record import MissionSummary, digest_of
-from fleet.mission.spec import ClockMode, Mission
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
 from fleet.runtime.args import engine_options
@@ -184,6 +185,20 @@ def write_roster(path: Path, ids: dict[str, int]) -> None:
     path.write_text(json.dumps(ids))
 
 
+def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
+             ) -> WorkJournal | None:
+    """The order book's journal (--journal), for an order mission: the dead dispatcher's to
+    go on with when this one picks the mission up, else a new one."""
+    if config.journal is None or setup.mission.kind is not MissionKind.ORDERS:
+        return None
+    journal = WorkJournal(config.journal)
+    scope.callback(journal.close)
+    if not setup.recover and config.journal.exists() and config.journal.stat().st_size:
+        raise UserError(f"--journal {config.journal} holds an earlier mission's order book: "
+                        f"pick that mission up (--recover) or give another file")
+    return journal
+
+
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                      liveness: Liveness, publish: Publish) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
@@ -201,13 +216,15 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             log.info("%d forklifts and the reservation service are up", len(vehicles))
             executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
                                       setup.layout.vehicle_kind)
+            journal = _journal(config, setup, scope)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
-                recovered, tick, wall = pick_up(executor, setup.layout, setup.mission.kind,
-                                                vehicles, setup.options.params)
+                recovered, tick, wall = pick_up(executor, setup.layout, setup.mission,
+                                                vehicles, setup.options.params, journal)
                 log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
                          len(recovered.done) + len(recovered.undelivered))
-            scenario = load_scenario(config.faults) if config.faults else None
+            scenario = load_scenario(config.faults, setup.layout.name) if config.faults \
+                else None
             t = recovered.t if recovered else 0.0
             if config.clock is ClockMode.FAST:
                 clock = FastClock(session, keys, vehicles, liveness, scenario, config.recorded,
@@ -221,7 +238,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             def progress(done: int, total: int, t: float, failures: int) -> None:
                 publish(Progress(done, total, t, failures), t)
 
-            options = dataclasses.replace(setup.options, progress=progress, events=publish)
+            options = dataclasses.replace(setup.options, progress=progress, events=publish,
+                                          work_log=journal)
             engine = Engine(setup.mission, options, setup.layout, executor, clock, recovered)
             record = engine.run()
             as_dict = MissionSummary.of_record(record).to_dict()
