@@ -189,12 +189,8 @@ def run(args: argparse.Namespace) -> int:
     mission = mission_from_args(args, layout)
     if not registry.is_built(layout.vehicle.kind):  # a planned kind: nothing drives it yet
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
-    if mission.kind is MissionKind.ORDERS:
-        n = order_fleet(layout, mission.vehicles)
-        if args.faults:
-            raise UserError("order missions take no faults yet (--faults)")
-    else:
-        n = fleet_size(layout, mission.vehicles)
+    n = order_fleet(layout, mission.vehicles) if mission.kind is MissionKind.ORDERS else \
+        fleet_size(layout, mission.vehicles)
     if args.force and args.out is None:
         raise UserError("--force replaces the directory given with --out DIR; without --out "
                         "a run gets a new directory of its own and replaces nothing")
@@ -299,8 +295,9 @@ def _report(out: Path, recording: Recording | None = None) -> Report:
 
 
 def fault_scenario(source: str, layout: Layout, vehicles: int) -> Scenario:
-    """The scenario of --faults, checked against the run before anything starts."""
-    scenario = load_scenario(source)
+    """The scenario of --faults (a shipped one in the layout's own version, where it ships
+    one), checked against the run before anything starts."""
+    scenario = load_scenario(source, layout.name)
     check_against(scenario, layout, vehicles)
     return scenario
 
