@@ -535,11 +535,10 @@ class OrderBook:
     def park(self, agv: int, now: float) -> ChargeTrip | None:
         """An AGV available where it cannot stay (on a lane, its order given to another
         while it was down) goes to the nearest free pile, as if to charge (None: it
-        already stands in a slot or on a pile, or no pile is free)."""
+        already stands in a slot or on its pile, or no pile is free)."""
         a = self._agv(agv)
         self._tick(now)
-        if a.phase is not Phase.IDLE or a.down or a.cell in self.slot_at or \
-                any(p.cell == a.cell for p in self.piles.values()):
+        if a.phase is not Phase.IDLE or a.down or a.pile is not None or a.cell in self.slot_at:
             return None
         pile = self._nearest(self.free_piles(), a.cell)
         if pile is None:
