@@ -86,6 +86,8 @@ class FaultResponse:
         # Never before what the work has taken as happened (real time takes an order
         # mission's arrivals a lead ahead): that stays as it was.
         t = max(disruption.t, self.work.taken_until)
+        if zone and t >= until:
+            return  # over before it could close
         at_rest = self.layout.vehicle_kind.body_cells_at_rest
         motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]), at_rest)
                    for v in self.fleet if v not in self.down}
@@ -185,8 +187,9 @@ class FaultResponse:
         if freeze is None:
             return
         v = self.fleet[up.vehicle]
-        # Not before the freeze (in real time it may be later than the fault was noticed).
-        up = dataclasses.replace(up, t=max(up.t, freeze.t))
+        # Not before the freeze nor what the work has taken (in real time both may be later
+        # than the instant it was noticed at).
+        up = dataclasses.replace(up, t=max(up.t, freeze.t, self.work.taken_until))
         shift = up.t - freeze.t
         t_stand = up.t
         if freeze.step is not None:  # the rest of the maneuver, from where it stood
