@@ -31,6 +31,7 @@ from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
+from fleet.mission.order_work import order_fleet
 from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
@@ -85,7 +86,15 @@ class MissionSetup:
 
     @property
     def vehicles(self) -> list[int]:
-        return list(range(1, (self.mission.vehicles or len(self.layout.vehicle_starts)) + 1))
+        return list(range(1, fleet_limit(self.mission, self.layout) + 1))
+
+
+def fleet_limit(mission: Mission, layout: Layout) -> int:
+    """The mission's fleet, or at most: one forklift per start pose, or on an order mission
+    the paper's ten AGVs (one per charging pile at most, where they start)."""
+    if mission.kind is MissionKind.ORDERS:
+        return order_fleet(layout, mission.vehicles)
+    return mission.vehicles or len(layout.vehicle_starts)
 
 
 def serve(config: DispatcherConfig) -> int:
@@ -149,7 +158,8 @@ def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
     """The mission with the fleet that claimed its ids (--claims), and who holds which;
     the claims are served (to a restarted agent) for as long as `scope` lasts."""
     mission = config.mission
-    limit = mission.vehicles or len(layout.vehicle_starts)
+    limit = mission.vehicles or (len(layout.piles) if mission.kind is MissionKind.ORDERS
+                                 else len(layout.vehicle_starts))
     claims = scope.enter_context(closing(
         Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))))
     ids = claims.gather(mission.vehicles, config.gather_s, config.startup_timeout_s, stop)
