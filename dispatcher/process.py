@@ -107,6 +107,10 @@ def serve(config: DispatcherConfig) -> int:
     if restarted:
         log.warning("%s exists: this dispatcher was restarted, it picks the mission up", marker)
     recover = config.recover or restarted
+    if config.journal is not None and not recover and config.journal.exists() and \
+            config.journal.stat().st_size:
+        raise UserError(f"--journal {config.journal} holds an earlier mission's order book: "
+                        f"pick that mission up (--recover) or give another file")
     stop = threading.Event()
     in_mission = threading.Event()
 
@@ -203,9 +207,6 @@ def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
         return None
     journal = WorkJournal(config.journal)
     scope.callback(journal.close)
-    if not setup.recover and config.journal.exists() and config.journal.stat().st_size:
-        raise UserError(f"--journal {config.journal} holds an earlier mission's order book: "
-                        f"pick that mission up (--recover) or give another file")
     return journal
 
 

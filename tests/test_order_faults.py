@@ -352,3 +352,15 @@ def test_the_served_decision_of_a_replayed_book_is_the_same():
     assert records == [["served", 1, 0.0, 0.0, 0]]
     again = OrderWork.replayed(PAPER002, mission, 2, records)
     assert again.last_leg(1) == (0.0, 0.0) and 1 not in again.trips
+
+
+def test_a_dispatcher_refuses_another_missions_journal_in_one_line(tmp_path, capsys):
+    """A journal with records belongs to a mission to pick up: a new mission does not write
+    over it (nor start at all)."""
+    journal = tmp_path / "dispatcher.journal"
+    journal.write_bytes(msgpack.packb(["advance", 1.0]))
+    assert main(["dispatcher", "--layout", "paper002", "--orders", "3", "--journal",
+                 str(journal), "--connect", "tcp/127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds an earlier mission's order book: pick that " \
+        "mission up (--recover) or give another file" in err
