@@ -11,13 +11,15 @@ from collections import Counter
 
 import msgpack
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from dispatcher.work_journal import WorkJournal
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Decision, Strategy, TaskKind
 from fleet.errors import UserError
-from fleet.mission.engine import Engine, MissionStuck
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import Fault, FaultKind, Scenario, builtin_scenarios, load_scenario
 from fleet.mission.freeze import ScheduledPacer
 from fleet.mission.order_log import from_record
@@ -25,11 +27,12 @@ from fleet.mission.order_work import OrderWork
 from fleet.mission.orders import OrderBook, Phase, release_orders
 from fleet.mission.pickup import HeldLeg, recovered_orders
 from fleet.mission.record import digest
+from fleet.mission.seam import LocalExecutor
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.lane_schedule import timed
 from fleet.planning.reservations import INF, Interval, ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.recording.inprocess import recorded_run, write_recording
+from fleet.recording.inprocess import Interrupted, recorded_run, write_recording
 from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
 from fleet.vehicles.agv import leg_of
@@ -364,3 +367,80 @@ def test_a_dispatcher_refuses_another_missions_journal_in_one_line(tmp_path, cap
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "holds an earlier mission's order book: pick that " \
         "mission up (--recover) or give another file" in err
+
+
+records = st.recursive(
+    st.none() | st.booleans() | st.integers(-5, 40) | st.floats(allow_nan=True) |
+    st.sampled_from(["advance", "served", "amended", "cancelled", "down", "up", "closed",
+                     "fetch", "stow"]),
+    lambda inner: st.lists(inner, max_size=5), max_leaves=12)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.lists(records, max_size=6))
+def test_any_journal_replays_or_is_refused_naming_the_record(raws):
+    """Whatever a journal holds, replaying it gives a book or a UserError naming the record,
+    never another error."""
+    try:
+        OrderWork.replayed(PAPER002, orders(4, 2), 2, raws)
+    except UserError as exc:
+        assert str(exc).startswith("the order book's journal, record ")
+
+
+class _StopAfter:
+    """A pacer that ends the run (as a killed dispatcher's) before its n-th decision."""
+
+    def __init__(self, decisions: int) -> None:
+        self.left = decisions
+
+    def before_decision(self, t_next: float, t_free: dict[int, float]) -> dict[int, float]:
+        self.left -= 1
+        if self.left < 0:
+            raise Interrupted("killed")
+        return t_free
+
+    def finish(self, t_end: float) -> None:
+        pass
+
+    def disruptions(self, t_next: float, down: frozenset[int]) -> list:
+        return []
+
+    def instant(self, t: float) -> float:
+        return t
+
+
+class _Parked(LocalExecutor):
+    """The dead engine's table, each AGV already parked where its last leg ends."""
+
+    def __init__(self, table: ReservationTable) -> None:
+        super().__init__(PAPER002.vehicle_kind, planners_for(PAPER002))
+        self.table = table
+
+    def park(self, vehicle: int, pose: Pose) -> None:
+        pass
+
+
+@pytest.mark.parametrize("decisions", [25, 40, 70])  # at 40 a leg picked up is postponed
+def test_a_restarted_engine_picks_an_order_mission_up_from_its_journal(decisions):
+    """The engine dies part of the way (its journal and table left); a new one replays the
+    journal, takes each AGV's last leg as its agent would hold it, and finishes: every
+    order once, the book whole, legs committed before the restart postponed as well."""
+    mission = orders(40, 6)
+    records: list = []
+
+    class Log:
+        def append(self, record: list) -> None:
+            records.append(msgpack.unpackb(msgpack.packb(record)))
+
+    first = Engine(mission, EngineOptions(work_log=Log()), PAPER002, pacer=_StopAfter(decisions))
+    with pytest.raises(Interrupted):
+        first.run()
+    held = [HeldLeg(v, slot.pose, (first.faults.driven[v] or [None])[-1], False, "", False)
+            for v, slot in first.fleet.items()]
+    work = OrderWork.replayed(PAPER002, mission, 6, records, Log())
+    recovered = recovered_orders(work, held, first.now)
+    second = Engine(mission, EngineOptions(), PAPER002, _Parked(first.executor.store),
+                    recovered=recovered)
+    record = second.run()
+    assert Counter(i for _, i, _ in record.stacks_done) == Counter(range(1, 41))
+    second.work.book.check()

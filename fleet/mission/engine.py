@@ -544,17 +544,19 @@ class Engine:
         """Another vehicle's committed leg was postponed by this commit (seed 002's collision
         rules): it arrives later, and is free that much later."""
         v = self.fleet[leg.vehicle]
-        k = max(i for i, s in enumerate(self.record.subtasks) if s.vehicle == leg.vehicle)
-        before = self.record.subtasks[k]
-        delay = leg.t_end - before.t_end
-        after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
-                                    t_done=leg.t_end + self.work.handling(before.kind))
-        self.record.subtasks[k] = after
-        v.amended(delay, after.t_done)
-        self.faults.amended(leg)
+        delay = leg.t_end - self.faults.amended(leg).t_end
+        mine = [i for i, s in enumerate(self.record.subtasks) if s.vehicle == leg.vehicle]
+        if mine and self.record.subtasks[mine[-1]].trajectory.t_start == leg.t_start:
+            before = self.record.subtasks[mine[-1]]
+            after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
+                                        t_done=leg.t_end + self.work.handling(before.kind))
+            self.record.subtasks[mine[-1]] = after
+            v.amended(delay, after.t_done)
+            self._emit(amended_event(after), self.now)
+        else:  # committed before this dispatcher picked the mission up: not in its record
+            v.amended(delay, v.t_free + delay)
         self.drive_log[v.vehicle].append(AmendLeg(leg))
         self.work.amended(leg)
-        self._emit(amended_event(after), self.now)
 
 
 def run_mission(mission: Mission, options: EngineOptions | None = None,

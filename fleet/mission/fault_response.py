@@ -58,11 +58,13 @@ class FaultResponse:
         self.before.append(before)
         self.driven[before.vehicle].append(traj)
 
-    def amended(self, leg: Trajectory) -> None:
-        """A committed leg was postponed (seed 002's collision rules): it is driven so."""
+    def amended(self, leg: Trajectory) -> Trajectory:
+        """A committed leg was postponed (seed 002's collision rules): it is driven so.
+        Returns it as it was."""
         legs = self.driven[leg.vehicle]
         k = max(i for i, traj in enumerate(legs) if traj.t_start == leg.t_start)
-        legs[k] = leg
+        before, legs[k] = legs[k], leg
+        return before
 
     def picked_up(self, legs: dict[int, Trajectory]) -> None:
         """A restarted dispatcher: each forklift's last committed leg, as its agent holds it."""
