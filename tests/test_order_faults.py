@@ -444,3 +444,20 @@ def test_a_restarted_engine_picks_an_order_mission_up_from_its_journal(decisions
     record = second.run()
     assert Counter(i for _, i, _ in record.stacks_done) == Counter(range(1, 41))
     second.work.book.check()
+
+
+def test_an_agv_walled_in_by_one_that_is_down_is_told_apart_from_one_kept_waiting():
+    """The wait-for graph's question (fleet/mission/deadlock.py): on h2 between two vertical
+    channels the only way east passes AGV 2, which stands there for good. Down, it walls
+    AGV 1 in (the engine says so, `dispatch/deadlock` walled, and AGV 1 waits for it to come
+    back); able to move, it is AGV 1's one blocker."""
+    planner = planners_for(PAPER002).get(frozenset())
+    table = ReservationTable()
+    table.commit(2, [Interval((7, 4), 0.0, INF)])
+    start, goal = Pose((3, 4), 0), Pose((11, 4), 0)
+    assert planner.blockage(1, start, [goal], table, lambda v: v != 2) is None
+    way = planner.blockage(1, start, [goal], table, lambda v: True)
+    assert way is not None and way.blockers == {2} and way.goal == goal
+    assert (7, 4) in way.cells and start.cell in way.cells
+    free = planner.blockage(1, start, [Pose((13, 12), 0)], ReservationTable(), lambda v: True)
+    assert free is not None and free.blockers == frozenset()

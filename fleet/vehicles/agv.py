@@ -138,14 +138,37 @@ class LanePlanner:
                       expansions)
 
     # Other AGVs are no obstacles on the lanes (they are settled in time), and every place is
-    # connected (`fleet layout check`): the deadlock-breaking questions have plain answers.
+    # connected (`fleet layout check`): the deadlock-breaking questions have plain answers,
+    # save who stands for good in the way.
     def component(self, pose: Pose) -> int | None:
         return 0
 
     def blockage(self, vehicle: int, start: Pose, goals: Sequence[Pose],
                  store: ReservationView, movable: Callable[[int], bool],
                  shortest: bool = False) -> Blockage | None:
-        return Blockage(goals[0], frozenset(), frozenset()) if goals else None
+        """The route to a goal past what cannot move (vehicles that are down, what is no
+        vehicle), and the vehicles that can but stand for good on it (its blockers); None
+        when what cannot move walls every goal off (a zone for a while walls nothing)."""
+        memo: dict[Cell, int | None] = {}
+
+        def holder(cell: Cell) -> int | None:
+            if cell not in memo:
+                memo[cell] = held_for_good(store, vehicle, cell)
+            return memo[cell]
+
+        def wall(cell: Cell) -> bool:
+            owner = holder(cell)
+            return owner is not None and not (owner > 0 and movable(owner))
+
+        for goal in goals:
+            if wall(goal.cell):
+                continue
+            route = self.routes.route(start.cell, goal.cell, wall)
+            if route is not None:
+                cells = frozenset(route.cells)
+                blockers = {o for c in cells if c != start.cell and (o := holder(c)) is not None}
+                return Blockage(goal, frozenset(blockers), cells)
+        return None
 
     def rest_cells(self, pose: Pose) -> list[Cell]:
         return [pose.cell]
