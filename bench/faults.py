@@ -1,7 +1,8 @@
-"""`fleet bench faults`: every shipped fault scenario on paper with four forklifts, as real
-processes on the fast or the real-time clock, beside the fault-free run on the same clock: how
-fast each fault is detected and recovered from (wall clock), what it costs the mission (sim
-time), and what the recording's verdicts say (docs/reliability.md).
+"""`fleet bench faults`: every shipped fault scenario on paper with four forklifts (or on a lane
+layout such as paper002, its own scenarios on an order mission), as real processes on the
+fast or the real-time clock, beside the fault-free run on the same clock: how fast each fault
+is detected and recovered from (wall clock), what it costs the mission (sim time), and what
+the recording's verdicts say (docs/reliability.md).
 
 Detection: from the injector applying the fault (its wall clock) to the dispatcher seeing it
 (a liveliness token gone, a forklift's report). Recovery: from there to the engine asking the
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import statistics
 import tempfile
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,25 +25,31 @@ from fleet.mission.faults import DETECT_TIMEOUT_S, VEHICLE_KINDS, builtin_scenar
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.reader import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
-from fleet.wire.protocol import Halt, Resume
+from fleet.wire.protocol import Halt, MissionDone, Resume
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
+ORDERS, AGVS = 40, 6  # a lane layout's order mission: long enough for every fault
+
+
+def order_mission(layout: str, orders: int = ORDERS, vehicles: int = AGVS) -> Mission:
+    return Mission(layout, MissionKind.ORDERS, Strategy.NEAREST, vehicles, 0, orders=orders)
 
 
 def run(names: list[str] | None = None, say: Callable[[str], None] = print,
-        clock: ClockMode = ClockMode.FAST, speed: float = 1.0) -> dict:
-    """One row per scenario (a kind's own scenario is named after the kind), and the
-    fault-free run's as "fault_free"."""
+        clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
+        mission: Mission = MISSION) -> dict:
+    """One row per scenario (a kind's own scenario is named after the kind; the layout's own
+    version where it ships one), and the fault-free run's as "fault_free"."""
     names = names or builtin_scenarios()
     with tempfile.TemporaryDirectory() as tmp:
         say(f"fault-free run ({clock} clock) ...")
-        base = _run(Path(tmp) / "none", None, clock, speed)
+        base = _run(Path(tmp) / "none", None, clock, speed, mission)
         base_end = base["end_time_s"]
         base["extra_s"] = 0.0
         rows = {"fault_free": base}
         for name in names:
             say(f"{name} ...")
-            row = _run(Path(tmp) / name, name, clock, speed)
+            row = _run(Path(tmp) / name, name, clock, speed, mission)
             row["extra_s"] = round(row["end_time_s"] - base_end, 2) \
                 if row["end_time_s"] is not None else None
             rows[name] = row
@@ -49,13 +57,18 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print,
     return rows
 
 
-def _run(out: Path, name: str | None, clock: ClockMode, speed: float) -> dict:
-    scenario = load_scenario(name) if name else None
-    outcome = run_processes(RunSpec(MISSION, 4, out, clock, speed, faults=scenario,
-                                    faults_source=name or ""))
+def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
+         mission: Mission) -> dict:
+    scenario = load_scenario(name, mission.layout) if name else None
+    assert mission.vehicles is not None
+    outcome = run_processes(RunSpec(mission, mission.vehicles, out, clock, speed,
+                                    faults=scenario, faults_source=name or ""))
     recording = read_recording(out)
     report = analyze(recording)
     detect, recover, rejoin = timings(outcome, recording)
+    lost, twice = len(report.stacks_lost), len(report.stacks_duplicated)
+    if mission.kind is MissionKind.ORDERS:  # the work verdict counts stacks: the record
+        lost, twice = _orders(recording, mission.orders)
     return {
         "completed": outcome.done is not None and outcome.done.ok,
         "error": outcome.error,
@@ -67,12 +80,21 @@ def _run(out: Path, name: str | None, clock: ClockMode, speed: float) -> dict:
         "recover_s": _median(recover), "rejoin_s": _median(rejoin),
         "overlaps": len(report.overlaps),
         "outside_reservation": len(report.outside_reservation),
-        "stacks_lost": len(report.stacks_lost),
-        "stacks_duplicated": len(report.stacks_duplicated),
+        "stacks_lost": lost,  # an order mission: orders
+        "stacks_duplicated": twice,
         "messages_lost": report.messages_lost,
         "messages_not_recorded": report.messages_not_recorded,
         "verdicts_pass": report.passed,
     }
+
+
+def _orders(recording: Recording, total: int) -> tuple[int, int]:
+    """An order mission's orders not done and done twice, as its final record has them."""
+    records = [m.record for _, m in recording.of(MissionDone) if m.ok]
+    if not records:
+        return total, 0
+    done = Counter(index for _, index, _ in records[-1]["stacks_done"])
+    return total - len(done), sum(n > 1 for n in done.values())
 
 
 def timings(outcome: RunOutcome, recording: Recording
@@ -137,7 +159,7 @@ def _line(name: str, row: dict) -> str:
     return (f"{name:<18} seen {_seen(row):>4}  detect {_fmt(row['detect_s'], ' s'):>8}  recover "
             f"{_fmt(row['recover_s'], ' s'):>8}  rejoin {_fmt(row['rejoin_s'], ' s'):>8}  "
             f"extra {_fmt(row['extra_s'], ' s'):>9}  overlaps {row['overlaps']}  outside "
-            f"{row['outside_reservation']}  stacks lost {row['stacks_lost']} twice "
+            f"{row['outside_reservation']}  lost {row['stacks_lost']} twice "
             f"{row['stacks_duplicated']}  messages lost {row['messages_lost']} (not recorded "
             f"{row['messages_not_recorded']})  {'pass' if row['verdicts_pass'] else 'FAIL'}")
 
@@ -145,7 +167,7 @@ def _line(name: str, row: dict) -> str:
 def table(result: dict) -> str:
     """The markdown table of docs/reliability.md."""
     lines = ["| scenario | seen | detect | recover | rejoin | extra mission time | overlaps | "
-             "outside reservation | stacks lost / twice | messages lost (not recorded) | "
+             "outside reservation | stacks (orders) lost / twice | messages lost (not recorded) | "
              "verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, row in result.items():
         if not isinstance(row, dict):

@@ -27,11 +27,13 @@ from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
+from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
+from fleet.mission.order_work import order_fleet
 from fleet.mission.record import MissionSummary, digest_of
-from fleet.mission.spec import ClockMode, Mission
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
 from fleet.runtime.args import engine_options
@@ -84,7 +86,15 @@ class MissionSetup:
 
     @property
     def vehicles(self) -> list[int]:
-        return list(range(1, (self.mission.vehicles or len(self.layout.vehicle_starts)) + 1))
+        return list(range(1, fleet_limit(self.mission, self.layout) + 1))
+
+
+def fleet_limit(mission: Mission, layout: Layout) -> int:
+    """The mission's fleet, or at most: one forklift per start pose, or on an order mission
+    the paper's ten AGVs (one per charging pile at most, where they start)."""
+    if mission.kind is MissionKind.ORDERS:
+        return order_fleet(layout, mission.vehicles)
+    return mission.vehicles or len(layout.vehicle_starts)
 
 
 def serve(config: DispatcherConfig) -> int:
@@ -97,6 +107,10 @@ def serve(config: DispatcherConfig) -> int:
     if restarted:
         log.warning("%s exists: this dispatcher was restarted, it picks the mission up", marker)
     recover = config.recover or restarted
+    if config.journal is not None and not recover and config.journal.exists() and \
+            config.journal.stat().st_size:
+        raise UserError(f"--journal {config.journal} holds an earlier mission's order book: "
+                        f"pick that mission up (--recover) or give another file")
     stop = threading.Event()
     in_mission = threading.Event()
 
@@ -148,7 +162,8 @@ def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
     """The mission with the fleet that claimed its ids (--claims), and who holds which;
     the claims are served (to a restarted agent) for as long as `scope` lasts."""
     mission = config.mission
-    limit = mission.vehicles or len(layout.vehicle_starts)
+    limit = mission.vehicles or (len(layout.piles) if mission.kind is MissionKind.ORDERS
+                                 else len(layout.vehicle_starts))
     claims = scope.enter_context(closing(
         Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))))
     ids = claims.gather(mission.vehicles, config.gather_s, config.startup_timeout_s, stop)
@@ -184,6 +199,17 @@ def write_roster(path: Path, ids: dict[str, int]) -> None:
     path.write_text(json.dumps(ids))
 
 
+def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
+             ) -> WorkJournal | None:
+    """The order book's journal (--journal), for an order mission: the dead dispatcher's to
+    go on with when this one picks the mission up, else a new one."""
+    if config.journal is None or setup.mission.kind is not MissionKind.ORDERS:
+        return None
+    journal = WorkJournal(config.journal)
+    scope.callback(journal.close)
+    return journal
+
+
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                      liveness: Liveness, publish: Publish) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
@@ -201,13 +227,15 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             log.info("%d forklifts and the reservation service are up", len(vehicles))
             executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
                                       setup.layout.vehicle_kind)
+            journal = _journal(config, setup, scope)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
-                recovered, tick, wall = pick_up(executor, setup.layout, setup.mission.kind,
-                                                vehicles, setup.options.params)
+                recovered, tick, wall = pick_up(executor, setup.layout, setup.mission,
+                                                vehicles, setup.options.params, journal)
                 log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
                          len(recovered.done) + len(recovered.undelivered))
-            scenario = load_scenario(config.faults) if config.faults else None
+            scenario = load_scenario(config.faults, setup.layout.name) if config.faults \
+                else None
             t = recovered.t if recovered else 0.0
             if config.clock is ClockMode.FAST:
                 clock = FastClock(session, keys, vehicles, liveness, scenario, config.recorded,
@@ -221,7 +249,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             def progress(done: int, total: int, t: float, failures: int) -> None:
                 publish(Progress(done, total, t, failures), t)
 
-            options = dataclasses.replace(setup.options, progress=progress, events=publish)
+            options = dataclasses.replace(setup.options, progress=progress, events=publish,
+                                          work_log=journal)
             engine = Engine(setup.mission, options, setup.layout, executor, clock, recovered)
             record = engine.run()
             as_dict = MissionSummary.of_record(record).to_dict()

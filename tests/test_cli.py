@@ -204,6 +204,20 @@ def test_bench_faults_json(capsys):
     assert main(["bench", "faults", "--scenarios", "nope"]) == 2
 
 
+def test_bench_faults_on_an_order_mission_json(capsys):
+    """On a lane layout the bench runs an order mission with the layout's own scenarios,
+    counting orders lost or done twice from the final record."""
+    assert main(["bench", "faults", "--layout", "paper002", "--orders", "12", "--vehicles",
+                 "4", "--scenarios", "vehicle_breakdown", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    row, base = result["vehicle_breakdown"], result["fault_free"]
+    assert row["completed"] and row["verdicts_pass"] and base["verdicts_pass"]
+    assert (row["overlaps"], row["outside_reservation"], row["stacks_lost"],
+            row["stacks_duplicated"]) == (0, 0, 0, 0)
+    assert row["detected"] == row["faults"] == 1 and row["detect_s"] > 0
+    assert main(["bench", "faults", "--layout", "small"]) == 2
+
+
 def test_a_reader_that_leaves_early_gets_no_traceback():
     """`fleet faults list | head -1`: the reader is gone before the output comes; the
     command stops quietly, with the shell's status for a broken pipe."""

@@ -30,7 +30,7 @@ from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout
 
 ROOT = Path(__file__).resolve().parent.parent
-IMAGE = "forklift-fleet:test"
+IMAGE = os.environ.get("FLEET_TEST_IMAGE", "forklift-fleet:test")
 MISSION_TIMEOUT_S = 600
 # The forklifts the fault test disturbs: any pair, drawn from a seed (FLEET_FAULT_SEED to
 # draw another; every ordered pair completes in process, docs/reliability.md).
@@ -166,6 +166,25 @@ def test_compose_up_with_four_forklifts_runs_the_reference_mission(deployment):
     assert report.passed and report.complete, report
     assert (len(report.overlaps), len(report.outside_reservation), report.stacks_done,
             report.stacks_duplicated, report.messages_lost) == (0, 0, 136, [], 0)
+
+
+def test_compose_up_runs_an_order_mission_on_a_lane_layout(deployment):
+    """FLEET_LAYOUT=paper002: three AGV containers claim their ids and run a small order
+    mission (seed 002's order book, the AGVs on the lanes) in fast mode; every container
+    exits by itself, every order is done once, and the recording passes its verdicts with
+    the very record of the in-process reference (the same digest)."""
+    d = deployment(FLEET_LAYOUT="paper002", FLEET_ORDERS="12", FLEET_VEHICLES="3")
+    d.compose("up", "-d", "--no-build", "--scale", "vehicle=3")
+    codes = [d.wait(service) for service in ("dispatcher", "recorder", "vehicle", "router")]
+    assert codes == [[0], [0], [0] * 3, [0]], d.logs()
+    recording = read_recording(d.recording())
+    (done,) = [m for _, m in recording.of(MissionDone)]
+    mission = Mission("paper002", MissionKind.ORDERS, Strategy.NEAREST, 3, orders=12)
+    assert done.ok and done.digest == digest(run_mission(mission))
+    assert sorted(index for _, index, _ in done.record["stacks_done"]) == list(range(1, 13))
+    report = analyze(recording)
+    assert report.passed and report.complete, report
+    assert (len(report.overlaps), len(report.outside_reservation)) == (0, 0)
 
 
 def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(deployment):

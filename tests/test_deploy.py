@@ -180,3 +180,31 @@ def test_the_secrets_give_the_router_every_login_and_the_forklifts_only_theirs(t
     (tmp_path / "bad").write_text("vehicle-1 no colon\n")
     with pytest.raises(UserError, match="bad:1: not a 'user:password' line"):
         read_dictionary(tmp_path / "bad")
+
+
+def test_a_lane_layout_deploys_an_order_mission_with_its_journal():
+    """FLEET_LAYOUT=paper002 runs an order mission (FLEET_ORDERS of them, 100 unless said),
+    dispatched by the order book, as `fleet run --layout paper002` does; its dispatcher
+    journals the book beside its restart marker, so a restart picks the mission up."""
+    parser = build_parser()
+    config = config_from_env({"FLEET_LAYOUT": "paper002", "FLEET_ORDERS": "40",
+                              "FLEET_VEHICLES": "6"})
+    args = parser.parse_args(service_config("dispatcher", config).argv())
+    assert (args.mission, args.orders, args.strategy, args.vehicles) == \
+        ("orders", 40, "nearest", 6)
+    assert str(args.journal) == "/tmp/fleet/dispatcher.journal" and args.claims
+    default = parser.parse_args(service_config("dispatcher", DeployConfig(
+        layout="paper002")).argv())
+    assert (default.mission, default.orders) == ("orders", 100)
+    paper = parser.parse_args(service_config("dispatcher", DeployConfig()).argv())
+    assert (paper.mission, paper.strategy, paper.journal) == ("fill", "ann", None)
+
+
+@pytest.mark.parametrize("env, named", [
+    ({"FLEET_ORDERS": "-3"}, "FLEET_ORDERS"), ({"FLEET_ORDERS": "many"}, "FLEET_ORDERS"),
+    ({"FLEET_MISSION": "fill", "FLEET_ORDERS": "4"}, "FLEET_ORDERS"),
+    ({"FLEET_LAYOUT": "paper002", "FLEET_STRATEGY": "ann"}, "FLEET_STRATEGY=ann"),
+    ({"FLEET_LAYOUT": "paper", "FLEET_STRATEGY": "nearest"}, "FLEET_STRATEGY=nearest")])
+def test_an_order_setting_that_does_not_fit_names_the_variable(env, named):
+    with pytest.raises(UserError, match=named):
+        service_config("dispatcher", config_from_env(env))

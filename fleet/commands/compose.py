@@ -39,7 +39,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "in the foreground until the mission ends, then analyse its "
                             "recording.")
     up.add_argument("--vehicles", type=positive_int, default=4,
-                    help="forklift containers (default 4)")
+                    help="forklift (or AGV) containers, and the fleet the mission waits for "
+                    "(default 4)")
+    up.add_argument("--layout", type=shipped_layout,
+                    help="FLEET_LAYOUT: a layout shipped in the image (paper002 runs order "
+                    "missions; default: $FLEET_LAYOUT, else paper)")
+    up.add_argument("--orders", type=positive_int, metavar="N",
+                    help="FLEET_ORDERS: an order mission of N orders (default: $FLEET_ORDERS, "
+                    "else 100)")
     up.add_argument("--build", action="store_true", help="build the image first")
     up.add_argument("--secure", action="store_true", help="behind the router's access "
                     "control (compose.secure.yaml), with the logins of `fleet compose secrets` "
@@ -74,6 +81,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     secrets.set_defaults(handler=run_secrets)
 
 
+def shipped_layout(text: str) -> str:
+    """A layout the image ships (a file here is not in the dispatcher's container)."""
+    from fleet.world.layout_file import builtin_names
+
+    if text not in builtin_names():
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is no layout shipped in the image (one of {', '.join(builtin_names())}; "
+            f"for your own, mount its TOML into the dispatcher's container and set "
+            f"FLEET_LAYOUT to its path there)")
+    return text
+
+
 def compose_command() -> list[str]:
     """`docker compose` (the plugin) where it exists, else Debian's `docker-compose`."""
     if shutil.which("docker") and subprocess.run(
@@ -93,10 +112,15 @@ def run_up(args: argparse.Namespace) -> int:
         files += ["-f", str(args.file.with_name("compose.secure.yaml"))]
     up = [*compose_command(), "-p", args.project, *files, "up", "--scale",
           f"vehicle={args.vehicles}", *(["--build"] if args.build else [])]
-    print("$ " + " ".join(up), file=sys.stderr)
+    settings = {"FLEET_VEHICLES": str(args.vehicles)}  # start once all of them claimed
+    if args.layout:
+        settings["FLEET_LAYOUT"] = args.layout
+    if args.orders:
+        settings["FLEET_ORDERS"] = str(args.orders)
+    print("$ " + " ".join([*(f"{k}={v}" for k, v in settings.items()), *up]), file=sys.stderr)
     # In the foreground: every container's log shows how far it is; the mission's processes
     # exit when it ends, the router last, and `up` returns then.
-    if subprocess.run(up).returncode not in (0, 130):
+    if subprocess.run(up, env={**os.environ, **settings}).returncode not in (0, 130):
         raise UserError("docker compose up failed (its output is above)")
     return analyze_latest(args.project, Path("runs/compose"))
 

@@ -4,10 +4,17 @@ file's check before a run (docs/faults.md)."""
 from __future__ import annotations
 
 import argparse
-from importlib import resources
 
-from fleet.mission.faults import KINDS, builtin_scenarios, check_against, load_scenario
+from fleet.mission.faults import (
+    KINDS,
+    builtin_scenarios,
+    check_against,
+    load_scenario,
+    shipped_source,
+)
+from fleet.mission.order_work import order_fleet
 from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
+from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.reachability import fleet_size
 
@@ -17,12 +24,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fault scenarios (docs/faults.md): TOML files listing "
                        "faults at simulation times, applied by fleet run --faults.")
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
-    actions.add_parser("list", help="the fault kinds and the shipped scenarios",
-                       description="List the fault kinds with their fields, and the shipped "
-                       "scenarios with what each does.")
+    listing = actions.add_parser("list", help="the fault kinds and the shipped scenarios",
+                                 description="List the fault kinds with their fields, and the "
+                                 "shipped scenarios with what each does.")
     show = actions.add_parser("show", help="print a shipped scenario (a start for your own)",
                               description="Print a shipped scenario's TOML, to copy and edit.")
     show.add_argument("scenario", choices=builtin_scenarios(), help="the scenario's name")
+    for action in (listing, show):
+        action.add_argument("--layout", default="paper", type=layout_arg,
+                            help="the layout's own versions where it ships them (paper002 "
+                            "does: its AGVs and lane cells; default paper)")
     check = actions.add_parser("check", help="check a scenario against a layout and fleet",
                                description="Check a scenario the way fleet run --faults "
                                "does before it starts anything: every field, and every "
@@ -32,31 +43,37 @@ def register(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--layout", default="paper", type=layout_arg,
                        help="layout name or TOML file (default paper)")
     check.add_argument("--vehicles", type=positive_int,
-                       help="fleet size (default: every start pose of the layout)")
+                       help="fleet size (default: every start pose of the layout; on a lane "
+                       "layout, the order mission's ten AGVs)")
     p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    layout = load_layout(args.layout)
     if args.action == "list":
         print("fault kinds (fields besides `kind` and `at`, sim seconds unless said):")
         for kind, spec in KINDS.items():
             fields = ", ".join([*spec.required, *(f"[{o}]" for o in spec.optional)])
             print(f"  {kind.value:<18} {fields}")
             print(f"  {'':<18} {spec.summary}")
-        print("shipped scenarios (fleet run --faults NAME; fleet faults show NAME):")
+        print(f"shipped scenarios for {layout.name} (fleet run --faults NAME; fleet faults "
+              f"show NAME):")
         for name in builtin_scenarios():
-            print(f"  {name:<18} {load_scenario(name).description}")
+            print(f"  {name:<18} {load_scenario(name, layout.name).description}")
         return 0
     if args.action == "show":
-        print(resources.files("fleet.mission.scenarios").joinpath(f"{args.scenario}.toml")
-              .read_text(), end="")
+        print(shipped_source(args.scenario, layout.name), end="")
         return 0
-    scenario = load_scenario(args.scenario)
-    layout = load_layout(args.layout)
-    vehicles = fleet_size(layout, args.vehicles)
+    scenario = load_scenario(args.scenario, layout.name)
+    vehicles = _fleet(layout, args.vehicles)
     check_against(scenario, layout, vehicles)
     print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
-          f"with {vehicles} forklifts")
+          f"with {vehicles} {'AGVs' if layout.has_lanes else 'forklifts'}")
     for fault in sorted(scenario.faults, key=lambda f: f.at):
         print(f"  {fault.describe()}")
     return 0
+
+
+def _fleet(layout: Layout, vehicles: int | None) -> int:
+    """The fleet a run on the layout has: its order mission's AGVs on a lane layout."""
+    return order_fleet(layout, vehicles) if layout.has_lanes else fleet_size(layout, vehicles)

@@ -196,8 +196,6 @@ def run(args: argparse.Namespace) -> int:
     if mission.kind is MissionKind.ORDERS:
         n = order_fleet(layout, mission.vehicles)
         OrderWork(layout, mission, n)  # its orders and batteries, checked before any start
-        if args.faults:
-            raise UserError("order missions take no faults yet (--faults)")
     else:
         n = fleet_size(layout, mission.vehicles)
     if args.force and args.out is None:
@@ -304,8 +302,9 @@ def _report(out: Path, recording: Recording | None = None) -> Report:
 
 
 def fault_scenario(source: str, layout: Layout, vehicles: int) -> Scenario:
-    """The scenario of --faults, checked against the run before anything starts."""
-    scenario = load_scenario(source)
+    """The scenario of --faults (a shipped one in the layout's own version, where it ships
+    one), checked against the run before anything starts."""
+    scenario = load_scenario(source, layout.name)
     check_against(scenario, layout, vehicles)
     return scenario
 

@@ -31,6 +31,7 @@ from fleet.mission.driving import states_until
 from fleet.mission.fault_response import FaultResponse
 from fleet.mission.freeze import Disruption, VehicleDown
 from fleet.mission.mission_work import mission_work
+from fleet.mission.order_log import WorkLog
 from fleet.mission.order_work import order_fleet
 from fleet.mission.pickup import Recovered
 from fleet.mission.record import (
@@ -103,6 +104,9 @@ class EngineOptions:
     events: Callable[[Message, float], None] | None = None
     # Each decision once planned (training collects its samples from these).
     planned: Callable[[Planned], None] | None = None
+    # Where an order mission's work journals what it is fed (a dispatcher's file, which a
+    # restarted dispatcher replays).
+    work_log: WorkLog | None = None
 
 
 @dataclass
@@ -149,8 +153,9 @@ class Engine:
         n = mission.vehicles if mission.vehicles is not None else len(starts)
         if mission.kind is MissionKind.ORDERS and not mission.starts:
             n = order_fleet(self.layout, mission.vehicles)
-        self.work = mission_work(mission, self.layout, self.options.params,
-                                 self.executor.store, self.planners, n)
+        self.work = recovered.work if recovered is not None and recovered.work is not None \
+            else mission_work(mission, self.layout, self.options.params, self.executor.store,
+                              self.planners, n, self.options.work_log)
         starts = starts or list(self.work.start_poses())  # order missions: on the piles
         if not 1 <= n <= len(starts):
             raise UserError(f"{n} vehicles requested but layout {self.layout.name} has "
@@ -222,6 +227,12 @@ class Engine:
         self._reserve_undelivered()
         while (active := self._next_active()) is not None:
             self._decide(active)
+        if self.work.work_left():  # only vehicles down for good could still do it
+            left = self.work.total - len(self.record.stacks_done)
+            raise MissionStuck(self.standstill(Cause.STUCK, (
+                f"the mission cannot finish: {left} of {self.work.total} not done by "
+                f"t={self.now:.2f} s, with vehicles "
+                f"{', '.join(map(str, sorted(self.faults.down)))} down for good")))
         rec = self.record
         rec.all_parked_time = max((s.t_end for s in rec.subtasks), default=0.0)
         self.pacer.finish(states_until(max(rec.end_time, rec.all_parked_time)))
@@ -240,24 +251,38 @@ class Engine:
 
     def _next_active(self) -> list[VehicleSlot] | None:
         """The vehicles to decide for next, once every disruption up to their instant is
-        applied; None once the mission is over (or the forklifts left are down for good)."""
+        applied; None once the mission is over (or the forklifts left are down for good).
+        What the work takes as happening by itself (an order mission's arrivals) comes in
+        time order with the disruptions: one at the instant of a fault comes after it (a
+        trip cut short never arrived)."""
         while True:
             active = self.active()
             t_next = min((v.t_free for v in active), default=math.inf)
             t_work = self.work.next_event()
-            if t_work <= t_next and t_work < math.inf:  # the work changes first (orders)
-                for vehicle, t in self.work.advance(t_work).items():
-                    self.fleet[vehicle].wait_until(max(t, self.fleet[vehicle].t_free))
-                continue
-            if not active and not self.faults.down:
+            if not active and not self.faults.down and t_work == math.inf:
                 return None
-            disruptions = self.pacer.disruptions(t_next, frozenset(self.faults.down))
-            if not disruptions:
-                return active or None
-            for disruption in disruptions:
-                self._disrupt(disruption)
+            disruptions = self.pacer.disruptions(min(t_next, t_work),
+                                                 frozenset(self.faults.down))
+            if disruptions:
+                for disruption in disruptions:
+                    self._disrupt(disruption)
+                continue
+            if t_work <= t_next and t_work < math.inf:
+                self._advance_work(t_work)
+                continue
+            return active or None
+
+    def _advance_work(self, t: float) -> None:
+        """The work takes what happens by itself up to t; the vehicles it gives something
+        to do are free for it from then on."""
+        for vehicle, t_given in self.work.advance(t).items():
+            self.fleet[vehicle].wait_until(max(t_given, self.fleet[vehicle].t_free))
 
     def _disrupt(self, disruption: Disruption) -> None:
+        # What the work had still to take before it happened first (a real-time clock
+        # notices a fault a margin ahead of now, and the work may be behind now).
+        while (t_work := self.work.next_event()) < disruption.t:
+            self._advance_work(t_work)
         self.streak.tried = {}  # the table changes: a target that failed may not fail now
         self.waits = {}  # and who can move, whatever the table's revision says
         self.faults.disrupt(disruption)
@@ -526,20 +551,24 @@ class Engine:
         """Another vehicle's committed leg was postponed by this commit (seed 002's collision
         rules): it arrives later, and is free that much later."""
         v = self.fleet[leg.vehicle]
-        k = max(i for i, s in enumerate(self.record.subtasks) if s.vehicle == leg.vehicle)
-        before = self.record.subtasks[k]
-        delay = leg.t_end - before.t_end
-        after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
-                                    t_done=leg.t_end + self.work.handling(before.kind))
-        self.record.subtasks[k] = after
-        if k in self.served_by:  # what it served is done later (its announcement said then)
-            cluster, index, _ = self.record.stacks_done[self.served_by[k]]
-            self.record.stacks_done[self.served_by[k]] = (cluster, index, after.t_done)
-            self.record.end_time = max(self.record.end_time, after.t_done)
-        v.amended(delay, after.t_done)
+        delay = leg.t_end - self.faults.amended(leg).t_end
+        mine = [i for i, s in enumerate(self.record.subtasks) if s.vehicle == leg.vehicle]
+        if mine and self.record.subtasks[mine[-1]].trajectory.t_start == leg.t_start:
+            k = mine[-1]
+            before = self.record.subtasks[k]
+            after = dataclasses.replace(before, t_end=leg.t_end, trajectory=leg,
+                                        t_done=leg.t_end + self.work.handling(before.kind))
+            self.record.subtasks[k] = after
+            if k in self.served_by:  # what it served is done later (its announcement said then)
+                cluster, index, _ = self.record.stacks_done[self.served_by[k]]
+                self.record.stacks_done[self.served_by[k]] = (cluster, index, after.t_done)
+                self.record.end_time = max(self.record.end_time, after.t_done)
+            v.amended(delay, after.t_done)
+            self._emit(amended_event(after), self.now)
+        else:  # committed before this dispatcher picked the mission up: not in its record
+            v.amended(delay, v.t_free + delay)
         self.drive_log[v.vehicle].append(AmendLeg(leg))
         self.work.amended(leg)
-        self._emit(amended_event(after), self.now)
 
 
 def run_mission(mission: Mission, options: EngineOptions | None = None,

@@ -58,6 +58,14 @@ class FaultResponse:
         self.before.append(before)
         self.driven[before.vehicle].append(traj)
 
+    def amended(self, leg: Trajectory) -> Trajectory:
+        """A committed leg was postponed (seed 002's collision rules): it is driven so.
+        Returns it as it was."""
+        legs = self.driven[leg.vehicle]
+        k = max(i for i, traj in enumerate(legs) if traj.t_start == leg.t_start)
+        before, legs[k] = legs[k], leg
+        return before
+
     def picked_up(self, legs: dict[int, Trajectory]) -> None:
         """A restarted dispatcher: each forklift's last committed leg, as its agent holds it."""
         for vehicle, leg in legs.items():
@@ -77,8 +85,13 @@ class FaultResponse:
             first, zone, until = set(), disruption.cells - self.work.goods_off_table, \
                 disruption.until
             cause = "zone closed"
-        t = disruption.t
-        motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]))
+        # Never before what the work has taken as happened (real time takes an order
+        # mission's arrivals a lead ahead): that stays as it was.
+        t = max(disruption.t, self.work.taken_until)
+        if zone and t >= until:
+            return  # over before it could close
+        at_rest = self.layout.vehicle_kind.body_cells_at_rest
+        motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]), at_rest)
                    for v in self.fleet if v not in self.down}
         pending = self._pending_deliveries(t)
         by_cell = {cell: vehicle for vehicle, cells in pending.items() for cell in cells}
@@ -87,8 +100,8 @@ class FaultResponse:
                          lambda vehicle: kept.get(vehicle, ()))
         goods: list[Cell] = []
         for vehicle, freeze in sorted(result.freezes.items()):
-            goods += self._freeze(freeze)
             down = vehicle in first
+            goods += self._freeze(freeze, down)
             if down:
                 self.down[vehicle] = freeze
             why = cause if down or zone else "its plan crossed a stopped forklift's cells"
@@ -101,6 +114,16 @@ class FaultResponse:
         self.executor.freeze(t, list(result.freezes.values()), goods, result.zone, until,
                              moving=[v for v in result.freezes if v not in self.down],
                              standing=sorted(first) if broken else [])
+        for vehicle in sorted(first):
+            self._given(t, self.work.down(vehicle, t, self.down[vehicle].cells))
+        if result.zone:
+            self._given(t, self.work.closed(result.zone, t, until))
+
+    def _given(self, t: float, given: dict[int, float]) -> None:
+        """Vehicles the work gave something to do from an instant: free from then on."""
+        for vehicle, at in given.items():
+            v = self.fleet[vehicle]
+            v.wait_until(max(at, t, v.t_free))
 
     def _pending_deliveries(self, t: float) -> dict[int, list[Cell]]:
         """The stack cells of each forklift's deliveries not yet arrived at t: the goods
@@ -114,11 +137,13 @@ class FaultResponse:
                 pending.setdefault(s.vehicle, []).append(s.stack_cell)
         return pending
 
-    def _freeze(self, freeze: Freeze) -> list[Cell]:
-        """Cut the forklift's plan after the maneuver in progress at freeze.t: its subtasks
-        not yet arrived are cancelled (a delivery's stack goes back to the queue, its goods as
-        before). Returns the stack cells whose goods reservations go with them."""
+    def _freeze(self, freeze: Freeze, down: bool) -> list[Cell]:
+        """Cut the forklift's plan after the maneuver in progress at freeze.t (`down`: it
+        stands where it is at t instead): its subtasks not yet arrived are cancelled (a
+        delivery's stack goes back to the queue, its goods as before). Returns the stack
+        cells whose goods reservations go with them."""
         t, vehicle = freeze.t, freeze.vehicle
+        stands = t if down else freeze.t_stand
         v = self.fleet[vehicle]
         cut = set(self.record.cut_subtasks)
         undone = [i for i, s in enumerate(self.record.subtasks)
@@ -139,25 +164,34 @@ class FaultResponse:
         for i in undone:
             self.record.cut_subtasks.append(i)
             s = self.record.subtasks[i]
-            if s.kind is TaskKind.DELIVER and s.stack_index is not None:
-                goods.append(self._reopen(s.target, s.stack_index, s.t_done, s.vehicle, t))
+            driven = sum(min(step.t1, stands) - step.t0 for step in s.trajectory.steps
+                         if step.t0 < stands and not self.layout.vehicle_kind.is_wait(
+                             step.manner.label))
+            reopened = self.work.cancel(vehicle, s.kind, s.target, s.stack_index, driven)
+            if reopened is not None:
+                self._reopen(reopened.cluster, reopened.index, s.vehicle, t)
+                if reopened.goods is not None:
+                    goods.append(reopened.goods)
         v.pose = freeze.pose
         self.driven[vehicle] = [c for c in (_truncated(traj, freeze)
                                             for traj in self.driven[vehicle]) if c is not None]
         return goods
 
-    def _reopen(self, cluster: str, index: int, t_done: float, vehicle: int, t: float) -> Cell:
-        cell = self.work.reopen(cluster, index)
-        self.record.stacks_done.remove((cluster, index, t_done))
+    def _reopen(self, cluster: str, index: int, vehicle: int, t: float) -> None:
+        """Work counted as done when its subtask was committed is not done after all."""
+        done = next(d for d in self.record.stacks_done if d[:2] == (cluster, index))
+        self.record.stacks_done.remove(done)
         self.record.end_time = max((d[2] for d in self.record.stacks_done), default=0.0)
         self.emit(StackReopened(cluster, index, vehicle, t), t)
-        return cell
 
     def _resume(self, up: VehicleUp) -> None:
         freeze = self.down.pop(up.vehicle, None)
         if freeze is None:
             return
         v = self.fleet[up.vehicle]
+        # Not before the freeze nor what the work has taken (in real time both may be later
+        # than the instant it was noticed at).
+        up = dataclasses.replace(up, t=max(up.t, freeze.t, self.work.taken_until))
         shift = up.t - freeze.t
         t_stand = up.t
         if freeze.step is not None:  # the rest of the maneuver, from where it stood
@@ -172,6 +206,8 @@ class FaultResponse:
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))
         self.emit(Resume(up.vehicle, up.t, t_stand), up.t)
+        pose = freeze.step.end if freeze.step is not None else freeze.pose
+        self._given(t_stand, self.work.up(up.vehicle, up.t, pose))
 
 
 def halt_message(freeze: Freeze, cause: str, moving: bool, layout: Layout) -> Halt:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from fleet.errors import UserError
 from fleet.planning.geometry import Cell
+from fleet.world.lanes import floor_cells
 from fleet.world.layout import Layout
 from fleet.world.layout_file import parse_cells
 
@@ -117,16 +118,27 @@ class Scenario:
 
 
 def builtin_scenarios() -> list[str]:
+    """The shipped scenarios' names (a layout may ship its own version of each)."""
     files = resources.files("fleet.mission.scenarios")
     return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """A shipped scenario by name (`kill_vehicle`, `mixed`, ...) or a TOML file by path."""
+def shipped_source(name: str, layout: str | None = None) -> str:
+    """A shipped scenario's TOML: the layout's own version where it ships one (its faults
+    name its vehicles and cells: `scenarios/<layout>/<name>.toml`), else the one written for
+    seed 000's paper warehouse."""
+    files = resources.files("fleet.mission.scenarios")
+    own = files.joinpath(layout, f"{name}.toml") if layout else None
+    return (own if own is not None and own.is_file() else
+            files.joinpath(f"{name}.toml")).read_text()
+
+
+def load_scenario(name_or_path: str | Path, layout: str | None = None) -> Scenario:
+    """A shipped scenario by name (`kill_vehicle`, `mixed`, ...; for `layout`, its own
+    version where it has one) or a TOML file by path."""
     text = str(name_or_path)
     if text in builtin_scenarios():
-        source = resources.files("fleet.mission.scenarios").joinpath(f"{text}.toml").read_text()
-        return parse_scenario(source, f"scenario {text}")
+        return parse_scenario(shipped_source(text, layout), f"scenario {text}")
     path = Path(text)
     if not path.is_file():
         raise ScenarioError(f"scenario {text!r} is neither a shipped scenario "
@@ -282,7 +294,10 @@ def _quoted(text: str) -> str:
 
 
 def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:
-    """Refuse faults that name a forklift the run does not have or cells off the map."""
+    """Refuse faults that name a forklift the run does not have, or cells off the map (on a
+    lane layout, off the floor its AGVs drive on: lanes, access cells, slots, stations and
+    piles)."""
+    floor = floor_cells(layout) if layout.has_lanes else None
     for i, fault in enumerate(scenario.faults):
         where = f"scenario {scenario.name}: fault {i + 1} ({fault.describe()})"
         if fault.vehicle is not None and fault.vehicle > vehicles:
@@ -292,3 +307,9 @@ def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:
         if off:
             raise ScenarioError(f"{where}: cell {off[0]} is off the {layout.cols}x"
                                 f"{layout.rows} map")
+        off = [c for c in fault.cells if floor is not None and c not in floor]
+        if off:
+            raise ScenarioError(f"{where}: cell {off[0]} is off the floor of layout "
+                                f"{layout.name} (no lane, access cell, slot, station or "
+                                f"pile: a zone closes floor its AGVs drive on)")
+

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from fleet.mission.faults import FaultKind, Scenario
 from fleet.planning.geometry import Cell
@@ -26,14 +26,21 @@ from fleet.planning.trajectory import Pose, Step, Trajectory
 from fleet.wire.protocol import GOODS
 
 
+def _forklift_at_rest(pose: Pose) -> Iterable[Cell]:
+    return body_cells_at_rest(pose.cell, pose.heading)
+
+
 @dataclass(frozen=True)
 class Motion:
     """What one forklift has committed: it stands at `rest` until its first trajectory, then
-    drives them in order (each starts where the previous one ended)."""
+    drives them in order (each starts where the previous one ended). `at_rest`: the cells
+    its kind's body covers standing at a pose (seed 000's forklift unless said)."""
 
     vehicle: int
     rest: Pose
     trajectories: tuple[Trajectory, ...] = ()
+    at_rest: Callable[[Pose], Iterable[Cell]] = field(default=_forklift_at_rest,
+                                                      compare=False)
 
 
 @dataclass(frozen=True)
@@ -62,8 +69,7 @@ def freeze_of(motion: Motion, t: float) -> Freeze:
                 break
             pose = step.end
         break
-    return Freeze(motion.vehicle, t, frozenset(body_cells_at_rest(pose.cell, pose.heading)),
-                  None, pose, t)
+    return Freeze(motion.vehicle, t, frozenset(motion.at_rest(pose)), None, pose, t)
 
 
 @dataclass(frozen=True)

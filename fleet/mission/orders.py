@@ -238,6 +238,7 @@ class Agv:
     leg_start: float = 0.0  # when its current trip was decided
     since: float = 0.0  # when it began waiting, arrived at a station or began charging
     charge_reason: str | None = None
+    down: bool = False  # cannot move (a fault): given no order until it is up again
 
     @property
     def status(self) -> str:
@@ -322,6 +323,9 @@ class OrderBook:
         self.station_queue: deque[int] = deque()  # AGVs waiting loaded for a station
         self.pile_queue: deque[int] = deque()  # AGVs waiting for a pile
         self.ran_flat: list[tuple[int, float]] = []  # (AGV, time) where a battery hit 0 %
+        # Cells no AGV can use now (a stopped AGV stands there, a zone is closed): no slot,
+        # station or pile there is chosen, no shelf there is fetched.
+        self.blocked: frozenset[Cell] = frozenset()
         self.clock = 0.0
         self.release(orders)
 
@@ -352,11 +356,14 @@ class OrderBook:
     def station_available(self, name: str) -> bool:
         return self.station_agv[name] is None
 
-    def vacant_slots(self) -> list[Slot]:
-        return [self.slots[n] for n, st in self.slot_state.items() if st is SlotState.VACANT]
+    def vacant_slots(self, blocked: bool = False) -> list[Slot]:
+        """Vacant slots an AGV can use now (`blocked`: those it cannot, too)."""
+        return [self.slots[n] for n, st in self.slot_state.items()
+                if st is SlotState.VACANT and (blocked or self.slots[n].cell not in self.blocked)]
 
     def free_piles(self) -> list[Pile]:
-        return [self.piles[n] for n, a in self.pile_agv.items() if a is None]
+        return [self.piles[n] for n, a in self.pile_agv.items()
+                if a is None and self.piles[n].cell not in self.blocked]
 
     # -- events ----------------------------------------------------------------------
 
@@ -379,8 +386,9 @@ class OrderBook:
         out."""
         self._tick(now)
         orders = [q[0] for shelf, q in self.queues.items()
-                  if q and shelf not in self.active and self.where[shelf].kind == "slot"]
-        agvs = [a for a in self.agvs.values() if a.phase is Phase.IDLE]
+                  if q and shelf not in self.active and self.where[shelf].kind == "slot"
+                  and self._slot_of(shelf).cell not in self.blocked]
+        agvs = [a for a in self.agvs.values() if a.phase is Phase.IDLE and not a.down]
         made = []
         while orders and agvs:
             best = min(((manhattan(a.cell, self._slot_of(o.shelf).cell), o.id, a.id, o, a)
@@ -440,19 +448,17 @@ class OrderBook:
         self.station_agv[station.name] = None
         self.station_shelf[station.name] = None
         self.where[a.order.shelf] = Place("agv", a.id)
-        slot = self._nearest(self.vacant_slots(), station.cell)
+        # A vacant slot blocked now (in a closed zone) only if no other is vacant: the AGV
+        # then waits for it to open.
+        slot = self._nearest(self.vacant_slots(), station.cell) or \
+            self._nearest(self.vacant_slots(blocked=True), station.cell)
         if slot is None:
             raise InvariantError(f"no vacant slot for shelf {a.order.shelf} leaving station "
                                  f"{station.name}")
         self.slot_state[slot.name] = SlotState.RESERVED
         self.reserved_by[slot.name] = a.id
         a.phase, a.slot, a.station, a.leg_start = Phase.TO_SLOT, slot, None, now
-        served = None
-        if self.station_queue:
-            waiting = self.agvs[self.station_queue.popleft()]
-            nearest = self._nearest(self._free_stations(), waiting.cell)
-            assert nearest is not None
-            served = self._to_station(waiting, nearest, now)
+        served = self._serve_station_queue(now)
         return ReturnTrip(a.id, a.order, slot, manhattan(station.cell, slot.cell), served)
 
     def returned(self, agv: int, now: float, driven: float | None = None) -> Completion:
@@ -499,6 +505,87 @@ class OrderBook:
         if now < full_at - EPS:
             raise EventError(f"AGV {agv} is not full at {now}: it charges until {full_at}")
         a.soc, a.phase, a.charge_reason = FULL, Phase.IDLE, None
+
+    # -- faults: an AGV that cannot move, places that cannot be used --------------------
+
+    def down(self, agv: int, now: float) -> None:
+        """The AGV cannot move from now on: it is given no order until it is `up`. A shelf
+        it carries stays on it, and its station, slot or pile stay its own."""
+        self._tick(now)
+        self._agv(agv).down = True
+
+    def give_back(self, agv: int, now: float, driven: float = 0.0) -> Order:
+        """The AGV will not fetch its order's shelf (it is down on the way, having driven
+        `driven` seconds of it): the order goes back to the front of its shelf's queue, for
+        whichever AGV is nearest; the shelf never left its slot."""
+        a = self._event(agv, now, Phase.TO_SHELF, "give its order back")
+        self._drive(a, now, driven)
+        assert a.order is not None
+        order = a.order
+        self.queues[order.shelf].appendleft(order)
+        del self.active[order.shelf]
+        a.phase, a.order, a.slot = Phase.IDLE, None, None
+        return order
+
+    def up(self, agv: int, now: float, cell: Cell) -> None:
+        """The AGV moves again from `cell` (where its trip was cut, if it was on one)."""
+        a = self._agv(agv)
+        self._tick(now)
+        a.down, a.cell = False, cell
+
+    def park(self, agv: int, now: float) -> ChargeTrip | None:
+        """An AGV available where it cannot stay (on a lane, its order given to another
+        while it was down) goes to the nearest free pile, as if to charge (None: it
+        already stands in a slot or on its pile, or no pile is free)."""
+        a = self._agv(agv)
+        self._tick(now)
+        if a.phase is not Phase.IDLE or a.down or a.pile is not None or a.cell in self.slot_at:
+            return None
+        pile = self._nearest(self.free_piles(), a.cell)
+        if pile is None:
+            return None
+        a.charge_reason = "park"
+        return self._to_pile(a, pile, now)
+
+    def retarget(self, agv: int, now: float) -> PackingStation | Slot | Pile | None:
+        """The station, slot or pile the AGV heads for is blocked: it heads for the nearest
+        free one from where it stands instead, which it now holds (None: none is free, it
+        keeps its own and waits for it)."""
+        a = self._agv(agv)
+        self._tick(now)
+        if a.phase is Phase.TO_STATION and a.station is not None:
+            station = self._nearest(self._free_stations(), a.cell)
+            if station is not None:
+                self.station_agv[a.station.name] = None
+                self.station_agv[station.name], a.station = a.id, station
+            return station
+        if a.phase is Phase.TO_SLOT and a.slot is not None:
+            slot = self._nearest(self.vacant_slots(), a.cell)
+            if slot is not None:
+                self.slot_state[a.slot.name] = SlotState.VACANT
+                del self.reserved_by[a.slot.name]
+                self.slot_state[slot.name], self.reserved_by[slot.name] = SlotState.RESERVED, a.id
+                a.slot = slot
+            return slot
+        if a.phase is Phase.TO_PILE and a.pile is not None:
+            pile = self._nearest(self.free_piles(), a.cell)
+            if pile is not None:
+                self.pile_agv[a.pile.name] = None
+                self.pile_agv[pile.name], a.pile = a.id, pile
+            return pile
+        return None
+
+    def block(self, cells: frozenset[Cell], now: float) -> list[StationTrip | ChargeTrip]:
+        """The cells no AGV can use from now on; an AGV waiting for a station or a pile
+        that one freed from the block now serves goes there."""
+        self._tick(now)
+        self.blocked = frozenset(cells)
+        served: list[StationTrip | ChargeTrip] = []
+        while (trip := self._serve_station_queue(now)) is not None:
+            served.append(trip)
+        while (pile := self._serve_pile_queue(now)) is not None:
+            served.append(pile)
+        return served
 
     # -- the invariant ---------------------------------------------------------------
 
@@ -602,7 +689,8 @@ class OrderBook:
         return self.slots[str(place.at)]
 
     def _free_stations(self) -> list[PackingStation]:
-        return [self.stations[n] for n, a in self.station_agv.items() if a is None]
+        return [self.stations[n] for n, a in self.station_agv.items()
+                if a is None and self.stations[n].cell not in self.blocked]
 
     @staticmethod
     def _nearest(places: Iterable[P], cell: Cell) -> P | None:
@@ -629,9 +717,24 @@ class OrderBook:
         return ChargeTrip(a.id, pile, manhattan(a.cell, pile.cell), a.charge_reason)
 
     def _serve_pile_queue(self, now: float) -> ChargeTrip | None:
+        """The first AGV waiting for a pile goes to the nearest free one, if any is."""
         if not self.pile_queue:
             return None
-        waiting = self.agvs[self.pile_queue.popleft()]
+        waiting = self.agvs[self.pile_queue[0]]
         pile = self._nearest(self.free_piles(), waiting.cell)
-        assert pile is not None
+        if pile is None:  # the one freed is blocked
+            return None
+        self.pile_queue.popleft()
         return self._to_pile(waiting, pile, now)
+
+    def _serve_station_queue(self, now: float) -> StationTrip | None:
+        """The first AGV waiting loaded for a station goes to the nearest free one, if any
+        is."""
+        if not self.station_queue:
+            return None
+        waiting = self.agvs[self.station_queue[0]]
+        nearest = self._nearest(self._free_stations(), waiting.cell)
+        if nearest is None:  # the one freed is blocked
+            return None
+        self.station_queue.popleft()
+        return self._to_station(waiting, nearest, now)

@@ -1,12 +1,15 @@
 """A restarted dispatcher picks a mission up: the state the engine starts from, from the
-goods the reservation service holds and what each forklift's agent says it committed
-(dispatcher/pickup.py asks them; docs/faults.md)."""
+goods the reservation service holds (an order mission: from the book its journal replays)
+and what each vehicle's agent says it committed (dispatcher/pickup.py asks them;
+docs/faults.md)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fleet.dispatching.decision import TaskKind
+from fleet.dispatching.decision import Decision, TaskKind
+from fleet.errors import UserError
+from fleet.mission.order_work import OrderWork
 from fleet.mission.work import MissionWork
 from fleet.planning.maneuvers import fork_target
 from fleet.planning.reservations import Interval
@@ -36,6 +39,7 @@ class Recovered:
     delivers_next: dict[int, bool]
     legs: dict[int, Trajectory]
     t: float  # the clock's last instant: nothing is decided before it
+    work: MissionWork | None = None  # the work as picked up, where it is not read as above
 
 
 def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float,
@@ -69,3 +73,31 @@ def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float
             legs[h.vehicle] = h.leg
     return Recovered(tuple(sorted(done, key=lambda d: d[2])), tuple(undelivered), poses,
                      t_free, delivers_next, legs, t)
+
+
+def recovered_orders(work: OrderWork, held: list[HeldLeg], t: float) -> Recovered:
+    """An order mission as the book its dead dispatcher journaled has it (`work`, replayed),
+    and the AGVs as their agents hold them. A leg an agent committed that the journal has not
+    heard of (the dead dispatcher never had the answer) is the trip the book had decided for
+    it, committed; a leg postponed that it has heard of only as it was, postponed. Both are
+    fed to the work (and journaled) before the engine starts from it."""
+    poses, t_free, legs = {}, {}, {}
+    for h in held:
+        poses[h.vehicle] = h.pose
+        end = 0.0
+        if h.leg is not None:
+            legs[h.vehicle], end = h.leg, h.leg.t_end
+            last = work.last_leg(h.vehicle)
+            if last is None or h.leg.t_start > last[0]:  # committed, answer never heard
+                trip = work.trips.get(h.vehicle)
+                if trip is None or trip.kind is None:
+                    raise UserError(f"AGV {h.vehicle} drives a leg from t={h.leg.t_start:.2f} "
+                                    f"that its order book never decided")
+                work.serve(Decision(h.vehicle, h.leg.t_start, trip.kind, trip, False), h.leg,
+                           h.leg.t_end + work.handling(trip.kind))
+            elif h.leg.t_start == last[0] and h.leg.t_end != last[1] and \
+                    h.vehicle in work.pending:
+                work.amended(h.leg)
+        t_free[h.vehicle] = max(t, end, work.trip_since(h.vehicle) or 0.0)
+    return Recovered(tuple(work.done()), (), poses, t_free, {v: True for v in poses}, legs, t,
+                     work)

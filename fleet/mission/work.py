@@ -38,6 +38,17 @@ class StackServed:
     goods: Interval | None  # None: nothing for the table (a shelf travels with its AGV)
 
 
+@dataclass(frozen=True)
+class Reopened:
+    """Work a subtask cut short had counted as done, to do again: its unit (a stack, or an
+    order: cluster and index as `StackServed` names them) and the cell whose goods
+    reservation goes with it (None: nothing in the table)."""
+
+    cluster: str
+    index: int
+    goods: Cell | None
+
+
 class MissionWork(Protocol):
     @property
     def ready_at(self) -> float:
@@ -113,9 +124,25 @@ class MissionWork(Protocol):
     def keep_clear(self) -> frozenset[Cell]:
         """Cells a vehicle sent aside should not stop on (where the work still goes)."""
 
-    def reopen(self, cluster: str, index: int) -> Cell:
-        """A delivery was cut short before it arrived: its stack is to do again, its goods as
-        they were before the delivery was decided. Returns the stack's cell."""
+    @property
+    def taken_until(self) -> float:
+        """The latest instant the work has taken what happened up to (`advance`): a freeze
+        never comes before it, for what the work took as done stays done."""
+
+    def cancel(self, vehicle: int, kind: TaskKind, target: str, index: int | None,
+               driven: float) -> Reopened | None:
+        """A committed subtask was cut short before it arrived (`driven`: the seconds of it
+        driven): what it would have done is to do again (None: nothing counted as done)."""
+
+    def down(self, vehicle: int, t: float, cells: frozenset[Cell]) -> dict[int, float]:
+        """The vehicle stands for good on `cells` from t until it is `up`; returns the
+        vehicles given something to do, and from when, as `advance` does."""
+
+    def up(self, vehicle: int, t: float, pose: Pose) -> dict[int, float]:
+        """The vehicle that was down moves again from t, from `pose` (as `advance`)."""
+
+    def closed(self, cells: frozenset[Cell], t: float, until: float) -> dict[int, float]:
+        """A zone closes `cells` over [t, until) (as `advance`)."""
 
     def done_at(self, goods: Interval) -> float | None:
         """When the stack under a goods reservation of the table was done, as a restarted
@@ -268,7 +295,28 @@ class StackWork(ABC):
         return StackServed(decision.target.name, stack.index, t_done,
                            self.goods_after(stack.cell, trajectory.t_end, t_done))
 
+    @property
+    def taken_until(self) -> float:
+        return -math.inf  # the stacks change only when subtasks are committed
+
+    def cancel(self, vehicle: int, kind: TaskKind, target: str, index: int | None,
+               driven: float) -> Reopened | None:
+        if kind is not TaskKind.DELIVER or index is None:
+            return None  # a return only takes the forklift back
+        return Reopened(target, index, self.reopen(target, index))
+
+    def down(self, vehicle: int, t: float, cells: frozenset[Cell]) -> dict[int, float]:
+        return {}  # a frozen forklift is a wall the planners see in the table
+
+    def up(self, vehicle: int, t: float, pose: Pose) -> dict[int, float]:
+        return {}
+
+    def closed(self, cells: frozenset[Cell], t: float, until: float) -> dict[int, float]:
+        return {}
+
     def reopen(self, cluster: str, index: int) -> Cell:
+        """A delivery was cut short before it arrived: its stack is to do again, its goods as
+        they were before the delivery was decided. Returns the stack's cell."""
         stack = next(st for st in self.layout.stacks
                      if st.cluster == cluster and st.index == index)
         queue = self.queue[cluster]

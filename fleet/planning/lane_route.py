@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from enum import Enum
 
@@ -40,6 +40,15 @@ STRAIGHT, DIAGONAL = 1.0, 1.4  # the paper's d, in cells
 def move_length(a: Cell, b: Cell) -> float:
     """The paper's d of a move to one of the eight neighbours, in cells."""
     return DIAGONAL if a[0] != b[0] and a[1] != b[1] else STRAIGHT
+
+
+def touched(cell: Cell, move: Move) -> set[Cell]:
+    """The cells a move from `cell` touches: where it goes, what it crosses, and a
+    diagonal's two corners (its body sweeps them)."""
+    cells = {move.to, *move.via}
+    if move.to[0] != cell[0] and move.to[1] != cell[1]:
+        cells |= {(cell[0], move.to[1]), (move.to[0], cell[1])}
+    return cells
 
 
 class Heuristic(Enum):
@@ -100,9 +109,12 @@ class LaneRoutes:
             return (DIAGONAL * min(dx, dy) + STRAIGHT * abs(dx - dy)) * self.seconds_per_cell
         return (dx + dy) * self.seconds_per_cell
 
-    def route(self, start: Cell, goal: Cell) -> Route | None:
+    def route(self, start: Cell, goal: Cell,
+              blocked: Callable[[Cell], bool] | None = None) -> Route | None:
         """The route from `start` to `goal` (a lane cell, slot, packing station or pile
-        each); None when the lanes lead from one to the other by no way."""
+        each); None when the lanes lead from one to the other by no way. With `blocked`, no
+        move touches a cell it says is blocked (something stands there for good), a
+        diagonal's corners included; the start and the goal are the caller's to judge."""
         graph = self.graph
         for name, cell in (("start", start), ("goal", goal)):
             if cell not in graph.ways_out and cell not in graph.moves:
@@ -127,7 +139,8 @@ class LaneRoutes:
             if cell == goal:
                 return Route(self._cells(parent, goal), g[goal], expansions)
             for move in self.moves_from(cell, start, ways_in):
-                if move.to in closed:
+                if move.to in closed or (blocked is not None and any(
+                        blocked(c) for c in touched(cell, move) - {goal})):
                     continue
                 cost = g[cell] + move.d * self.seconds_per_cell
                 if cost < g.get(move.to, float("inf")):

@@ -1,7 +1,8 @@
 """The compose deployment's configuration (docs/deployment.md): every setting comes from a
 FLEET_* environment variable, with its default here and nowhere else, and `service_config`
 turns it into the config of each service's process (its command line: `argv()`). Pure: the
-environment is passed in, nothing is read or started here."""
+environment is passed in, nothing is started here; only the dispatcher's mission, left to
+its layout, reads the layout (a lane layout's runs order missions)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path, PurePosixPath
 
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.order_work import DEFAULT_ORDERS
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
 from fleet.runtime.args import BusFlags
@@ -25,6 +27,7 @@ from fleet.runtime.process_configs import (
     RouterConfig,
 )
 from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
+from fleet.world.layout_file import load_layout
 
 SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
 SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
@@ -36,8 +39,10 @@ FOXGLOVE_PORT = 8765
 class DeployConfig:
     run: str = "default"  # keys live under fleet/RUN/
     layout: str = "paper"
-    mission: str = "fill"
-    strategy: str = "ann"
+    mission: str = ""  # "": orders on a layout with shelf slots (paper002), else fill
+    strategy: str = ""  # "": nearest for orders, else ann
+    orders: int = 0  # an order mission's orders (0: 100)
+    order_area: str = ""  # draw them on this shelf area's shelves only
     vehicles: str = "auto"  # "auto": as many as claim an id (docker compose --scale vehicle=N)
     seed: int = 0
     clock: str = "fast"  # a ClockMode's value
@@ -60,6 +65,7 @@ MAX_VEHICLES = 16  # logins are made for this many forklifts
 JOURNAL = "/data/journal/reservation-{host}.journal"  # a recreated container starts afresh
 RECORDINGS = "/data/recordings"
 RESTART_MARKER = "/tmp/fleet/dispatcher.started"  # survives a restart, not a re-creation
+WORK_JOURNAL = "/tmp/fleet/dispatcher.journal"  # an order mission's book, beside it
 VEHICLE_ID_FILE = "/tmp/fleet/vehicle.id"  # what the vehicle's health check looks for
 
 
@@ -103,12 +109,16 @@ def _check(config: DeployConfig) -> None:
     choices = {"mission": [k.value for k in MissionKind],
                "strategy": [s.value for s in Strategy], "clock": [m.value for m in ClockMode]}
     for name, allowed in choices.items():
+        if name in ("mission", "strategy") and getattr(config, name) == "":
+            continue  # left to the layout, and to the mission
         if getattr(config, name) not in allowed:
             raise UserError(f"{ENV[name]}={getattr(config, name)!r}: one of "
                             f"{', '.join(allowed)}")
     if config.vehicles != "auto" and not (config.vehicles.isdigit() and
                                           int(config.vehicles) >= 1):
         raise UserError(f"FLEET_VEHICLES={config.vehicles!r}: 'auto' or a fleet size")
+    if config.orders < 0:
+        raise UserError(f"FLEET_ORDERS={config.orders}: a number of orders, 1 or more")
 
 
 def service_config(service: str, config: DeployConfig) -> ProcessConfig:
@@ -129,15 +139,39 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
         return RecorderConfig(_bus(config, service), out_dir=Path(RECORDINGS),
                               exit_when_done=True, foxglove=FOXGLOVE_PORT,
                               foxglove_host="0.0.0.0")
-    fleet = None if config.vehicles == "auto" else int(config.vehicles)
-    mission = Mission(config.layout, MissionKind(config.mission), Strategy(config.strategy),
-                      fleet, config.seed)
+    mission = dispatcher_mission(config)
     return DispatcherConfig(
         _bus(config, service), mission, clock=ClockMode(config.clock), speed=config.speed,
         command=f"docker compose (FLEET_LAYOUT={config.layout} "
-        f"FLEET_STRATEGY={config.strategy} FLEET_SEED={config.seed})", recorded=True,
-        exit_when_done=True, claims=True, gather_s=config.gather_s,
-        restart_marker=Path(RESTART_MARKER))
+        f"FLEET_STRATEGY={mission.strategy.value} FLEET_SEED={config.seed}"
+        + (f" FLEET_ORDERS={mission.orders}" if mission.orders else "") + ")",
+        recorded=True, exit_when_done=True, claims=True, gather_s=config.gather_s,
+        restart_marker=Path(RESTART_MARKER),
+        journal=Path(WORK_JOURNAL) if mission.kind is MissionKind.ORDERS else None)
+
+
+def dispatcher_mission(config: DeployConfig) -> Mission:
+    """The mission the settings give, as `fleet run` has it: what they leave open follows
+    the layout (one with shelf slots runs order missions); a mismatch names the variables."""
+    if config.mission:
+        kind = MissionKind(config.mission)
+    elif config.orders or config.order_area:
+        kind = MissionKind.ORDERS
+    else:
+        kind = MissionKind.ORDERS if load_layout(config.layout).slots else MissionKind.FILL
+    orders = kind is MissionKind.ORDERS
+    if (config.orders or config.order_area) and not orders:
+        raise UserError(f"FLEET_ORDERS and FLEET_ORDER_AREA are for order missions, not "
+                        f"FLEET_MISSION={kind.value}")
+    strategy = Strategy(config.strategy) if config.strategy else \
+        Strategy.NEAREST if orders else Strategy.ANN
+    if (strategy is Strategy.NEAREST) != orders:
+        raise UserError(f"FLEET_STRATEGY={strategy.value} does not dispatch {kind.value} "
+                        f"missions: order missions take nearest, fill and empty the others")
+    fleet = None if config.vehicles == "auto" else int(config.vehicles)
+    return Mission(config.layout, kind, strategy, fleet, config.seed,
+                   orders=(config.orders or DEFAULT_ORDERS) if orders else 0,
+                   order_area=config.order_area)
 
 
 def _bus(config: DeployConfig, principal: str) -> BusFlags:

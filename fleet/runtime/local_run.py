@@ -20,7 +20,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.mission.faults import FaultKind, Scenario
-from fleet.mission.spec import ClockMode, Mission
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.rundir import fresh
 from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
@@ -61,6 +61,7 @@ from fleet.wire.topics import (
     vehicle_sender,
 )
 
+DISPATCHER_JOURNAL = "dispatcher.journal"  # an order mission's book, for a restarted one
 ROUTER_TIMEOUT_MS = 30_000
 ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
 RECORDED_TIMEOUT_S = 10.0
@@ -109,7 +110,9 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
     return DispatcherConfig(bus, dataclasses.replace(spec.mission, vehicles=spec.vehicles),
                             spec.weights, spec.clock, spec.speed, command=spec.command,
                             faults=spec.faults_source if spec.faults is not None else None,
-                            recorded=spec.record, recover=recover)
+                            recorded=spec.record, recover=recover,
+                            journal=spec.run_dir / DISPATCHER_JOURNAL
+                            if spec.mission.kind is MissionKind.ORDERS else None)
 
 
 class Secrets:

@@ -249,6 +249,7 @@ class DispatcherConfig(ProcessConfig):
     claims: bool = False  # hand out forklift ids to agents started with --id auto
     gather_s: float = 5.0  # claims without a fleet size: start once no claim came this long
     restart_marker: Path | None = None
+    journal: Path | None = None  # an order mission's book's inputs, for a restarted one
 
     @classmethod
     def add_arguments(cls, p: argparse.ArgumentParser) -> None:
@@ -292,13 +293,17 @@ class DispatcherConfig(ProcessConfig):
                        "there, this is a restart: pick the mission up as --recover does (a "
                        "container keeps its files across restarts, not across re-creation; "
                        "default: none)")
+        p.add_argument("--journal", type=Path, metavar="FILE",
+                       help="an order mission: journal what the order book is fed to this "
+                       "file, from which a restarted dispatcher (--recover, the same FILE) "
+                       "picks the mission up (default: none, and no pick-up)")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> DispatcherConfig:
         return cls(BusFlags.from_args(args), mission_from_args(args), args.weights,
                    ClockMode(args.clock), args.speed, args.startup_timeout, args.command,
                    args.faults, args.recorded, args.recover, args.exit_when_done, args.claims,
-                   args.gather, args.restart_marker)
+                   args.gather, args.restart_marker, args.journal)
 
     def argv(self) -> list[str]:
         d = DispatcherConfig
@@ -311,6 +316,7 @@ class DispatcherConfig(ProcessConfig):
                 *_flag("--claims", self.claims, False),
                 *_flag("--gather", self.gather_s, d.gather_s),
                 *_flag("--restart-marker", self.restart_marker),
+                *_flag("--journal", self.journal),
                 *_flag("--exit-when-done", self.exit_when_done, False),
                 *_flag("--command", self.command, "")]
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from fleet.params import VehicleDims
-from fleet.planning.blockage import Blockage
+from fleet.planning.blockage import Blockage, held_for_good
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.lane_conflicts import Area, settle
@@ -87,9 +87,32 @@ def schedule_of(leg: Trajectory, seconds_per_cell: float) -> Schedule:
                     seconds_per_cell)
 
 
+def closed(store: ReservationView, vehicle: int, cell: Cell, t_start: float) -> bool:
+    """Whether a zone (no vehicle) holds the cell at some time from t_start on."""
+    owner = store.conflict(vehicle, cell, t_start, INF)
+    return owner is not None and owner < 1
+
+
+def standing(store: ReservationView, vehicle: int, t_start: float) -> Callable[[Cell], bool]:
+    """Which cells a route from t_start must keep off: those something holds for good
+    (another vehicle standing there: no rule settles with one that never leaves) or a
+    closed zone holds from then on. In a run without faults no lane cell is either."""
+    memo: dict[Cell, bool] = {}
+
+    def blocked(cell: Cell) -> bool:
+        if cell not in memo:
+            memo[cell] = held_for_good(store, vehicle, cell) is not None or \
+                closed(store, vehicle, cell, t_start)
+        return memo[cell]
+
+    return blocked
+
+
 class LanePlanner:
     """The paper's A* on the lanes, on space only: the route is timed from the start and
-    left for the conflict policy to settle."""
+    left for the conflict policy to settle. Other AGVs are no obstacles, save one that
+    stands for good (down, or halted and not moving yet): the route goes round it, as round
+    a closed zone (`standing`)."""
 
     def __init__(self, routes: LaneRoutes) -> None:
         self.routes = routes
@@ -97,8 +120,11 @@ class LanePlanner:
     def plan(self, vehicle: int, start: Pose, t_start: float, goals: Sequence[Pose],
              store: ReservationView) -> Trajectory | PlanFailure:
         best, expansions = None, 0
+        blocked = standing(store, vehicle, t_start)
         for cell in dict.fromkeys(g.cell for g in goals):  # each goal cell once, in order
-            route = self.routes.route(start.cell, cell)
+            if closed(store, vehicle, cell, t_start):
+                continue
+            route = self.routes.route(start.cell, cell, blocked)
             if route is None:
                 continue
             expansions += route.expansions
@@ -106,19 +132,43 @@ class LanePlanner:
                 best = route
         if best is None:
             return PlanFailure(FailureReason.NO_PATH, f"no lane route from {start.cell} to "
-                               f"{', '.join(str(g.cell) for g in goals)}", expansions)
+                               f"{', '.join(str(g.cell) for g in goals)} round what stands "
+                               f"for good and closed zones", expansions)
         return leg_of(timed(vehicle, best.cells, t_start, self.routes.seconds_per_cell),
                       expansions)
 
     # Other AGVs are no obstacles on the lanes (they are settled in time), and every place is
-    # connected (`fleet layout check`): the deadlock-breaking questions have plain answers.
+    # connected (`fleet layout check`): the deadlock-breaking questions have plain answers,
+    # save who stands for good in the way.
     def component(self, pose: Pose) -> int | None:
         return 0
 
     def blockage(self, vehicle: int, start: Pose, goals: Sequence[Pose],
                  store: ReservationView, movable: Callable[[int], bool],
                  shortest: bool = False) -> Blockage | None:
-        return Blockage(goals[0], frozenset(), frozenset()) if goals else None
+        """The route to a goal past what cannot move (vehicles that are down, what is no
+        vehicle), and the vehicles that can but stand for good on it (its blockers); None
+        when what cannot move walls every goal off (a zone for a while walls nothing)."""
+        memo: dict[Cell, int | None] = {}
+
+        def holder(cell: Cell) -> int | None:
+            if cell not in memo:
+                memo[cell] = held_for_good(store, vehicle, cell)
+            return memo[cell]
+
+        def wall(cell: Cell) -> bool:
+            owner = holder(cell)
+            return owner is not None and not (owner > 0 and movable(owner))
+
+        for goal in goals:
+            if wall(goal.cell):
+                continue
+            route = self.routes.route(start.cell, goal.cell, wall)
+            if route is not None:
+                cells = frozenset(route.cells)
+                blockers = {o for c in cells if c != start.cell and (o := holder(c)) is not None}
+                return Blockage(goal, frozenset(blockers), cells)
+        return None
 
     def rest_cells(self, pose: Pose) -> list[Cell]:
         return [pose.cell]
@@ -151,6 +201,9 @@ class SettleByRules:
                                f"vehicles {c.a} and {c.b} meeting at {sorted(c.cells)} "
                                f"(t={c.t:.2f} s, {c.kind.value})", trajectory.expansions)
         mine = settled.schedules[own.vehicle]
+        held = self._held(mine, others, view)
+        if held is not None:
+            return PlanFailure(FailureReason.NO_PATH, held, trajectory.expansions)
         amends = []
         for vehicle, schedule in sorted(settled.schedules.items()):
             if vehicle == own.vehicle:
@@ -167,6 +220,20 @@ class SettleByRules:
         leg = leg_of(mine, trajectory.expansions)
         return Commitment(leg, leg.intervals, trajectory.t_start, tuple(amends),
                           as_route(mine))
+
+    @staticmethod
+    def _held(mine: Schedule, others: Mapping[int, Schedule], view: ReservationView
+              ) -> str | None:
+        """Why the settled leg still cannot be committed: a cell it touches is held by what
+        the rules do not settle with (a vehicle frozen mid-move, a closed zone), which only
+        waiting for it to go ends; None when nothing such is in the way."""
+        for iv in mine.intervals():
+            other = view.conflict(mine.vehicle, iv.cell, iv.t0, iv.t1)
+            if other is not None and other not in others:
+                who = f"vehicle {other}" if other > 0 else "a closed zone"
+                return (f"cell {iv.cell} is held by {who}, which the collision rules cannot "
+                        f"settle with, over [{iv.t0:.2f}, {iv.t1:.2f})")
+        return None
 
     def routes(self, vehicle: int, view: ReservationView) -> dict[int, Schedule]:
         """Every other vehicle's route in time, as the store holds it; one without a route

@@ -115,6 +115,12 @@ def lane_graph(layout: Layout) -> LaneGraph:
     return LaneGraph(layout.name, layout.cell_size, moves, ways_out, ways_in)
 
 
+def floor_cells(layout: Layout) -> frozenset[Cell]:
+    """The cells a lane layout's vehicles can be on: lanes, access cells and places."""
+    return frozenset({*layout.lane_directions, *layout.access_cells,
+                      *(place.cell for _, place in places(layout))})
+
+
 def collision_areas(layout: Layout) -> dict[Cell, Area]:
     """Each cell's set in seed 002's Section 5.3 (cells off every set are not driven)."""
     found: dict[Cell, Area] = {}
