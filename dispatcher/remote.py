@@ -126,10 +126,11 @@ class RemoteExecutor:
             except ParticipantLost as exc:
                 log.warning("forklift %d did not hear where to stand: %s", vehicle, exc)
 
-    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool,
+               battery: float | None = None) -> None:
         step = step_to_wire(freeze.step) if freeze.step is not None else None
         self._tell(vehicle, ResumeRequest(self.task_requester.next_id(), vehicle, freeze.t, t,
-                                          str(freeze.pose), loaded, step), t)
+                                          str(freeze.pose), loaded, step, battery), t)
 
     def status(self, vehicle: int) -> VehicleStatus:
         """What a forklift holds (a restarted dispatcher asks)."""

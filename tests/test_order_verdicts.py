@@ -16,7 +16,7 @@ import pytest
 
 from fleet.analysis.battery import Charge, battery_verdict
 from fleet.analysis.lane_traffic import Grid, Seen, lane_breaches, meetings, tracks
-from fleet.analysis.shelves import Announced, Carrying, orders_verdict
+from fleet.analysis.shelves import Announced, Carrying, Claim, orders_verdict
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy, TaskKind
 from fleet.mission.drive_log import AmendLeg
@@ -190,6 +190,61 @@ def test_two_orders_of_one_shelf_need_two_packings():
     assert once.done == 1 and once.lost == ["order 2 (s-3-3)"]
     both = trip(1, SLOT, SLOT) + trip(1, SLOT, SLOT, t0=100.0)
     assert orders_verdict(PAPER002, ["s-3-3", "s-3-3"], both, [], True).done == 2
+
+
+def unseen_from(states: list[Carrying], t0: float, t1: float) -> list[Carrying]:
+    """The states with those in (t0, t1) not recorded: the first after the window says so."""
+    kept = [s for s in states if not t0 < s.t < t1]
+    return [dataclasses.replace(s, unseen=True) if s.t >= t1 and kept[i - 1].t <= t0 else s
+            for i, s in enumerate(kept)]
+
+
+TRIP_SAID = [Claim(1, "fetch", "s-3-3", 0.5, 0.5), Claim(1, "pack", STATION.name, 20.0, 30.0),
+             Claim(1, "stow", "s-3-3", 50.5, 50.5)]
+
+
+def test_a_packing_no_recorder_saw_is_taken_on_the_dispatchers_word():
+    """The recorder was down from t=10 to t=40: the packing is the dispatcher's word, the
+    drop seen after it completes the order, which is listed as unverified, not lost."""
+    states = unseen_from(trip(1, SLOT, SLOT), 10.0, 40.0)
+    verdict = orders_verdict(PAPER002, ["s-3-3"], states, [], True, TRIP_SAID)
+    assert verdict.passed and verdict.unverified == ["order 1 (s-3-3)"]
+    unsaid = orders_verdict(PAPER002, ["s-3-3"], states, [], True)
+    assert unsaid.unseen == ["order 1 (s-3-3)"] and unsaid.done == 0
+
+
+def test_a_whole_trip_no_recorder_saw_is_the_trips_announced_in_the_window():
+    states = unseen_from(trip(1, SLOT, SLOT), 0.2, 50.4)  # lift to put-back unseen
+    verdict = orders_verdict(PAPER002, ["s-3-3"], states, [], True, TRIP_SAID)
+    assert verdict.passed and verdict.unverified == ["order 1 (s-3-3)"]
+    without_stow = orders_verdict(PAPER002, ["s-3-3"], states, [], True, TRIP_SAID[:2])
+    assert without_stow.unseen == ["order 1 (s-3-3)"]  # put down where no one says
+
+
+def test_a_packing_seen_in_part_counts_and_one_seen_whole_is_still_judged():
+    partly = unseen_from(trip(1, SLOT, SLOT), 25.0, 40.0)
+    assert orders_verdict(PAPER002, ["s-3-3"], partly, [], True, TRIP_SAID).passed
+    too_short = trip(1, SLOT, SLOT, dwell=5.0)
+    too_short[1] = dataclasses.replace(too_short[1], unseen=True)  # the lift unseen
+    verdict = orders_verdict(PAPER002, ["s-3-3"], too_short, [], True, TRIP_SAID)
+    assert "before its dwell of 10.0 s" in verdict.shelf_faults[0].why
+
+
+def test_a_shelf_lifted_where_no_one_saw_or_said_is_named_by_the_next_move_it_explains():
+    """AGV 1 lifts s-3-3 in a window nobody recorded and nobody announced; AGV 2 then puts
+    s-4-3 into s-3-3's slot: the book learns that AGV 1 carries s-3-3, and nothing is a
+    fault. Both orders are done, s-3-3's on the word of the move that named it."""
+    first = unseen_from(trip(1, SLOT, OTHER, t0=10.0), 10.2, 20.0)  # s-3-3 lifted unseen
+    second = trip(2, OTHER, SLOT)  # s-4-3 taken first, put in s-3-3's slot at t=50.5
+    verdict = orders_verdict(PAPER002, ["s-3-3", "s-4-3"], first + second, [], True)
+    assert verdict.shelf_faults == [] and verdict.passed, verdict
+    assert "order 1 (s-3-3)" in verdict.unverified
+
+
+def test_an_order_whose_whole_trip_no_one_saw_or_said_is_not_verified_not_lost():
+    states = unseen_from(trip(1, SLOT, SLOT), 0.2, 50.4)
+    verdict = orders_verdict(PAPER002, ["s-3-3"], states, [], True)
+    assert verdict.lost == [] and verdict.unseen == ["order 1 (s-3-3)"] and verdict.passed
 
 
 # -- a real recording ----------------------------------------------------------------------

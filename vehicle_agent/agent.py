@@ -338,11 +338,15 @@ class Agent:
             pose = Pose.parse(message.pose)
             step = step_from_wire(message.step, "dispatch.resume_request.step") \
                 if message.step is not None else None
+            if message.battery is not None and not 0.0 <= message.battery <= 100.0:
+                raise ValueError(f"dispatch.resume_request.battery must be a charge within "
+                                 f"0..100 %, not {message.battery!r}")
         except (ValueError, ProtocolError) as exc:
             return Reply(message.request_id, False, self.mirror.revision, reason=str(exc))
         self.reservations.resync(self.mirror)
         with self.drive_lock:
-            self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume)
+            self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume,
+                               message.battery)
         with self.status_lock:  # ticks before t_resume may still list us as down
             self.resumed_at, self.down, self.broken = message.t_resume, False, False
         self.last_kind = ""

@@ -22,6 +22,7 @@ import bisect
 import math
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TypeVar
 
 from fleet.analysis.battery import BatteryVerdict, Charge, battery_verdict
@@ -55,7 +56,7 @@ from fleet.analysis.served import (
     services,
 )
 from fleet.analysis.shelves import Announced as OrderAnnounced
-from fleet.analysis.shelves import Carrying, OrdersVerdict, orders_verdict
+from fleet.analysis.shelves import Carrying, Claim, OrdersVerdict, orders_verdict
 from fleet.analysis.streams import (
     LOSS_NOTICED_WALL_S,
     Hole,
@@ -169,8 +170,9 @@ def analyze(recording: Recording) -> Report:
                       lambda v, t0, t1: states_unknown(unverified, v, t0, t1))
     served = {(j.announced.cluster, j.announced.index) for j in judged if j.served}
     finished = bool(done) and done[-1].ok
+    positions = _positions(usable, standing, STATE_GAP_PERIODS * period)
     breaches, met = ([], []) if not layout.has_lanes else \
-        _lane_traffic(layout, usable, STATE_GAP_PERIODS * period)
+        _lane_traffic(layout, positions, STATE_GAP_PERIODS * period)
     from_record = stacks_not_recorded(done, unrecorded, expected - set(stacks), any(
         cls is StackDone for _, cls in uncounted_tails(recording, restarts, final is not None)))
     return Report(
@@ -230,7 +232,7 @@ def analyze(recording: Recording) -> Report:
         incomplete=list(record.incomplete),
         vehicle_noun=kind.noun,
         lane_layout=layout.has_lanes,
-        orders=_orders(recording, layout, usable, finished)
+        orders=_orders(recording, layout, positions, finished, record)
         if info.kind == MissionKind.ORDERS.value else None,
         lane_breaches=breaches,
         meetings=met,
@@ -258,34 +260,74 @@ def _battery(info: MissionInfo, layout: Layout, states: list[tuple[float, Vehicl
                            info.charge_below)
 
 
-def _lane_traffic(layout: Layout, states: list[tuple[float, VehicleState]], max_gap: float
+@dataclass(frozen=True)
+class _Position:
+    """Where a vehicle was at an instant: a state of its own, or, while it was down, where
+    its halt says it stood (carrying what its last state said)."""
+
+    vehicle: int
+    t: float
+    x: float
+    y: float
+    loaded: bool
+    unseen: bool  # its positions just before are not known (further than the state gap)
+
+
+def _positions(states: list[tuple[float, VehicleState]], standing: list[Sample],
+               max_gap: float) -> list[_Position]:
+    """Every vehicle's positions, by vehicle, then time."""
+    own = sorted(((m.vehicle, t, m.x, m.y, m.loaded) for t, m in states))
+    loads: dict[int, tuple[list[float], list[bool]]] = {}
+    for v, t, _, _, loaded in own:
+        times, values = loads.setdefault(v, ([], []))
+        times.append(t)
+        values.append(loaded)
+    def load_at(v: int, t: float) -> bool:
+        times, values = loads.get(v, ([], []))
+        k = bisect.bisect_right(times, t) - 1
+        return values[k] if k >= 0 else False
+    merged = sorted(own + [(s.vehicle, s.t, s.x, s.y, load_at(s.vehicle, s.t))
+                           for s in standing])
+    out: list[_Position] = []
+    for v, t, x, y, loaded in merged:
+        gap = not out or out[-1].vehicle != v or t - out[-1].t > max_gap
+        first = not out or out[-1].vehicle != v
+        out.append(_Position(v, t, x, y, loaded, gap and not first))
+    return out
+
+
+def _lane_traffic(layout: Layout, positions: list[_Position], max_gap: float
                   ) -> tuple[list[ExecutedViolation], list[Meeting]]:
     """Seed 002's traffic verdicts on the AGVs' executed moves (fleet/analysis/
     lane_traffic.py): moves against the lane rules, and AGVs meeting as the paper's
     collision classes forbid."""
-    pieces = tracks([Seen(m.vehicle, t, m.x, m.y) for t, m in states],
+    pieces = tracks([Seen(p.vehicle, p.t, p.x, p.y) for p in positions],
                     Grid(layout.origin, layout.cell_size), max_gap)
     move_s = layout.cell_size / layout.vehicle_kind.max_speed_mps
     return lane_breaches(layout, pieces), meetings(pieces, move_s, cell_names(layout))
 
 
-def _orders(recording: Recording, layout: Layout, states: list[tuple[float, VehicleState]],
-            finished: bool) -> OrdersVerdict:
+def _orders(recording: Recording, layout: Layout, positions: list[_Position],
+            finished: bool, record: MissionSummary) -> OrdersVerdict:
     """What became of an order mission's orders and shelves (fleet/analysis/shelves.py)."""
     grid = Grid(layout.origin, layout.cell_size)
     last: dict[int, Seen] = {}
     seen = []
-    for t, m in sorted(states, key=lambda s: (s[1].vehicle, s[0])):
-        now, before = Seen(m.vehicle, t, m.x, m.y), last.get(m.vehicle)
+    for p in positions:
+        now, before = Seen(p.vehicle, p.t, p.x, p.y), last.get(p.vehicle)
         passed = grid.passed(before, now) if before is not None else []
-        cell = grid.cell_of(m.x, m.y)
+        cell = grid.cell_of(p.x, p.y)
         through = frozenset(c for c, _, _ in passed) or frozenset([cell] if cell else [])
-        standing = before is not None and (before.x, before.y) == (m.x, m.y)
-        seen.append(Carrying(m.vehicle, t, cell, through, m.loaded, standing))
-        last[m.vehicle] = now
-    announced = [OrderAnnounced(m.cluster, m.index, m.vehicle, m.t)
-                 for _, m in recording.of(StackDone)]
-    return orders_verdict(layout, list(recording.info.released), seen, announced, finished)
+        standing = before is not None and (before.x, before.y) == (p.x, p.y)
+        seen.append(Carrying(p.vehicle, p.t, cell, through, p.loaded, standing, p.unseen))
+        last[p.vehicle] = now
+    claims = [Claim(s.vehicle, s.kind, s.target, s.t_end, s.t_done) for s in record.subtasks]
+    # Announced as a stack is (dispatch/stack: the shelf and the order), less those a cut
+    # return reopened (dispatch/reopen): the order is announced again when it is put back.
+    announced = [OrderAnnounced(a.cluster, a.index, a.vehicle, a.t)
+                 for a in announced_stacks(recording)]
+    return orders_verdict(layout, list(recording.info.released), seen, announced, finished,
+                          claims)
 
 
 def _mission(info: MissionInfo) -> dict:

@@ -225,6 +225,10 @@ class Report:
                 + (f", {len(o.misnamed)} misnamed" if o.misnamed else "")
                 + f", {len(o.shelf_faults)} shelf faults, "
                 f"{len(self.impossible_states)} impossible states"
+                + (f"; {len(o.unverified)} done on the dispatcher's word (their AGV's states "
+                   f"not recorded)" if o.unverified else "")
+                + (f"; {len(o.unseen)} not verified (their shelves moved while neither a "
+                   f"recorder nor the dispatcher's word was there)" if o.unseen else "")
                 + ("" if self.finished else "; the mission did not finish"
                    + (f" ({self.mission_error})" if self.mission_error
                       else " (no result recorded)")))
@@ -313,7 +317,8 @@ class Report:
         if self.orders is not None:
             o = self.orders
             for label, rows in (("done twice", o.duplicated), ("misnamed", o.misnamed),
-                                ("not done", o.not_served), ("lost", o.lost)):
+                                ("not done", o.not_served), ("lost", o.lost),
+                                ("not verified", o.unseen)):
                 out += [f"  {label:<19}{row}" for row in rows[:10]]
                 if len(rows) > 10:
                     out.append(f"  {label:<19}... {len(rows) - 10} more")

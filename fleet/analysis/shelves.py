@@ -19,6 +19,16 @@ module's own bookkeeping: nothing of the order book or the engine is used.
   once, and the order must be done physically.
 - **Conservation.** Every shelf is in one place at every instant, by construction of the
   bookkeeping; at the end of a finished mission every shelf stands in a slot.
+- **Windows without a recorder.** What an AGV did between two states further apart than
+  the state period (no recorder ran) is taken on the dispatcher's word: the trips it
+  announced ending in the window (`Claim`: a fetch lifts its shelf, a packing whose dwell
+  ended there packs, a stow puts the shelf in its slot), squared with what the state after
+  shows (carrying or not). A packing the states saw only in part is taken as done. The
+  orders whose shelves were moved so are listed as `unverified`, not failed. Where the word
+  is missing too, `_Shelves` names a shelf lifted unseen by the first move that contradicts
+  it, and an order not seen done that may have been done unseen is `unseen`, not lost. An
+  AGV that is down says nothing but stands where its halt says: the caller gives those
+  instants as states too.
 """
 
 from __future__ import annotations
@@ -47,6 +57,19 @@ class Carrying:
     through: frozenset[Cell]
     loaded: bool
     standing: bool  # at the same position as its state before
+    unseen: bool = False  # its states just before are not known (no recorder ran then)
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A trip as the dispatcher announced it (dispatch/subtask): the word the check takes
+    where the AGV's own states were not recorded."""
+
+    vehicle: int
+    kind: str  # "fetch", "pack", "stow" or "charge"
+    target: str  # the shelf, station, slot or pile
+    t_end: float  # arrived (a fetch lifts, a stow puts down then)
+    t_done: float  # left (a packing's dwell ends then)
 
 
 @dataclass(frozen=True)
@@ -79,65 +102,172 @@ class OrdersVerdict:
     # an order never released
     shelf_faults: list[ShelfFault] = field(default_factory=list)
     last_done_s: float = 0.0  # the first state showing the last order's shelf put down
+    unverified: list[str] = field(default_factory=list)  # done on the dispatcher's word
+    unseen: list[str] = field(default_factory=list)  # not seen done: their shelves moved
+    # where neither a state nor the dispatcher's recorded word says
 
     @property
     def passed(self) -> bool:
-        return (self.done == self.expected and not self.duplicated and not self.lost
-                and not self.not_served and not self.misnamed and not self.shelf_faults)
+        return (self.done + len(self.unseen) == self.expected and not self.duplicated
+                and not self.lost and not self.not_served and not self.misnamed
+                and not self.shelf_faults)
 
 
 def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carrying],
-                   announced: list[Announced], finished: bool) -> OrdersVerdict:
+                   announced: list[Announced], finished: bool,
+                   claims: Iterable[Claim] = ()) -> OrdersVerdict:
     """What the states say of the released orders (order i + 1's shelf is `released[i]`)."""
-    slots: dict[Cell, str | None] = {tuple(s.cell): s.name for s in layout.slots}
+    book = _Shelves({tuple(s.cell): s.name for s in layout.slots},
+                    {s.name: tuple(s.cell) for s in layout.slots})
     stations = {tuple(p.cell): p for p in layout.packing}
     faults: list[ShelfFault] = []
-    carried: dict[int, str] = {}
-    packed: dict[str, list[float]] = defaultdict(list)  # shelf -> packings not yet put back
-    done_at: dict[str, list[float]] = defaultdict(list)  # shelf -> drops after a packing
-    for event in _events(states, stations):
+    for event in _events(states, stations, claims):
         t, vehicle, what, cell = event.t, event.vehicle, event.what, event.cell
-        if what == "lift":
-            shelf = slots.get(cell) if cell is not None else None
-            if cell not in slots:
+        if event.word or what == "gap":
+            book.taken_on_word(event)
+        elif what == "lift":
+            if cell not in book.slots:
                 faults.append(ShelfFault(t, vehicle, f"lifted a shelf away from a slot "
                                                      f"({_where(cell)})"))
-            elif vehicle in carried:
+            elif vehicle in book.carried:
                 faults.append(ShelfFault(t, vehicle, f"lifted at {_where(cell)} while "
-                                                     f"carrying {carried[vehicle]}"))
-            elif shelf is None:
+                                                     f"carrying {book.carried[vehicle]}"))
+            elif book.slots[cell] is None and not book.astray:
                 faults.append(ShelfFault(t, vehicle, f"lifted at the vacant slot "
                                                      f"{_where(cell)}"))
             else:
-                carried[vehicle], slots[cell] = shelf, None
+                book.lift(vehicle, cell)
         elif what == "drop":
-            shelf = carried.pop(vehicle, None)
+            shelf = book.carried.get(vehicle)
             if shelf is None:
                 continue  # a lift already judged wrong
-            if cell not in slots:
+            if cell not in book.slots:
                 faults.append(ShelfFault(t, vehicle, f"put {shelf} down away from a slot "
                                                      f"({_where(cell)})"))
-            elif slots[cell] is not None:
-                faults.append(ShelfFault(t, vehicle, f"put {shelf} down on {slots[cell]} in "
-                                                     f"{_where(cell)}"))
+                del book.carried[vehicle]
+            elif book.slots[cell] is not None and not book.unknown:
+                faults.append(ShelfFault(t, vehicle, f"put {shelf} down on {book.slots[cell]} "
+                                                     f"in {_where(cell)}"))
+                del book.carried[vehicle]
             else:
-                slots[cell] = shelf
-                done_at[shelf] += [t] * len(packed.pop(shelf, []))
+                book.drop(vehicle, cell, t)
         else:  # a stay at a packing station
-            shelf = carried.get(vehicle)
+            shelf = book.carried.get(vehicle)
             station = stations[cell]
             if shelf is None:
                 continue  # an empty AGV passing or waiting there packs nothing
-            if event.span < station.dwell - event.tolerance:
+            if event.unseen and event.span < station.dwell - event.tolerance:
+                book.pack(shelf, t, on_word=True)  # the rest of its dwell was unseen
+            elif event.span < station.dwell - event.tolerance:
                 faults.append(ShelfFault(t, vehicle, f"left packing station {station.name} "
                                                      f"with {shelf} after {event.span:.2f} s, "
                                                      f"before its dwell of {station.dwell} s"))
             else:
-                packed[shelf].append(t)
+                book.pack(shelf, t)
     if finished:
         faults += [ShelfFault(float("inf"), v, f"still carried {shelf} at the end")
-                   for v, shelf in sorted(carried.items())]
-    return _accounted(released, done_at, announced, faults)
+                   for v, shelf in sorted(book.carried.items())
+                   if shelf not in book.on_word and shelf not in book.unknown]
+    named = {shelf: drops for shelf, drops in book.done_at.items() if shelf not in book.unknown}
+    verdict = _accounted(released, named, announced, faults)
+    # An order not seen done may have been done unseen if its shelf moved unseen, or never
+    # seen to move while some AGV was not recorded.
+    moved_unseen = [f"order {o} ({s})" for o, s in enumerate(released, 1) if s in book.on_word
+                    or (book.blind and s not in book.lifted)]
+    verdict.unverified = [o for o in moved_unseen if o not in verdict.lost]
+    verdict.unseen = [o for o in verdict.lost if o in moved_unseen]
+    verdict.lost = [o for o in verdict.lost if o not in moved_unseen]
+    verdict.not_served = [o for o in verdict.not_served if o not in moved_unseen]
+    return verdict
+
+
+@dataclass
+class _Shelves:
+    """Where every shelf is, as far as the recording tells. A window no state or trip
+    explains leaves a shelf of unknown name on an AGV (`unknown`) or a known one put down at
+    an unknown slot (`astray`); the first seen move that contradicts the book names it (a
+    shelf put down on a slot the book says is full: that slot's shelf is the oldest unknown
+    one; one lifted at a slot the book says is vacant: the oldest astray one)."""
+
+    slots: dict[Cell, str | None]  # what each slot holds
+    homes: dict[str, Cell]  # each slot's cell by its name
+    carried: dict[int, str] = field(default_factory=dict)
+    packed: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    done_at: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    on_word: set[str] = field(default_factory=set)  # shelves an unseen move moved
+    unknown: list[str] = field(default_factory=list)
+    astray: list[str] = field(default_factory=list)
+    lifted: set[str] = field(default_factory=set)  # shelves seen or said to move
+    blind: bool = False  # some AGV's states were not recorded for a while
+
+    def lift(self, vehicle: int, cell: Cell) -> None:
+        if self.slots[cell] is None:  # the oldest shelf put down unseen
+            self.slots[cell] = self.astray.pop(0)
+            self.on_word.add(self.slots[cell])
+        self.carried[vehicle], self.slots[cell] = self.slots[cell], None
+        self.lifted.add(self.carried[vehicle])
+
+    def drop(self, vehicle: int, cell: Cell, t: float) -> None:
+        occupant, self.slots[cell] = self.slots[cell], None
+        if occupant is not None:  # it was the oldest shelf lifted unseen
+            self._name(self.unknown.pop(0), occupant)
+        shelf = self.carried.pop(vehicle)
+        self.slots[cell] = shelf
+        self.done_at[shelf] += [t] * len(self.packed.pop(shelf, []))
+
+    def pack(self, shelf: str, t: float, on_word: bool = False) -> None:
+        self.packed[shelf].append(t)
+        if on_word:
+            self.on_word.add(shelf)
+
+    def taken_on_word(self, event: _Event) -> None:
+        """A trip's end in a window the AGV's states were not recorded in, as the
+        dispatcher announced it; at the window's end ("gap"), what the state after it shows
+        carried."""
+        vehicle, what = event.vehicle, event.what
+        shelf = self.carried.get(vehicle)
+        if what == "lift" and shelf is None:
+            cell = next((c for c, there in self.slots.items() if there == event.word), None)
+            if cell is not None:
+                self.lift(vehicle, cell)
+            else:  # the book lost it: it is no longer where it was thought to be
+                self.carried[vehicle] = event.word
+                self.lifted.add(event.word)
+                if event.word in self.astray:
+                    self.astray.remove(event.word)
+            self.on_word.add(event.word)
+        elif what == "pack" and shelf is not None:
+            self.pack(shelf, event.t, on_word=True)
+        elif what == "drop" and shelf is not None:
+            self.on_word.add(shelf)
+            cell = self.homes.get(event.word)
+            if cell is not None and self.slots[cell] is None:
+                self.drop(vehicle, cell, event.t)
+            else:
+                self.astray.append(self.carried.pop(vehicle))
+        elif what == "gap":
+            self.blind = True
+            if event.loaded and shelf is None:
+                self.carried[vehicle] = f"an unseen shelf (AGV {vehicle}, t={event.t:.2f} s)"
+                self.unknown.append(self.carried[vehicle])
+            elif not event.loaded and shelf is not None:
+                self.on_word.add(shelf)  # put down where no state or trip says
+                self.astray.append(self.carried.pop(vehicle))
+            elif shelf is not None:
+                self.on_word.add(shelf)  # carried through: it may have been packed unseen
+
+    def _name(self, unknown: str, shelf: str) -> None:
+        """The unknown shelf is `shelf`: it is where the unknown one is, with its history."""
+        self.on_word.add(shelf)
+        for vehicle, there in self.carried.items():
+            if there == unknown:
+                self.carried[vehicle] = shelf
+        for cell, there in self.slots.items():
+            if there == unknown:
+                self.slots[cell] = shelf
+        for book in (self.packed, self.done_at):
+            if unknown in book:
+                book[shelf] += book.pop(unknown)
 
 
 def _accounted(released: list[str], done_at: dict[str, list[float]],
@@ -176,30 +306,41 @@ def _accounted(released: list[str], done_at: dict[str, list[float]],
 class _Event:
     t: float
     vehicle: int
-    what: str  # "lift", "drop" or "stay" (at a packing station)
+    what: str  # "lift", "drop", "stay" (at a packing station) or "gap" (states unseen)
     cell: Cell | None
     span: float = 0.0  # a stay's length
     tolerance: float = 0.0  # how much shorter than the truth a stay may be seen
+    unseen: bool = False  # a stay next to a window the AGV's states were not recorded in
+    loaded: bool = False  # carrying at a gap's end
+    word: str = ""  # taken on the dispatcher's word: the shelf lifted, the slot put into,
+    # the station packed at
 
 
-def _events(states: Iterable[Carrying], stations: dict[Cell, PackingStation]
-            ) -> list[_Event]:
+def _events(states: Iterable[Carrying], stations: dict[Cell, PackingStation],
+            claims: Iterable[Claim]) -> list[_Event]:
     """Lifts, drops and stays at packing stations, of every AGV, in time order (at one
-    instant: drops before lifts, so a shelf put down can be taken up at once)."""
+    instant: drops before lifts, so a shelf put down can be taken up at once); in a window
+    the AGV's states were not recorded in, its trips that ended there, at their ends."""
     by_vehicle: dict[int, list[Carrying]] = defaultdict(list)
     for s in states:
         by_vehicle[s.vehicle].append(s)
+    said: dict[int, list[Claim]] = defaultdict(list)
+    for c in sorted(claims, key=lambda c: c.t_end):
+        said[c.vehicle].append(c)
     events = []
     for vehicle, seen in by_vehicle.items():
         seen.sort(key=lambda s: s.t)
         stay: list[Carrying] = []
         for before, s in zip([None, *seen], seen, strict=False):
-            if before is not None and before.loaded != s.loaded:
+            if before is not None and s.unseen:
+                events += _trips_unseen(said[vehicle], before.t, s.t)
+                events.append(_Event(s.t, vehicle, "gap", None, loaded=s.loaded))
+            elif before is not None and before.loaded != s.loaded:
                 where = next(iter(s.through)) if len(s.through) == 1 else None
                 events.append(_Event(s.t, vehicle, "lift" if s.loaded else "drop", where))
             at_station = s.cell in stations and s.standing
             if stay and not (at_station and s.cell == stay[-1].cell and s.loaded):
-                events.append(_stay(stay))
+                events.append(_stay(stay, cut=s.unseen))
                 stay = []
             if at_station and s.loaded:
                 stay = stay or ([before] if before is not None and before.cell == s.cell
@@ -207,14 +348,29 @@ def _events(states: Iterable[Carrying], stations: dict[Cell, PackingStation]
                 stay.append(s)
         if stay:
             events.append(_stay(stay))
-    order = {"drop": 0, "stay": 1, "lift": 2}
-    return sorted(events, key=lambda e: (e.t, order[e.what], e.vehicle))
+    # At one instant: the trips taken on word, then what a window's end shows, then what
+    # the states show.
+    order = {"drop": 0, "pack": 1, "stay": 1, "lift": 2, "gap": 0}
+    return sorted(events, key=lambda e: (e.t, 0 if e.word else 1 if e.what == "gap" else 2,
+                                         order[e.what], e.vehicle))
 
 
-def _stay(seen: list[Carrying]) -> _Event:
+def _trips_unseen(claims: list[Claim], since: float, until: float) -> list[_Event]:
+    """The trips announced as ending in (since, until] as events: a fetch lifts its shelf, a
+    stow puts it into its slot, a packing whose dwell also ended there packs (one seen in
+    part is a stay's to judge)."""
+    what = {"fetch": "lift", "stow": "drop", "pack": "pack"}
+    return [_Event(c.t_end, c.vehicle, what[c.kind], None, word=c.target) for c in claims
+            if since < c.t_end <= until and c.kind in what
+            and (c.kind != "pack" or c.t_done <= until)]
+
+
+def _stay(seen: list[Carrying], cut: bool = False) -> _Event:
+    """A stay at a packing station; `cut`: the states after it were not recorded, so it may
+    have gone on unseen (as one that began unseen may have begun earlier)."""
     period = max((b.t - a.t for a, b in itertools.pairwise(seen)), default=0.0)
     return _Event(seen[0].t, seen[0].vehicle, "stay", seen[0].cell, seen[-1].t - seen[0].t,
-                  2 * period)
+                  2 * period, unseen=cut or seen[0].unseen)
 
 
 def _where(cell: Cell | None) -> str:

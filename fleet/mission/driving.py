@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 from fleet.mission.battery import Battery
+from fleet.mission.drive_log import AddLeg, AmendLeg, CutAt, DriveOrder, ResumeAt, StopAt
 from fleet.mission.spec import ClockMode
 from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose, Step, Trajectory
@@ -27,11 +28,35 @@ FAST_STATE_PERIOD_S = 0.5  # sim seconds between two states in fast mode
 REALTIME_STATE_PERIOD_S = 0.1  # wall seconds between two states in real time (10 Hz)
 
 
+def replayed(vehicle: int, start: Pose, layout: Layout, battery: Battery | None,
+             log: list[DriveOrder]) -> tuple[Drive, list[tuple[float, float]]]:
+    """The vehicle driven as its agent was told (a `DriveLog` entry's orders, in order), and
+    the windows it was down in (it says nothing then)."""
+    drive = Drive(vehicle, start, layout, battery)
+    silent: list[tuple[float, float]] = []
+    for order in log:
+        match order:
+            case AddLeg(trajectory, loaded, after):
+                drive.add(trajectory, loaded, after)
+            case AmendLeg(trajectory):
+                drive.amend(trajectory)
+            case CutAt(t):
+                drive.cut(t)
+            case StopAt(t):
+                drive.stop(t)
+                silent.append((t, math.inf))
+            case ResumeAt(t):
+                drive.resume(t)
+                silent[-1] = (silent[-1][0], t)
+    return drive, silent
+
+
 def states_until(t_end: float) -> float:
     """Where the states of a mission that ended at t_end stop (exclusive): past the first
     instant of the fast grid at or after t_end, so the recording shows every vehicle as the
-    mission leaves it (an AGV's last shelf put down at t_end)."""
-    k = math.ceil(t_end / FAST_STATE_PERIOD_S - 1e-9)
+    mission leaves it (an AGV's last shelf put down at t_end). No tolerance: an end a
+    rounding error past a grid instant must still be seen from the next one."""
+    k = math.ceil(t_end / FAST_STATE_PERIOD_S)
     return (k + 1) * FAST_STATE_PERIOD_S
 
 
@@ -132,10 +157,13 @@ class Drive:
                 leg.pause_to = t
 
     def restart(self, rest: Pose, loaded: bool, step: Step | None, t_stop: float,
-                t_resume: float) -> None:
+                t_resume: float, soc: float | None = None) -> None:
         """Become what the dispatcher says (a restarted agent knows nothing of itself): at
         rest at `rest`, or stopped part-way through `step` since t_stop, moving from
-        t_resume. States before t_resume are not published again."""
+        t_resume, with the battery at `soc` at t_stop (None: as its own legs had it). States
+        before t_resume are not published again."""
+        if self.battery is not None and t_stop >= self.charged_at[0]:
+            self.charged_at = (t_stop, self.soc_at(t_stop) if soc is None else soc)
         self.legs = []
         self.rest_pose, self.loaded = rest, loaded
         if step is not None:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.drive_log import CutAt, DriveLog, ResumeAt, StopAt
+from fleet.mission.driving import replayed
 from fleet.mission.freeze import (
     BREAKDOWN,
     Disruption,
@@ -52,6 +53,7 @@ class FaultResponse:
         self.down: dict[int, Freeze] = {}  # forklifts that cannot move, and where they stopped
         self.before: list[VehicleSlot] = []  # each forklift's slot before each subtask
         self.driven: dict[int, list[Trajectory]] = {v: [] for v in fleet}
+        self.since_start = True  # its drive log holds every leg since the mission began
 
     def committed(self, before: VehicleSlot, traj: Trajectory) -> None:
         """A subtask's trajectory was committed; `before` is its forklift's slot until then."""
@@ -70,6 +72,18 @@ class FaultResponse:
         """A restarted dispatcher: each forklift's last committed leg, as its agent holds it."""
         for vehicle, leg in legs.items():
             self.driven[vehicle] = [leg]
+        self.since_start = False
+
+    def _charge_at(self, vehicle: int, t: float) -> float | None:
+        """The vehicle's battery at t, as everything it was told since the start drove it
+        (a restarted agent learns it so); None: no battery, or this dispatcher did not see
+        the start (the agent keeps its own)."""
+        battery = self.work.battery(vehicle)
+        if battery is None or not self.since_start:
+            return None
+        drive, _ = replayed(vehicle, self.starts[vehicle - 1], self.layout, battery,
+                            self.drive_log[vehicle])
+        return round(drive.soc_at(t), 6)
 
     def disrupt(self, disruption: Disruption) -> None:
         """Apply what the clock reports: a forklift down or back, a zone closed."""
@@ -202,7 +216,8 @@ class FaultResponse:
                                                       step.t0, (step,), (), 0))
         v.t_free = max(v.t_free, t_stand)
         v.t_still = t_stand
-        self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task))
+        self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task),
+                             battery=self._charge_at(up.vehicle, freeze.t))
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))
         self.emit(Resume(up.vehicle, up.t, t_stand), up.t)

@@ -34,7 +34,7 @@ from typing import Any
 
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.errors import UserError
-from fleet.mission.battery import BatteryParams, parse_battery, start_charges
+from fleet.mission.battery import Battery, BatteryParams, parse_battery, start_charges
 from fleet.mission.order_log import (
     Advance,
     Amended,
@@ -141,9 +141,10 @@ class OrderWork:
             raise UserError(f"layout {layout.name}: packing stations of different dwells "
                             f"({sorted(dwells)}) are not supported")
         _, params = mission_battery(mission)
+        self.start_charges = mission_charges(mission, vehicles)
         try:
             self.book = OrderBook(layout, vehicles, mission_orders(mission, layout), params,
-                                  mission_charges(mission, vehicles))
+                                  self.start_charges)
         except ValueError as exc:  # it names the number that is wrong (n_op, the fleet)
             raise UserError(f"--battery: {exc}") from None
         self.layout = layout
@@ -209,6 +210,10 @@ class OrderWork:
 
     def loaded(self, kind: TaskKind) -> bool:
         return kind in (TaskKind.PACK, TaskKind.STOW)
+
+    def battery(self, vehicle: int) -> Battery:
+        return Battery(self.book.battery, self.start_charges[vehicle - 1],
+                       frozenset(p.cell for p in self.layout.piles))
 
     def carried_after(self, kind: TaskKind) -> bool:
         """An AGV lifts the shelf as it arrives under it, and puts it down as it arrives in

@@ -82,8 +82,10 @@ class Executor(Protocol):
         their maneuver in progress, the `standing` ones (broken down) to stand where they
         are at t."""
 
-    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
-        """A forklift that was down moves again from t, completing its interrupted maneuver."""
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool,
+               battery: float | None = None) -> None:
+        """A vehicle that was down moves again from t, completing its interrupted maneuver
+        (`battery`: its charge when it stopped, for an agent that knows nothing of itself)."""
 
 
 class Pacer(Protocol):
@@ -158,7 +160,8 @@ class LocalExecutor:
             if not written.ok:  # the cascade left nothing in the way
                 raise AssertionError(f"freeze at t={t} conflicts: {written.reason}")
 
-    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool) -> None:
+    def resume(self, vehicle: int, freeze: Freeze, t: float, loaded: bool,
+               battery: float | None = None) -> None:
         pass  # the table already holds the forklift's cells to infinity
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
 from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
+from fleet.mission.battery import Battery
 from fleet.mission.spec import MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
@@ -97,6 +98,9 @@ class MissionWork(Protocol):
     def carried_after(self, kind: TaskKind) -> bool | None:
         """Whether it carries goods once it arrives, when that changes at the arrival (None:
         as on the subtask, until its next; `Task.after`)."""
+
+    def battery(self, vehicle: int) -> Battery | None:
+        """The vehicle's battery as the mission gives it (None: none is modelled)."""
 
     @abstractmethod
     def handling(self, kind: TaskKind) -> float:
@@ -206,6 +210,9 @@ class StackWork(ABC):
 
     def carried_after(self, kind: TaskKind) -> bool | None:
         return None  # a forklift unloads (claims) over a handling time, then drives on
+
+    def battery(self, vehicle: int) -> Battery | None:
+        return None  # seed 000 models no battery
 
     @abstractmethod
     def handling(self, kind: TaskKind) -> float: ...

@@ -8,7 +8,6 @@ the fast-mode grid, exactly as each agent would publish them.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import defaultdict
@@ -16,8 +15,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fleet.mission.battery import battery_of
-from fleet.mission.drive_log import AddLeg, AmendLeg, CutAt, DriveLog, ResumeAt, StopAt
-from fleet.mission.driving import FAST_STATE_PERIOD_S, Drive, states_until
+from fleet.mission.drive_log import DriveLog
+from fleet.mission.driving import FAST_STATE_PERIOD_S, replayed, states_until
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import Scenario
 from fleet.mission.freeze import Disruption, ScheduledPacer
@@ -58,23 +57,8 @@ def vehicle_states(record: MissionRecord, layout: Layout, keys: Keys, drive_log:
         until = states_until(max(record.end_time, record.all_parked_time))
     out = []
     for vehicle, start in zip(record.vehicles, record.starts, strict=True):
-        drive = Drive(vehicle, start, layout,
-                      None if info is None else battery_of(info, vehicle, layout))
-        silent: list[tuple[float, float]] = []
-        for order in drive_log[vehicle]:
-            match order:
-                case AddLeg(trajectory, loaded, after):
-                    drive.add(trajectory, loaded, after)
-                case AmendLeg(trajectory):
-                    drive.amend(trajectory)
-                case CutAt(t):
-                    drive.cut(t)
-                case StopAt(t):
-                    drive.stop(t)
-                    silent.append((t, math.inf))
-                case ResumeAt(t):
-                    drive.resume(t)
-                    silent[-1] = (silent[-1][0], t)
+        battery = None if info is None else battery_of(info, vehicle, layout)
+        drive, silent = replayed(vehicle, start, layout, battery, drive_log[vehicle])
         for t in drive.due(until, FAST_STATE_PERIOD_S, before=True):
             if not any(t0 <= t < t1 for t0, t1 in silent):
                 out.append(outgoing(keys, Keys.vehicle_state, drive.state_at(t), t, vehicle))

@@ -129,7 +129,7 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
                    "the layout, or lower-left (seed 002's Figure 19; default: every shelf)")
     p.add_argument("--battery", type=battery_arg, default="", metavar="KEY=VALUE,...",
                    help="seed 002's batteries in an order mission: " + "; ".join(
-                       f"{key}: {text}" for key, text in BATTERY_KEYS.items())
+                       f"{key}: {text}" for key, text in BATTERY_KEYS.items()).replace("%", "%%")
                    + " (e.g. start=15..40,n_op=6; default: the defaults of each)")
     p.add_argument("--strategy", choices=[s.value for s in Strategy], default=None,
                    help="how the dispatcher picks each vehicle's next goal (default ann; "

@@ -415,6 +415,7 @@ class ResumeRequest(Message):
     pose: PoseText  # where it stands once the maneuver is over
     loaded: bool
     step: WireStep | None = None
+    battery: float | None = None  # its charge at t_stop, % (None: it keeps its own)
 
 
 @dataclass(frozen=True)
