@@ -107,6 +107,15 @@ def test_bench_planner_json(capsys):
     assert 0.0 <= result["success_rate"] <= 1.0
 
 
+def test_bench_planner004_compares_heap_and_list_on_the_same_queries(capsys):
+    assert main(["bench", "planner004", "--queries", "4", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["queries"] == 16 and result["found"] == 16 and result["same_paths"] == 16
+    assert result["heap_total_s"] > 0 and result["list_total_s"] > 0
+    assert result["length_on"] == result["length_off"] and result["lengthened"] == 0
+    assert result["turns_on"] <= result["turns_off"]
+
+
 def parse_source(name: str) -> str:
     from importlib import resources
 

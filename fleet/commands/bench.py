@@ -44,6 +44,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                          help="seed of the queries (default 2026)")
     planner.add_argument("--json", action="store_true", help="print one JSON object")
     planner.set_defaults(handler=run_planner)
+    planner004 = which.add_parser("planner004", help="seed 004's A*: binary heap against "
+                                  "plain list, and the turning cost",
+                                  description="Seed 004's improved A* on paper004: the "
+                                  "binary-heap open list against the plain list on the same "
+                                  "seeded queries of every task type (same paths, planning "
+                                  "time), and the turning cost on empty fetches over an empty "
+                                  "floor (turns and route lengths) (docs/agv-004.md).")
+    planner004.add_argument("--queries", type=positive_int, default=500,
+                            help="queries of each task type, and fetches for the turning "
+                            "cost (default 500)")
+    planner004.add_argument("--seed", type=integer, default=2026,
+                            help="seed of the queries (default 2026)")
+    planner004.add_argument("--json", action="store_true", help="print one JSON object")
+    planner004.set_defaults(handler=run_planner004)
     strategies = which.add_parser("strategies", help="the five strategies on fill and empty "
                                   "(Table 4 of seed 000) with a lower bound",
                                   description="Run every strategy in process on the fill "
@@ -214,6 +228,30 @@ def run_planner(args: argparse.Namespace) -> int:
     print(f"  success    {result['success_rate']:.1%}   outcomes {result['outcomes']}")
     print(f"  expansions p50 {result['expansions_p50']}   max {result['expansions_max']}")
     print(f"  setup per fill state (not in the query time) p50 {result['setup_p50_ms']} ms")
+    return 0
+
+
+def run_planner004(args: argparse.Namespace) -> int:
+    from bench import planner004
+
+    bar = ProgressBar(5 * args.queries, "seed 004 planner", unit="queries",
+                      enabled=not args.json)
+    try:
+        result = planner004.run(args.queries, args.seed, lambda done, _: bar.update(done))
+    finally:
+        bar.close()
+    if emitted_json(result, args.json):
+        return 0
+    r = result
+    print(f"seed 004's A* on {r['layout']}: {r['queries']} queries (seed {r['seed']}), "
+          f"{r['found']} found")
+    print(f"  heap  {r['heap_total_s']} s in all, p50 {r['heap_p50_ms']} ms")
+    print(f"  list  {r['list_total_s']} s in all, p50 {r['list_p50_ms']} ms")
+    print(f"  the heap {r['heap_speedup']}x faster; the same path in {r['same_paths']} of "
+          f"{r['queries']} queries")
+    print(f"  turning cost on {r['turn_queries']} empty fetches: turns {r['turns_off']} -> "
+          f"{r['turns_on']} ({r['turns_cut']:.1%} fewer), cells {r['length_off']} -> "
+          f"{r['length_on']}, {r['lengthened']} routes longer")
     return 0
 
 
