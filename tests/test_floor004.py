@@ -6,6 +6,7 @@ lengthening routes."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import random
 from collections import Counter
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from fleet.cli import main
 from fleet.errors import UserError
 from fleet.planning.astar004 import Costs, plan
 from fleet.planning.rules004 import (
@@ -27,6 +29,9 @@ from fleet.planning.rules004 import (
     value,
 )
 from fleet.world.floor004 import CLASSES, Floor004Shape, build, class_of, paper004
+from fleet.world.floor004_check import floor_problems
+from fleet.world.layout import LayoutError
+from fleet.world.layout_file import layout_source, load_layout, parse_layout
 
 FLOOR = paper004()
 DRAWING = Path(__file__).parent / "data" / "paper004.txt"
@@ -77,6 +82,57 @@ def test_shapes_that_cannot_be_built_are_refused_naming_the_number():
     assert len(small.slots) == 4 * 6 * 10 and len(small.piles) == 6
 
 
+# -- the layout file ---------------------------------------------------------------------------
+
+def test_the_layout_paper004_is_the_generated_floor():
+    layout = load_layout("paper004")
+    assert layout.floor == FLOOR and layout.render_drawing() == FLOOR.drawing()
+    assert layout.vehicle.kind == "lifting-agv" and (layout.cols, layout.rows) == (100, 50)
+
+
+@pytest.mark.parametrize(("change", "named"), [
+    (("blocks_across = 16", "blocks_across = 15"), "bounds: the map is 100 x 50 cells, but the "
+                                                   "floor of [floor004] is 94 x 50"),
+    (("piles_per_side = 10", "piles_per_side = 12"), "floor004: piles_per_side must be 0..11"),
+    (("stations = 8", "stations = 8\nqueue = 4"), "floor004: unknown key 'queue'"),
+    (("stations = 8", "stations = 'eight'"), "floor004: 'stations' must be a int"),
+    (('kind = "lifting-agv"', 'kind = "agv"'), "vehicle: a seed-004 floor is driven by "
+                                               "lifting-agv vehicles, not agv"),
+    (("C..........", "C.....R...."), "drawing: row 6 from the top differs from the floor at "
+                                     "column 6: 'R' drawn, '.' generated"),
+    (("[bounds]", "[[pile]]\nname = 'x'\n\n[bounds]"), "pile: a seed-004 floor is generated "
+                                                       "from [floor004]; it takes no [[pile]]"),
+])
+def test_a_floor_file_that_disagrees_with_itself_is_refused_naming_what(change, named):
+    text = layout_source("paper004").replace(*change, 1)
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(text, "f.toml")
+    assert str(refused.value).startswith(f"f.toml: {named}"), str(refused.value)
+
+
+def test_the_floor_is_shown_and_checked_and_a_run_on_it_is_refused_in_one_line(capsys):
+    assert main(["layout", "show", "paper004"]) == 0
+    out = capsys.readouterr().out
+    assert FLOOR.drawing() in out and "1920 in 192 blocks" in out and "stations 8" in out
+    assert main(["layout", "check", "paper004"]) == 0
+    assert "paper004: ok: 1920 slots, 18 goods, 8 stations, 20 piles" in capsys.readouterr().out
+    assert main(["run", "--layout", "paper004", "--inprocess"]) == 2
+    assert "the lifting-agv vehicle kind is not built yet" in capsys.readouterr().err
+
+
+def test_fleet_plan_answers_one_query_on_the_floor_with_the_tasks_rules(capsys):
+    assert main(["plan", "--layout", "paper004", "--from", "s-40-26", "--to", "station-3"]) == 0
+    head, cells, summary = capsys.readouterr().out.splitlines()
+    assert head.startswith("M2 (deliver) s-40-26 (40, 26) -> station-3 (30, 4)")
+    assert cells.split()[0] == "40,26" and cells.split()[-1] == "30,4"
+    assert "0 under shelves" in summary
+    assert main(["plan", "--layout", "paper004", "--from", "2,48", "--to", "s-40-26",
+                 "--turn-cost", "0", "--list-open"]) == 0
+    assert capsys.readouterr().out.startswith("M1 (fetch) 2,48")
+    assert main(["plan", "--layout", "paper004", "--from", "0,0", "--to", "s-40-26"]) == 2
+    assert "cell (0, 0) of paper004 is wall" in capsys.readouterr().err
+
+
 # -- the rules --------------------------------------------------------------------------------
 
 def test_the_direction_code_is_the_seeds():
@@ -94,55 +150,24 @@ def test_grid_values_follow_kind_and_occupancy():
     assert [v for v in range(10) if plannable(Task.RETURN, v)] == [0, 1, 5]
 
 
-def rule_graph(task: Task, cells: set) -> dict:
-    return {c: [(c[0] + STEP[d][0], c[1] + STEP[d][1]) for d in allowed(FLOOR.grid, task, c)
-                if (c[0] + STEP[d][0], c[1] + STEP[d][1]) in cells] for c in cells}
+def test_the_rules_let_every_part_of_the_work_be_done():
+    """Under the rules, empty AGVs reach every floor cell and slot from every other; loaded
+    AGVs every station from every slot and back; every pile is reached and left (B-MAP-2)."""
+    assert floor_problems(FLOOR) == []
 
 
-def reached(edges: dict, start) -> set:
-    seen, todo = {start}, [start]
-    while todo:
-        for n in edges[todo.pop()]:
-            if n not in seen:
-                seen.add(n)
-                todo.append(n)
-    return seen
-
-
-def strongly_connected(edges: dict) -> bool:
-    back: dict = {c: [] for c in edges}
-    for c, ns in edges.items():
-        for n in ns:
-            back[n].append(c)
-    first = next(iter(edges))
-    return reached(edges, first) == set(edges) == reached(back, first)
-
-
-def test_empty_agvs_reach_every_floor_cell_and_slot_from_every_other_under_the_rules():
-    cells = {c for c, k in FLOOR.kinds.items() if k in (Kind.FLOOR, Kind.SLOT)} - \
-        set(FLOOR.piles)
-    assert strongly_connected(rule_graph(Task.FETCH, cells))
-
-
-def test_loaded_agvs_connect_every_slot_with_every_station_under_the_rules():
-    """On the floor (slots are not driven loaded) the loaded rule graph is one strongly
-    connected piece, holding every entrance and exit point; every slot is left into it and
-    entered from it along the rules."""
-    floor = {c for c, k in FLOOR.kinds.items() if k is Kind.FLOOR} - set(FLOOR.piles)
-    edges = rule_graph(Task.DELIVER, floor)
-    assert strongly_connected(edges)
-    assert {s.entrance for s in FLOOR.stations} | {s.exit_point for s in FLOOR.stations} <= floor
-    for slot in FLOOR.slots:
-        x, y = slot.xy
-        around = [((x + dx, y + dy), d) for d, (dx, dy) in STEP.items()]
-        assert any(n in floor for n, _ in around), slot
-        assert any(n in floor and opposite(d) in allowed(FLOOR.grid, Task.RETURN, n)
-                   for n, d in around), slot
-
-
-def opposite(d: Direction) -> Direction:
-    return {Direction.UP: Direction.DOWN, Direction.DOWN: Direction.UP,
-            Direction.LEFT: Direction.RIGHT, Direction.RIGHT: Direction.LEFT}[d]
+def test_a_floor_whose_rules_cut_something_off_names_it():
+    """Walls put round one block cut its slots off; the check names each of them."""
+    block = [s for s in FLOOR.slots if s.block == (0, 5)]
+    around = {(x, y) for s in block for x in range(s.xy[0] - 1, s.xy[0] + 2)
+              for y in range(s.xy[1] - 1, s.xy[1] + 2)
+              if FLOOR.kind((x, y)) is Kind.FLOOR}
+    walled = dict(FLOOR.kinds) | {c: Kind.WALL for c in around}
+    broken = dataclasses.replace(FLOOR, kinds=walled)
+    broken.__dict__.pop("grid", None)  # the grid is derived from the kinds
+    problems = floor_problems(broken)
+    assert {s.name for s in block} <= {p.split()[1] for p in problems if p.startswith("slot")}
+    assert not any("station" in p for p in problems)
 
 
 def test_piles_are_reached_to_charge_and_left_only_outward():
@@ -192,19 +217,27 @@ def test_the_filters_keep_stagnant_and_moving_agvs_as_the_seed_says():
         assert (under in path.cells) is through, occupancy
 
 
-def test_every_move_planned_keeps_its_tasks_rules():
-    rng = random.Random(4)
-    floor = [c for c, k in FLOOR.kinds.items() if k is Kind.FLOOR and c not in FLOOR.piles]
-    for _ in range(40):
+FREE = sorted(c for c, k in FLOOR.kinds.items() if k is Kind.FLOOR and c not in FLOOR.piles)
+
+
+def random_queries(rng: random.Random, n: int) -> list[tuple]:
+    """n seeded queries of each task type: (task, start, goal, home slot)."""
+    out = []
+    for _ in range(n):
         slot = rng.choice(FLOOR.slots).xy
-        for task, a, b, home in ((Task.FETCH, rng.choice(floor), slot, None),
-                                 (Task.DELIVER, slot, rng.choice(FLOOR.stations).entrance, slot),
-                                 (Task.RETURN, rng.choice(FLOOR.stations).exit_point, slot,
-                                  slot)):
-            path = plan(FLOOR.grid, task, a, b, home=home)
-            for c, n in itertools.pairwise(path.cells):
-                code = direction_code(n[0] - c[0], n[1] - c[1])
-                assert Direction(code) in allowed(FLOOR.grid, task, c, home), (task, c, n)
+        out += [(Task.FETCH, rng.choice(FREE), slot, None),
+                (Task.DELIVER, slot, rng.choice(FLOOR.stations).entrance, slot),
+                (Task.RETURN, rng.choice(FLOOR.stations).exit_point, slot, slot),
+                (Task.CHARGE, slot, rng.choice(FLOOR.piles), None)]
+    return out
+
+
+def test_every_move_planned_keeps_its_tasks_rules():
+    for task, a, b, home in random_queries(random.Random(4), 40):
+        path = plan(FLOOR.grid, task, a, b, home=home)
+        for c, n in itertools.pairwise(path.cells):
+            code = direction_code(n[0] - c[0], n[1] - c[1])
+            assert Direction(code) in allowed(FLOOR.grid, task, c, home), (task, c, n)
 
 
 def test_the_search_stops_when_the_goal_enters_the_open_list():
@@ -217,17 +250,12 @@ def test_the_search_stops_when_the_goal_enters_the_open_list():
 
 def test_the_heap_and_the_list_return_the_same_paths():
     rng = random.Random(7)
-    floor = [c for c, k in FLOOR.kinds.items() if k is Kind.FLOOR and c not in FLOOR.piles]
-    for _ in range(60):
-        slot = rng.choice(FLOOR.slots).xy
-        for task, a, b, home in ((Task.FETCH, rng.choice(floor), slot, None),
-                                 (Task.DELIVER, slot, rng.choice(FLOOR.stations).entrance, slot),
-                                 (Task.CHARGE, slot, rng.choice(FLOOR.piles), None)):
-            heading = rng.choice(list(Direction))
-            costs = Costs(heat=2.0, t_value={rng.choice(floor): 1.0 for _ in range(50)})
-            by_heap = plan(FLOOR.grid, task, a, b, heading, costs, heap=True, home=home)
-            by_list = plan(FLOOR.grid, task, a, b, heading, costs, heap=False, home=home)
-            assert by_heap == by_list, (task, a, b)
+    for task, a, b, home in random_queries(rng, 45):
+        heading = rng.choice(list(Direction))
+        costs = Costs(heat=2.0, t_value={rng.choice(FREE): 1.0 for _ in range(50)})
+        by_heap = plan(FLOOR.grid, task, a, b, heading, costs, heap=True, home=home)
+        by_list = plan(FLOOR.grid, task, a, b, heading, costs, heap=False, home=home)
+        assert by_heap == by_list, (task, a, b)
 
 
 def test_the_turning_cost_cuts_turns_and_keeps_route_lengths():
@@ -235,10 +263,9 @@ def test_the_turning_cost_cuts_turns_and_keeps_route_lengths():
     never lengthens a route and removes many of its turns; `fleet bench` will report the
     share."""
     rng = random.Random(1)
-    floor = [c for c, k in FLOOR.kinds.items() if k is Kind.FLOOR and c not in FLOOR.piles]
     turns = {0.0: 0, 1.0: 0}
     for _ in range(120):
-        a, b = rng.choice(floor), rng.choice(FLOOR.slots).xy
+        a, b = rng.choice(FREE), rng.choice(FLOOR.slots).xy
         without, with_ = (plan(FLOOR.grid, Task.FETCH, a, b, costs=Costs(turn=w)) for w in (0, 1))
         assert with_.length <= without.length
         turns[0.0] += without.turns()

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, positive_int, writable_file
+from fleet.world.floor004 import CLASSES
+from fleet.world.floor004_check import floor_problems
 from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
 from fleet.world.lane_reachability import lane_problems
 from fleet.world.layout import LANE_SYMBOLS, Layout
@@ -72,9 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_list(args: argparse.Namespace) -> int:
     for name in builtin_names():
         layout = load_layout(name)
-        if layout.has_lanes:
-            print(f"{name:13} {len(layout.slots):5} slots   {len(layout.piles):3} piles     "
-                  f"{layout.description}")
+        if layout.has_lanes or layout.floor is not None:
+            slots, piles = ((len(layout.slots), len(layout.piles)) if layout.floor is None
+                            else (len(layout.floor.slots), len(layout.floor.piles)))
+            print(f"{name:13} {slots:5} slots   {piles:3} piles     {layout.description}")
             continue
         print(f"{name:13} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
               f"vehicles  {layout.description}")
@@ -142,9 +145,35 @@ def lane_summary(layout: Layout) -> str:
     return "\n".join(lines)
 
 
+def floor_summary(layout: Layout) -> str:
+    """What `fleet layout show` prints under a seed-004 floor's drawing: its slots and goods
+    by popularity class, stations, piles and parking places."""
+    floor = layout.floor
+    assert floor is not None
+    by_class = Counter(s.goods.rsplit("-", 1)[0] for s in floor.slots)
+    lines = _map_lines(layout)
+    lines.append(f"  slots    {len(floor.slots)} in {len({s.block for s in floor.slots})} "
+                 f"blocks of {floor.shape.block_width} x 2, one shelf each (named after its "
+                 f"home slot, s-COL-ROW); empty AGVs drive under them")
+    lines += _wrapped(f"goods {len(floor.goods)}", [
+        f"{c} {by_class[c]} slots" for c in CLASSES])
+    lines += _wrapped(f"stations {len(floor.stations)}", [
+        f"{s.name} entrance {floor.cell(s.entrance)} work {floor.cell(s.work)}"
+        for s in floor.stations])
+    lines.append(f"           each a fixed route: entrance, {len(floor.stations[0].waiting)} "
+                 f"waiting cells, the work cell, {len(floor.stations[0].exits)} exit cells, "
+                 f"the exit point" if floor.stations else "")
+    lines.append(f"  piles    {len(floor.piles)} in the side walls, left only outward")
+    lines.append(f"  parking  {len(floor.parking)} places on the top rows; vehicles "
+                 f"{layout.vehicle.kind}s")
+    return "\n".join(line for line in lines if line)
+
+
 def summary(layout: Layout) -> str:
     """What `fleet layout show` prints under the drawing: the map's size and extent, the
     clusters, stations, vehicles, obstacles and passages."""
+    if layout.floor is not None:
+        return floor_summary(layout)
     if layout.has_lanes:
         return lane_summary(layout)
     lines = [
@@ -167,6 +196,8 @@ def summary(layout: Layout) -> str:
 
 def run_check(args: argparse.Namespace) -> int:
     layout = load_layout(args.file)  # structural errors raise LayoutError naming the element
+    if layout.floor is not None:
+        return _check_floor(args.file, layout)
     if layout.has_lanes:
         return _check_lanes(args.file, layout)
     bar = ProgressBar(len(layout.stacks), "reachability", unit="stacks")
@@ -188,15 +219,30 @@ def _reported(name: str, problems: Sequence[object]) -> int:
     return 1
 
 
-def _check_lanes(name: str, layout: Layout) -> int:
-    problems = lane_problems(layout)
+def _checked(name: str, problems: Sequence[object], ok: str) -> int:
+    """The problems (1), or that the layout is ok and what it holds (0)."""
     if problems:
         return _reported(name, problems)
-    print(f"{name}: ok: {len(layout.slots)} slots, {len(layout.packing)} packing stations, "
-          f"{len(layout.piles)} piles, {len(layout.lanes)} lanes, {len(layout.junctions)} "
-          f"junctions; every slot, station and pile can be reached from every other along "
-          f"the lanes")
+    print(f"{name}: ok: {ok}")
     return 0
+
+
+def _check_lanes(name: str, layout: Layout) -> int:
+    return _checked(name, lane_problems(layout),
+                    f"{len(layout.slots)} slots, {len(layout.packing)} packing stations, "
+                    f"{len(layout.piles)} piles, {len(layout.lanes)} lanes, "
+                    f"{len(layout.junctions)} junctions; every slot, station and pile can be "
+                    f"reached from every other along the lanes")
+
+
+def _check_floor(name: str, layout: Layout) -> int:
+    floor = layout.floor
+    assert floor is not None
+    return _checked(name, floor_problems(floor),
+                    f"{len(floor.slots)} slots, {len(floor.goods)} goods, "
+                    f"{len(floor.stations)} stations, {len(floor.piles)} piles; under the "
+                    f"traffic rules empty AGVs reach every cell and slot, loaded AGVs every "
+                    f"station from every slot and back, and every pile is reached and left")
 
 
 def run_generate(args: argparse.Namespace) -> int:

@@ -9,13 +9,14 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fleet.commands import lane_plan
+from fleet.commands import floor_plan, lane_plan
 from fleet.errors import UserError
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.runtime.argtypes import (
     MAX_SIM_SECONDS,
     layout_arg,
+    non_negative_float,
     png_file,
     positive_int,
     sim_seconds,
@@ -49,6 +50,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="on a lane layout (seed 002; places are slots 's-3-2', packing "
                    "stations, piles or cells 'col,row'): the lanes mode, the paper's literal "
                    "dynamic map with errata E1-E7, or with its raw indices (default lanes)")
+    p.add_argument("--task", choices=list(floor_plan.TASKS),
+                   help="on a seed-004 floor (places are slots 's-7-45', stations "
+                   "'station-3' or cells 'col,row'): the AGV's task, whose traffic rules it "
+                   "keeps (default: from the places: to a pile charge, slot to station "
+                   "deliver, station to slot return, else fetch)")
+    p.add_argument("--turn-cost", type=non_negative_float, default=1.0,
+                   help="on a seed-004 floor: the turning cost, cells a quarter turn "
+                   "(default 1; 0 switches it off)")
+    p.add_argument("--list-open", action="store_true",
+                   help="on a seed-004 floor: search with the plain list, not the binary heap "
+                   "(the same path, slower)")
     p.set_defaults(handler=run)
 
 
@@ -211,6 +223,8 @@ def format_trajectory(traj: Trajectory) -> str:
 
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
+    if layout.floor is not None:
+        return floor_plan.run(args, layout)
     if layout.has_lanes:
         return lane_plan.run(args, layout)
     forklifts = len(layout.vehicle_starts)

@@ -44,6 +44,13 @@ def positive_float(text: str) -> float:
     return value
 
 
+def non_negative_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise _refuse(text, "must be 0 or a positive number")
+    return value
+
+
 MAX_SIM_SECONDS = 1e6  # days of simulated time: beyond any mission (as fault scenarios say)
 
 

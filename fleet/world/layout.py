@@ -20,6 +20,7 @@ from fleet.planning.gridmap import GridMap
 from fleet.planning.trajectory import Pose
 from fleet.vehicles import registry
 from fleet.vehicles.kind import VehicleKind
+from fleet.world.floor004 import Floor004
 
 # The drawing's symbols (docs/layouts.md): clusters and obstacles bring their own.
 FREE, PASSAGE, NOTCH, STATION = ".", ":", "n", "P"
@@ -154,6 +155,8 @@ class Layout:
     packing: tuple[PackingStation, ...] = ()
     piles: tuple[Pile, ...] = ()
     access_cells: frozenset[Cell] = frozenset()  # crossed straight, element to lane only
+    # A seed-004 floor (docs/layouts.md, "Seed 004 floors"): generated, with its own cells.
+    floor: Floor004 | None = None
 
     @property
     def has_lanes(self) -> bool:
@@ -220,6 +223,8 @@ class Layout:
 
     def render_drawing(self) -> str:
         """The ASCII drawing the data implies, top row first (docs/layouts.md has the legend)."""
+        if self.floor is not None:
+            return self.floor.drawing()
         grid = [[FREE] * self.cols for _ in range(self.rows)]
         for cell, symbol in self._symbols():
             grid[cell[1]][cell[0]] = symbol

@@ -22,6 +22,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose
 from fleet.vehicles import registry
 from fleet.vehicles.kind import VehicleKind
+from fleet.world.floor004_file import FLOOR_TABLE, FloorParts
 from fleet.world.lane_file import LANE_TABLES, LaneParts
 from fleet.world.layout import (
     FREE,
@@ -118,10 +119,10 @@ def _finite(value: object) -> bool:
 
 
 _TOP_KEYS = {"name", "description", "cell_size", "bounds", "vehicle", "cluster", "station",
-             "obstacle", "passage", "starts", "drawing", *LANE_TABLES}
+             "obstacle", "passage", "starts", "drawing", FLOOR_TABLE, *LANE_TABLES}
 
 
-class _Builder(LaneParts):
+class _Builder(LaneParts, FloorParts):
     """Turns the parsed TOML into a Layout, raising LayoutError at the first problem."""
 
     def __init__(self, data: dict, where: str) -> None:
@@ -220,6 +221,9 @@ class _Builder(LaneParts):
         origin = (x0 + cell_size / 2, y0 + cell_size / 2)
 
         vehicle = self.vehicle(data.get("vehicle", {}), cell_size)
+        if self.is_floor004():
+            return self.floor_layout(Layout(name, description, self.cols, self.rows, cell_size,
+                                            origin, (), (), (), (), (), vehicle, (), ""))
         obstacles = [self.obstacle(t, i) for i, t in enumerate(self.tables("obstacle"))]
         if self.is_lane_layout():
             layout = self.lane_layout(Layout(name, description, self.cols, self.rows,
