@@ -76,6 +76,8 @@ def test_every_slot_lies_beside_a_one_cell_aisle():
 def test_shapes_that_cannot_be_built_are_refused_naming_the_number():
     with pytest.raises(UserError, match="piles_per_side"):
         build(Floor004Shape(piles_per_side=12))
+    with pytest.raises(UserError, match="parking_rows must be 2 or more"):
+        build(Floor004Shape(parking_rows=1))
     with pytest.raises(UserError, match="8 stations 12 columns apart"):
         build(Floor004Shape(blocks_across=4))
     small = build(Floor004Shape(blocks_across=4, double_rows=6, stations=2, piles_per_side=3))
@@ -156,6 +158,38 @@ def test_the_rules_let_every_part_of_the_work_be_done():
     assert floor_problems(FLOOR) == []
 
 
+def test_a_floor_without_piles_is_named_so():
+    assert floor_problems(build(Floor004Shape(piles_per_side=0))) == [
+        "the floor has no charging pile"]
+
+
+U, L, D, R = Direction.UP, Direction.LEFT, Direction.DOWN, Direction.RIGHT
+
+
+@pytest.mark.parametrize(("task", "xy", "home", "expected"), [
+    # empty AGVs: the row's and the column's rule everywhere (B.4.1)
+    (Task.FETCH, (20, 3), None, {L, U}),  # odd row left, even plain column up
+    (Task.FETCH, (20, 4), None, {R, U}),  # under a shelf too: even row right
+    (Task.FETCH, (7, 4), None, {R, D}),  # aisle column 1 (from the left) runs down
+    (Task.FETCH, (13, 9), None, {L, U}),  # aisle column 2 runs up
+    (Task.FETCH, (1, 9), None, {L, U}),  # the approach column is aisle column 0
+    (Task.FETCH, (98, 10), None, {R, D}),  # aisle column 17
+    # loaded AGVs: the aisle's own way, free across it; both at crossings and in the open
+    (Task.DELIVER, (20, 3), None, {L, U, D}),
+    (Task.RETURN, (7, 4), None, {D, L, R}),
+    (Task.DELIVER, (7, 3), None, {L, D}),
+    (Task.DELIVER, (20, 42), None, {R, U}),
+    (Task.RETURN, (20, 4), (20, 4), set(Direction)),  # its own slot
+    # piles are left outward; charging AGVs turn toward the piles beside them
+    (Task.FETCH, (0, 6), None, {R}), (Task.CHARGE, (99, 6), None, {L}),
+    (Task.CHARGE, (1, 6), None, {L, U}), (Task.CHARGE, (98, 9), None, {R, D}),
+])
+def test_the_rule_table_is_the_notes(task, xy, home, expected):
+    """D_M(x, y) as the note reconstructs Table 3, cell by cell (y down: row 3 is the first
+    aisle, x = 7 the first aisle column after the approach column x = 1)."""
+    assert allowed(FLOOR.grid, task, xy, home) == expected
+
+
 def test_a_floor_whose_rules_cut_something_off_names_it():
     """Walls put round one block cut its slots off; the check names each of them."""
     block = [s for s in FLOOR.slots if s.block == (0, 5)]
@@ -198,7 +232,7 @@ def test_an_empty_agv_drives_under_shelves_and_a_loaded_one_does_not():
 def test_the_filters_keep_stagnant_and_moving_agvs_as_the_seed_says():
     """Empty AGVs avoid stagnant cells (5, 6) but plan through moving ones (1, 4); loaded AGVs
     plan through a stagnant floor cell (5: it will have cleared) but not a 6."""
-    start, goal = (20, 3), (30, 3)  # along a horizontal aisle
+    start, goal = (20, 3), (30, 3)  # along aisle row 3, which runs left: round by row 2
     straight = plan(FLOOR.grid, Task.FETCH, start, goal)
     middle = straight.cells[5]
     for occupancy, through in ((Occupancy.MOVING, True), (Occupancy.STAGNANT, False)):

@@ -111,6 +111,22 @@ def test_a_slot_driven_straight_through_is_a_breach_and_one_stopped_at_is_not():
     assert all(b.vehicle == 1 for b in lane_breaches(CHANNEL, pieces))
 
 
+def test_a_route_whose_start_was_not_recorded_may_have_left_through_a_door():
+    """Stepping from the lane beside slot (2, 2) across the channel is a door's move only
+    for a route that began at the slot. Seen from the mission's start it is a breach; seen
+    after a window without states (the AGV may have left the slot unseen) it is not judged,
+    but a wrong-way move after it still is."""
+    across = [(2, 1), (2, 0), (3, 0), (4, 0)]
+    assert {b.rule for b in lane_breaches(CHANNEL, tracks(driven(1, across), GRID,
+                                                          1.5 * PERIOD))} == {"crossing-lane"}
+    seen_before = driven(1, [(5, 0), (6, 0)])
+    resumed = seen_before + driven(1, across, t0=10.0)
+    assert lane_breaches(CHANNEL, tracks(resumed, GRID, 1.5 * PERIOD)) == []
+    back = seen_before + driven(1, [(2, 1), (2, 0), (3, 0), (2, 0), (1, 0)], t0=10.0)
+    assert [b.move for b in lane_breaches(CHANNEL, tracks(back, GRID, 1.5 * PERIOD))] == [
+        ((3, 0), (2, 0)), ((2, 0), (1, 0))]
+
+
 def test_states_further_apart_than_the_gap_are_not_joined():
     jumped = driven(1, [(0, 0), (1, 0)]) + driven(1, [(5, 0), (6, 0)], t0=5.0)
     pieces = tracks(jumped, GRID, 1.5 * PERIOD)
@@ -245,6 +261,56 @@ def test_an_order_whose_whole_trip_no_one_saw_or_said_is_not_verified_not_lost()
     states = unseen_from(trip(1, SLOT, SLOT), 0.2, 50.4)
     verdict = orders_verdict(PAPER002, ["s-3-3"], states, [], True)
     assert verdict.lost == [] and verdict.unseen == ["order 1 (s-3-3)"] and verdict.passed
+
+
+AISLE = next(iter(PAPER002.lane_directions))  # a lane cell: no slot, no station
+
+
+def idle(vehicle: int, t0: float, t1: float, loaded_after: bool = False) -> list[Carrying]:
+    """An AGV on a lane, its states between t0 and t1 not recorded."""
+    return [Carrying(vehicle, t0, AISLE, frozenset([AISLE]), False, False),
+            Carrying(vehicle, t1, AISLE, frozenset([AISLE]), loaded_after, False, unseen=True)]
+
+
+def test_a_window_too_short_to_hide_a_packing_excuses_no_order():
+    """AGV 2 was not recorded for 5 s: no packing fits; the order whose shelf nobody moved
+    is lost (and its announcement not served). One of 60 s could hide a packing: an order
+    whose shelf was never seen to move is then not verified, as many as fit, no more."""
+    short = trip(1, SLOT, SLOT) + idle(2, 0.0, 5.0)
+    said = [Announced("s-3-3", 1, 1, 50.5), Announced("s-4-3", 2, 2, 60.0)]
+    verdict = orders_verdict(PAPER002, ["s-3-3", "s-4-3"], short, said, True)
+    assert verdict.lost == verdict.not_served == ["order 2 (s-4-3)"] and not verdict.passed
+    long = trip(1, SLOT, SLOT) + idle(2, 0.0, 15.0)  # one packing of 10 s fits
+    three = ["s-3-3", "s-4-3", "s-5-3"]
+    verdict = orders_verdict(PAPER002, three, long, [], True)
+    assert verdict.unseen == ["order 2 (s-4-3)"] and verdict.lost == ["order 3 (s-5-3)"]
+
+
+def test_a_shelf_lifted_unseen_excuses_one_contradiction_not_two():
+    """AGV 9 came out of a window carrying a shelf nobody named: AGV 2 putting a shelf on a
+    slot the book says is full is explained by it (that slot's shelf is the one lifted
+    unseen); AGV 3 doing the same after it is a fault."""
+    states = (idle(9, 0.0, 30.0, loaded_after=True)
+              + [dataclasses.replace(s, t=s.t + 40.0) for s in trip(2, OTHER, SLOT)]
+              + [dataclasses.replace(s, t=s.t + 100.0)
+                 for s in trip(3, PAPER002.shelves["s-5-3"], PAPER002.shelves["s-6-3"])])
+    faults = orders_verdict(PAPER002, ["s-4-3"], states, [], False).shelf_faults
+    assert [(f.vehicle, f.why) for f in faults] == [(3, "put s-5-3 down on s-6-3 in cell "
+                                                        f"{tuple(PAPER002.shelves['s-6-3'].cell)}")]
+
+
+def test_shelves_lifted_unseen_and_put_back_home_are_each_their_own():
+    """AGVs 1 and 2 each lift a shelf where nobody saw or said, and each puts its own back
+    home, seen: each is named as its own AGV's, and a later seen trip of s-3-3 is sound."""
+    def back_home(vehicle: int, slot, seen_from: float, down_at: float) -> list[Carrying]:
+        cell = tuple(slot.cell)
+        return idle(vehicle, 0.0, seen_from, loaded_after=True) + carrying(vehicle, [
+            (down_at - 0.5, cell, True, False), (down_at, cell, False, False)])
+    # AGV 2's shelf was seen first, AGV 1's is put back first: neither is the other's.
+    states = (back_home(1, SLOT, 30.0, 40.5) + back_home(2, OTHER, 25.0, 45.5)
+              + trip(3, SLOT, SLOT, t0=100))
+    verdict = orders_verdict(PAPER002, ["s-3-3"], states, [], True)
+    assert verdict.shelf_faults == [] and verdict.done == 1 and verdict.passed, verdict
 
 
 # -- a real recording ----------------------------------------------------------------------

@@ -178,18 +178,30 @@ def executed_routes(piece: list[Visit], places: set[Cell]) -> list[list[Visit]]:
     return [r for r in routes if len(r) > 1]
 
 
+UNSEEN_DOOR_MOVES = 2  # a door's moves: onto the access cell, and across the channel
+
+
 def lane_breaches(layout: Layout, pieces: dict[int, list[list[Visit]]]
                   ) -> list[ExecutedViolation]:
-    """Every executed move that breaks the lane rules, by AGV and time."""
+    """Every executed move that breaks the lane rules, by AGV and time. Where a piece of
+    track begins after (or ends before) a window the AGV's states were not recorded in, its
+    first (last) route may have begun (ended) at a place unseen: its first (last) two moves,
+    which a door would allow, are not judged."""
     places = {tuple(p.cell) for group in (layout.slots, layout.packing, layout.piles)
               for p in group}
     out = []
     for vehicle, vehicle_pieces in pieces.items():
-        for piece in vehicle_pieces:
-            for route in executed_routes(piece, places):
+        for k, piece in enumerate(vehicle_pieces):
+            routes = executed_routes(piece, places)
+            for r, route in enumerate(routes):
+                moves = len(route) - 1
+                first = UNSEEN_DOOR_MOVES if k > 0 and r == 0 else 0
+                last = moves - UNSEEN_DOOR_MOVES if k < len(vehicle_pieces) - 1 and \
+                    r == len(routes) - 1 else moves
                 for v in lane_violations(layout, [visit.cell for visit in route]):
-                    out.append(ExecutedViolation(vehicle, route[v.index].t_out, v.move, v.rule,
-                                                 v.detail))
+                    if first <= v.index < last:
+                        out.append(ExecutedViolation(vehicle, route[v.index].t_out, v.move,
+                                                     v.rule, v.detail))
     return sorted(out, key=lambda e: (e.t, e.vehicle))
 
 

@@ -34,6 +34,7 @@ module's own bookkeeping: nothing of the order book or the engine is used.
 from __future__ import annotations
 
 import itertools
+import math
 from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -117,9 +118,10 @@ def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carryin
                    announced: list[Announced], finished: bool,
                    claims: Iterable[Claim] = ()) -> OrdersVerdict:
     """What the states say of the released orders (order i + 1's shelf is `released[i]`)."""
-    book = _Shelves({tuple(s.cell): s.name for s in layout.slots},
-                    {s.name: tuple(s.cell) for s in layout.slots})
     stations = {tuple(p.cell): p for p in layout.packing}
+    book = _Shelves({tuple(s.cell): s.name for s in layout.slots},
+                    {s.name: tuple(s.cell) for s in layout.slots},
+                    min((p.dwell for p in layout.packing), default=math.inf))
     faults: list[ShelfFault] = []
     for event in _events(states, stations, claims):
         t, vehicle, what, cell = event.t, event.vehicle, event.what, event.cell
@@ -132,7 +134,7 @@ def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carryin
             elif vehicle in book.carried:
                 faults.append(ShelfFault(t, vehicle, f"lifted at {_where(cell)} while "
                                                      f"carrying {book.carried[vehicle]}"))
-            elif book.slots[cell] is None and not book.astray:
+            elif book.slots[cell] is None and not book.astray:  # each astray excuses one
                 faults.append(ShelfFault(t, vehicle, f"lifted at the vacant slot "
                                                      f"{_where(cell)}"))
             else:
@@ -145,7 +147,7 @@ def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carryin
                 faults.append(ShelfFault(t, vehicle, f"put {shelf} down away from a slot "
                                                      f"({_where(cell)})"))
                 del book.carried[vehicle]
-            elif book.slots[cell] is not None and not book.unknown:
+            elif book.slots[cell] is not None and not book.unknown:  # each unknown: one
                 faults.append(ShelfFault(t, vehicle, f"put {shelf} down on {book.slots[cell]} "
                                                      f"in {_where(cell)}"))
                 del book.carried[vehicle]
@@ -170,14 +172,16 @@ def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carryin
                    if shelf not in book.on_word and shelf not in book.unknown]
     named = {shelf: drops for shelf, drops in book.done_at.items() if shelf not in book.unknown}
     verdict = _accounted(released, named, announced, faults)
-    # An order not seen done may have been done unseen if its shelf moved unseen, or never
-    # seen to move while some AGV was not recorded.
-    moved_unseen = [f"order {o} ({s})" for o, s in enumerate(released, 1) if s in book.on_word
-                    or (book.blind and s not in book.lifted)]
-    verdict.unverified = [o for o in moved_unseen if o not in verdict.lost]
-    verdict.unseen = [o for o in verdict.lost if o in moved_unseen]
-    verdict.lost = [o for o in verdict.lost if o not in moved_unseen]
-    verdict.not_served = [o for o in verdict.not_served if o not in moved_unseen]
+    # An order not seen done may have been done unseen if its shelf moved unseen; or, as
+    # many as the packings the windows nobody said anything of could hold, if its shelf was
+    # never seen to move.
+    shelf_of = {f"order {o} ({s})": s for o, s in enumerate(released, 1)}
+    moved = [o for o, shelf in shelf_of.items() if shelf in book.on_word]
+    never = [o for o in verdict.lost if o not in moved and shelf_of[o] not in book.lifted]
+    verdict.unverified = [o for o in moved if o not in verdict.lost]
+    verdict.unseen = [o for o in verdict.lost if o in moved] + never[:book.hidden_packings]
+    verdict.lost = [o for o in verdict.lost if o not in verdict.unseen]
+    verdict.not_served = [o for o in verdict.not_served if o not in verdict.unseen]
     return verdict
 
 
@@ -185,12 +189,14 @@ def orders_verdict(layout: Layout, released: list[str], states: Iterable[Carryin
 class _Shelves:
     """Where every shelf is, as far as the recording tells. A window no state or trip
     explains leaves a shelf of unknown name on an AGV (`unknown`) or a known one put down at
-    an unknown slot (`astray`); the first seen move that contradicts the book names it (a
-    shelf put down on a slot the book says is full: that slot's shelf is the oldest unknown
-    one; one lifted at a slot the book says is vacant: the oldest astray one)."""
+    an unknown slot (`astray`); the first seen move that contradicts the book names it, so
+    each excuses one contradiction at most: a shelf put down on a slot the book says is full
+    names that slot's shelf as the AGV's own unknown one, else the oldest; a shelf lifted at
+    a slot the book says is vacant is the astray one whose home it is, else the oldest."""
 
     slots: dict[Cell, str | None]  # what each slot holds
     homes: dict[str, Cell]  # each slot's cell by its name
+    min_dwell: float  # the shortest packing: a window shorter cannot hide one
     carried: dict[int, str] = field(default_factory=dict)
     packed: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
     done_at: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
@@ -198,19 +204,24 @@ class _Shelves:
     unknown: list[str] = field(default_factory=list)
     astray: list[str] = field(default_factory=list)
     lifted: set[str] = field(default_factory=set)  # shelves seen or said to move
-    blind: bool = False  # some AGV's states were not recorded for a while
+    hidden_packings: int = 0  # packings the windows nobody said anything of could hold
 
     def lift(self, vehicle: int, cell: Cell) -> None:
-        if self.slots[cell] is None:  # the oldest shelf put down unseen
-            self.slots[cell] = self.astray.pop(0)
+        if self.slots[cell] is None:  # a shelf put down unseen: the one at home here first
+            home = [s for s in self.astray if self.homes.get(s) == cell]
+            self.slots[cell] = (home or self.astray)[0]
+            self.astray.remove(self.slots[cell])
             self.on_word.add(self.slots[cell])
         self.carried[vehicle], self.slots[cell] = self.slots[cell], None
         self.lifted.add(self.carried[vehicle])
 
     def drop(self, vehicle: int, cell: Cell, t: float) -> None:
         occupant, self.slots[cell] = self.slots[cell], None
-        if occupant is not None:  # it was the oldest shelf lifted unseen
-            self._name(self.unknown.pop(0), occupant)
+        if occupant is not None:  # it was lifted unseen: the AGV's own unknown one first
+            own = self.carried[vehicle]
+            unknown = own if own in self.unknown else self.unknown[0]
+            self.unknown.remove(unknown)
+            self._name(unknown, occupant)
         shelf = self.carried.pop(vehicle)
         self.slots[cell] = shelf
         self.done_at[shelf] += [t] * len(self.packed.pop(shelf, []))
@@ -246,14 +257,16 @@ class _Shelves:
             else:
                 self.astray.append(self.carried.pop(vehicle))
         elif what == "gap":
-            self.blind = True
+            unsaid = not event.explained
+            if unsaid:
+                self.hidden_packings += int(event.span // self.min_dwell)
             if event.loaded and shelf is None:
                 self.carried[vehicle] = f"an unseen shelf (AGV {vehicle}, t={event.t:.2f} s)"
                 self.unknown.append(self.carried[vehicle])
             elif not event.loaded and shelf is not None:
                 self.on_word.add(shelf)  # put down where no state or trip says
                 self.astray.append(self.carried.pop(vehicle))
-            elif shelf is not None:
+            elif shelf is not None and unsaid and event.span >= self.min_dwell:
                 self.on_word.add(shelf)  # carried through: it may have been packed unseen
 
     def _name(self, unknown: str, shelf: str) -> None:
@@ -308,10 +321,11 @@ class _Event:
     vehicle: int
     what: str  # "lift", "drop", "stay" (at a packing station) or "gap" (states unseen)
     cell: Cell | None
-    span: float = 0.0  # a stay's length
+    span: float = 0.0  # a stay's length, a gap's
     tolerance: float = 0.0  # how much shorter than the truth a stay may be seen
     unseen: bool = False  # a stay next to a window the AGV's states were not recorded in
     loaded: bool = False  # carrying at a gap's end
+    explained: bool = False  # a gap some announced trip ended in
     word: str = ""  # taken on the dispatcher's word: the shelf lifted, the slot put into,
     # the station packed at
 
@@ -333,8 +347,10 @@ def _events(states: Iterable[Carrying], stations: dict[Cell, PackingStation],
         stay: list[Carrying] = []
         for before, s in zip([None, *seen], seen, strict=False):
             if before is not None and s.unseen:
-                events += _trips_unseen(said[vehicle], before.t, s.t)
-                events.append(_Event(s.t, vehicle, "gap", None, loaded=s.loaded))
+                trips = _trips_unseen(said[vehicle], before.t, s.t)
+                events += trips
+                events.append(_Event(s.t, vehicle, "gap", None, s.t - before.t,
+                                     loaded=s.loaded, explained=bool(trips)))
             elif before is not None and before.loaded != s.loaded:
                 where = next(iter(s.through)) if len(s.through) == 1 else None
                 events.append(_Event(s.t, vehicle, "lift" if s.loaded else "drop", where))

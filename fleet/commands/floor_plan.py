@@ -64,7 +64,9 @@ def run(args: argparse.Namespace, layout: Layout) -> int:
                             f"floor alone and meet each other while driving; docs/agv-004.md)")
     start, goal = place(floor, args.start, True), place(floor, args.goal, False)
     task = TASKS[args.task] if args.task else task_for(floor, start, goal)
-    home = start if task is Task.DELIVER else goal if task is Task.RETURN else None
+    home = {Task.DELIVER: start, Task.RETURN: goal}.get(task)  # a loaded AGV's own slot
+    if home is not None and floor.kind(home) is not Kind.SLOT:
+        home = None
     t0 = time.perf_counter()
     path = plan(floor.grid, task, start, goal, costs=Costs(turn=args.turn_cost),
                 heap=not args.list_open, home=home)

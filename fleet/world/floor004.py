@@ -43,10 +43,13 @@ class Floor004Shape:
     def check(self) -> None:
         """A shape that cannot be built is refused, naming the number."""
         for name in ("blocks_across", "double_rows", "stations", "station_pitch",
-                     "block_width", "parking_rows", "transit_rows"):
+                     "block_width"):
             if getattr(self, name) < 1:
                 raise UserError(f"floor shape: {name} must be 1 or more, not "
                                 f"{getattr(self, name)}")
+        if self.parking_rows < 2:
+            raise UserError("floor shape: parking_rows must be 2 or more (the AGVs park on the "
+                            "top two rows)")
         if self.transit_rows < 2:
             raise UserError("floor shape: transit_rows must be 2 or more (an open row and the "
                             "stations' entrance row)")

@@ -1,7 +1,8 @@
 """Whether a seed-004 floor's traffic rules let the work be done (the note's B-MAP-2), as
 problems naming what is cut off: empty AGVs must reach every floor cell and slot from every
 other; loaded AGVs must get from every slot to every station's entrance and from every exit
-point back to every slot; an AGV must reach every pile to charge and leave it.
+point back to every slot; an AGV must reach a pile to charge from wherever it may turn to
+charge (a slot, a parking place, an exit point), and leave every pile.
 
 Reachability here is on the rule graphs alone (fleet/planning/rules004.py), with nothing
 else on the floor: whatever stands in the way while driving is the tracker's to meet.
@@ -43,12 +44,27 @@ def floor_problems(floor: Floor004) -> list[str]:
         elif not into:
             problems.append(f"slot {slot.name} at {slot.xy}: a loaded AGV cannot enter it "
                             f"from the aisles along the rules")
+    return problems + _charging_problems(floor, empty)
+
+
+def _charging_problems(floor: Floor004, empty: set[XY]) -> list[str]:
+    """Every slot, parking place and exit point (where an AGV may turn to charge) reaches a
+    pile under the charging rules, and every pile is left onto the floor."""
+    if not floor.piles:
+        return ["the floor has no charging pile"]
+    grid = floor.grid
+    charge = _reversed(_edges(grid, Task.CHARGE, empty | set(floor.piles)))
+    to_pile = _reached(charge, *floor.piles)
+    places = [(f"slot {s.name} at {s.xy}", s.xy) for s in floor.slots]
+    places += [(f"parking place {c}", c) for c in floor.parking]
+    places += [(f"{s.name}: its exit point {s.exit_point}", s.exit_point)
+               for s in floor.stations]
+    problems = [f"{name}: no pile is reached from there to charge"
+                for name, cell in places if cell not in to_pile]
     for pile in floor.piles:
         (leave,) = allowed(grid, Task.CHARGE, pile)
-        beside = (pile[0] + STEP[leave][0], pile[1] + STEP[leave][1])
-        if beside not in empty or _toward(beside, pile) not in allowed(grid, Task.CHARGE,
-                                                                      beside):
-            problems.append(f"pile at {pile}: not entered to charge from the column beside it")
+        if (pile[0] + STEP[leave][0], pile[1] + STEP[leave][1]) not in empty:
+            problems.append(f"pile at {pile}: it is not left onto the floor")
     return problems
 
 
@@ -78,8 +94,8 @@ def _reversed(edges: Edges) -> Edges:
     return back
 
 
-def _reached(edges: Edges, start: XY) -> set[XY]:
-    seen, todo = {start}, [start]
+def _reached(edges: Edges, *starts: XY) -> set[XY]:
+    seen, todo = set(starts), list(starts)
     while todo:
         for n in edges.get(todo.pop(), ()):
             if n not in seen:
