@@ -22,9 +22,13 @@ from fleet.world.floor004 import Floor004, paper004
 Query = tuple[Task, XY, XY, Direction, XY | None]  # task, start, goal, heading, home slot
 
 
-def queries(floor: Floor004, n: int, rng: random.Random) -> list[Query]:
+def free_cells(floor: Floor004) -> list[XY]:
+    """The floor cells a query may start from (no piles), in a fixed order."""
+    return sorted(c for c, k in floor.kinds.items() if k is Kind.FLOOR and c not in floor.piles)
+
+
+def queries(floor: Floor004, free: list[XY], n: int, rng: random.Random) -> list[Query]:
     """n queries of each task type."""
-    free = sorted(c for c, k in floor.kinds.items() if k is Kind.FLOOR and c not in floor.piles)
     out: list[Query] = []
     for _ in range(n):
         slot = rng.choice(floor.slots).xy
@@ -46,7 +50,8 @@ def _timed(floor: Floor004, q: Query, heap: bool) -> tuple[Path | None, float]:
 def run(n: int, seed: int, progress: Callable[[int, int], None] | None = None) -> dict:
     floor = paper004()
     rng = random.Random(seed)
-    asked = queries(floor, n, rng)
+    free = free_cells(floor)
+    asked = queries(floor, free, n, rng)
     times: dict[str, list[float]] = {"heap": [], "list": []}
     same, found = 0, 0
     for k, q in enumerate(asked, 1):
@@ -60,8 +65,6 @@ def run(n: int, seed: int, progress: Callable[[int, int], None] | None = None) -
             progress(k, len(asked) + n)
     turns = {"off": [0, 0], "on": [0, 0]}  # [length, turns] in all
     lengthened = 0
-    free = sorted(c for c, kind in floor.kinds.items() if kind is Kind.FLOOR
-                  and c not in floor.piles)
     for k in range(n):
         a, b = rng.choice(free), rng.choice(floor.slots).xy
         off = plan(floor.grid, Task.FETCH, a, b, costs=Costs(turn=0.0))

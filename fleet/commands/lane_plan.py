@@ -13,6 +13,7 @@ from fleet.planning.geometry import Cell
 from fleet.planning.lane_route import LaneRoutes, Route
 from fleet.world.lanes import lane_graph, places
 from fleet.world.layout import Layout
+from fleet.world.places import col_row
 
 MAPS = ("lanes", "literal", "literal-raw")
 
@@ -24,10 +25,7 @@ def place_cell(layout: Layout, text: str) -> Cell:
     if text in named:
         return named[text]
     if "," in text:
-        try:
-            col, row = (int(part) for part in text.split(","))
-        except ValueError:
-            raise UserError(f"place {text!r} must be 'col,row' with two whole numbers") from None
+        col, row = col_row(text)
         if (col, row) in layout.lane_directions or (col, row) in named.values():
             return col, row
         raise UserError(f"place {text!r}: cell ({col}, {row}) of layout {layout.name} is no "

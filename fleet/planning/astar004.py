@@ -21,7 +21,17 @@ import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from fleet.planning.rules004 import STEP, XY, Direction, Grid004, Task, allowed, plannable, value
+from fleet.planning.rules004 import (
+    STEP,
+    XY,
+    Direction,
+    Grid004,
+    Task,
+    allowed,
+    direction_code,
+    plannable,
+    value,
+)
 
 Values = Callable[[XY], int]  # a cell's grid value now (the static kind when nothing moves)
 
@@ -51,10 +61,11 @@ class Path:
 
 
 def heading_of(a: XY, b: XY) -> Direction:
-    for d, (dx, dy) in STEP.items():
-        if (a[0] + dx, a[1] + dy) == b:
-            return d
-    raise ValueError(f"{a} -> {b} is not one step")
+    """The direction of the step from a to b, by the seed's code (Equation (3))."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    if abs(dx) + abs(dy) != 1:
+        raise ValueError(f"{a} -> {b} is not one step")
+    return Direction(direction_code(dx, dy))
 
 
 def count_turns(cells: tuple[XY, ...], heading: Direction | None = None) -> int:

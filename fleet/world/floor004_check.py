@@ -10,7 +10,8 @@ else on the floor: whatever stands in the way while driving is the tracker's to 
 
 from __future__ import annotations
 
-from fleet.planning.rules004 import STEP, XY, Direction, Grid004, Kind, Task, allowed
+from fleet.planning.astar004 import heading_of
+from fleet.planning.rules004 import STEP, XY, Grid004, Kind, Task, allowed
 from fleet.world.floor004 import Floor004
 
 Edges = dict[XY, list[XY]]
@@ -37,7 +38,7 @@ def floor_problems(floor: Floor004) -> list[str]:
                                 f"loaded AGVs' aisles")
     for slot in floor.slots:
         out = [n for n in _around(slot.xy) if n in forth and n in back]
-        into = [n for n in out if _toward(n, slot.xy) in allowed(grid, Task.RETURN, n)]
+        into = [n for n in out if heading_of(n, slot.xy) in allowed(grid, Task.RETURN, n)]
         if not out:
             problems.append(f"slot {slot.name} at {slot.xy}: a loaded AGV cannot leave it "
                             f"into the aisles")
@@ -75,10 +76,6 @@ def _name(floor: Floor004, cell: XY) -> str:
 
 def _around(cell: XY) -> list[XY]:
     return [(cell[0] + dx, cell[1] + dy) for dx, dy in STEP.values()]
-
-
-def _toward(a: XY, b: XY) -> Direction:
-    return next(d for d, (dx, dy) in STEP.items() if (a[0] + dx, a[1] + dy) == b)
 
 
 def _edges(grid: Grid004, task: Task, cells: set[XY]) -> Edges:

@@ -50,3 +50,12 @@ def resolve(layout: Layout, text: str, filled: Iterable[Cell] = ()) -> list[Pose
     names = ", ".join(s.name for s in layout.stations)
     raise UserError(f"place {text!r} is not a pose 'col,row,H', a station ({names}) or a "
                     f"stack like 's1#5'")
+
+
+def col_row(text: str) -> Cell:
+    """A cell as the user writes it, 'col,row' (a UserError naming the text otherwise)."""
+    try:
+        col, row = (int(part) for part in text.split(","))
+    except ValueError:
+        raise UserError(f"place {text!r} must be 'col,row' with two whole numbers") from None
+    return col, row
