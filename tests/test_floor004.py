@@ -133,6 +133,14 @@ def test_fleet_plan_answers_one_query_on_the_floor_with_the_tasks_rules(capsys):
     assert capsys.readouterr().out.startswith("M1 (fetch) 2,48")
     assert main(["plan", "--layout", "paper004", "--from", "0,0", "--to", "s-40-26"]) == 2
     assert "cell (0, 0) of paper004 is wall" in capsys.readouterr().err
+    # aisle row 46 (from the bottom; the seed's row 3) runs left: relaxed, straight right
+    assert main(["plan", "--layout", "paper004", "--from", "3,46", "--to", "9,46",
+                 "--relaxed"]) == 0
+    head, cells, summary = capsys.readouterr().out.splitlines()
+    assert head.endswith("rules lifted") and summary.startswith("6 cells")
+    assert main(["plan", "--layout", "paper004", "--from", "s-40-26", "--to", "station-3",
+                 "--relaxed"]) == 2
+    assert "only an empty AGV plans without the rules" in capsys.readouterr().err
 
 
 # -- the rules --------------------------------------------------------------------------------

@@ -58,6 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--turn-cost", type=non_negative_float, default=1.0,
                    help="on a seed-004 floor: the turning cost, cells a quarter turn "
                    "(default 1; 0 switches it off)")
+    p.add_argument("--relaxed", action="store_true",
+                   help="on a seed-004 floor: an empty AGV plans without the traffic rules, "
+                   "as after repeated failures (default: with them)")
     p.add_argument("--list-open", action="store_true",
                    help="on a seed-004 floor: search with the plain list, not the binary heap "
                    "(the same path, slower)")
