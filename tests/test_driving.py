@@ -1,6 +1,7 @@
 """Where a forklift is at a sim time, from what it committed."""
 
 import math
+import time
 
 import pytest
 
@@ -10,7 +11,7 @@ from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import Pose
 from fleet.wire.protocol import ClockTick
 from fleet.world.layout_file import load_layout
-from vehicle_agent.clock import tick_problem
+from vehicle_agent.clock import SimClock, tick_problem
 
 
 def small_trip(t_start=10.0):
@@ -107,6 +108,22 @@ def test_real_time_ticks_need_a_positive_speed_and_keep_it():
     for speed in (0.0, -1.0, 1e9):
         assert "speed" in tick_problem(ClockTick(1, "realtime", 0.0, speed, 1e9), None)
     assert "speed 3.0" in tick_problem(ClockTick(2, "realtime", 1.0, 3.0, 1e9), good)
+
+
+def test_a_tick_that_waited_in_a_buffer_sets_the_time_but_is_not_the_clock_heard_now():
+    """A stalled or cut-off agent finds old ticks waiting when it wakes: they tell the time,
+    not that the clock speaks (nor who is down now), so it stays silent until a fresh one."""
+    clock = SimClock()
+    assert clock.silent_for() == math.inf
+    now = time.time()
+    clock.take(ClockTick(7, "realtime", 300.0, 40.0, now - 100.0 / 40.0))
+    assert clock.now() == pytest.approx(400.0, abs=1.0)
+    assert clock.silent_for() == pytest.approx(2.5, abs=0.5)
+    clock.take(ClockTick(8, "realtime", 400.0, 40.0, now))
+    assert clock.silent_for() < 0.5
+    starting = SimClock()  # before the start the anchor is still to come: sent now
+    starting.take(ClockTick(1, "realtime", 0.0, 40.0, now + 5.0))
+    assert starting.silent_for() < 0.5
 
 
 def test_real_time_states_are_never_coarser_than_fast_mode():

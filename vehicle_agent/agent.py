@@ -65,7 +65,7 @@ log = logging.getLogger("fleet.agent")
 MAX_COMMIT_ATTEMPTS = 5
 DUE_MARGIN_S = 0.001  # wake just after an instant, so it has come
 SYNC_TIMEOUT_S = 10.0
-# Real time: a forklift that has not heard the clock (ticks every 0.5 s) for this long
+# Real time: a forklift whose newest tick heard was sent this long ago (ticks every 0.5 s)
 # publishes no state: it may be down, and the dispatcher's word on where it stands is awaited.
 CLOCK_SILENCE_S = 1.0
 # Real time: a commit must be applied this long before its plan starts, so that the reply is
@@ -125,7 +125,6 @@ class Agent:
         # the forklift stands and that it moves again (ResumeRequest). Says nothing meanwhile.
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
-        self.heard = 0.0  # monotonic time the last clock tick arrived
         # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`.
         self.status_lock = threading.Lock()
         self.broken = False  # reported a breakdown: it stands when the dispatcher says when
@@ -416,8 +415,7 @@ class Agent:
         with self.status_lock:
             if self.vehicle in tick.down and tick.t >= self.resumed_at and not self.broken:
                 self.down = True  # held as down: we were cut off, stalled or restarted
-        self.clock.tick = tick
-        self.heard = time.monotonic()  # after `down`: the state thread reads them unlocked
+        self.clock.take(tick)  # after `down`: the state thread reads them unlocked
         return True
 
     def _fast_tick(self, tick: ClockTick, state_pub, ack_pub) -> None:
@@ -434,7 +432,7 @@ class Agent:
             tick = self.clock.tick
             if tick is None or tick.mode != ClockMode.REALTIME or self.down:
                 continue
-            if time.monotonic() - self.heard > CLOCK_SILENCE_S:
+            if self.clock.silent_for() > CLOCK_SILENCE_S:
                 continue  # cut off or stalled: silent until the clock is heard (and says)
             period = state_period(ClockMode.REALTIME, tick.speed)
             self._publish_states(state_pub, self.clock.now(), period)

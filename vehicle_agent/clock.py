@@ -36,10 +36,26 @@ def tick_problem(tick: ClockTick, last: ClockTick | None) -> str:
 
 
 class SimClock:
-    """This process's view of the one clock: the last tick heard."""
+    """This process's view of the one clock: the last tick heard, and since when the clock
+    has been silent."""
 
     def __init__(self) -> None:
         self.tick: ClockTick | None = None
+        self.spoke = -math.inf  # monotonic time the clock sent the newest tick heard
+
+    def take(self, tick: ClockTick) -> None:
+        """The clock's next tick (checked with `tick_problem`). A real-time tick says when it
+        was sent: one that arrives late (it waited in a buffer while this process was stalled
+        or cut off) sets the time, but says nothing of whether the clock speaks now."""
+        age = 0.0
+        if tick.mode == ClockMode.REALTIME:
+            age = max(0.0, time.time() - tick.wall)  # an anchor still to come: sent now
+        self.tick = tick
+        self.spoke = max(self.spoke, time.monotonic() - age)
+
+    def silent_for(self) -> float:
+        """Seconds since the clock sent the newest tick heard (infinite before any)."""
+        return time.monotonic() - self.spoke
 
     @property
     def realtime(self) -> bool:
