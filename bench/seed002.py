@@ -16,13 +16,12 @@ check (fleet/analysis/safety.py), so a saving never comes from a broken rule.
 from __future__ import annotations
 
 import itertools
-import os
 import statistics
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 
+from bench.pool import run_all
 from fleet.analysis.lane_rules import lane_violations
 from fleet.analysis.safety import Held, double_bookings
 from fleet.dispatching.decision import Strategy
@@ -115,12 +114,7 @@ def run(seeds: int = SEEDS, progress: Callable[[int, int], None] | None = None,
     a core); every mission is deterministic, so the result does not depend on how many."""
     todo = jobs(seeds)
     started = time.perf_counter()
-    runs: dict[Job, Run] = {}
-    with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
-        for job, result in zip(todo, pool.map(judged_run, todo), strict=True):
-            runs[job] = result
-            if progress is not None:
-                progress(len(runs), len(todo))
+    runs = run_all(todo, judged_run, progress, workers)
     result: dict = {"seeds": seeds}
     for fig, points in (("fig17", FIG17), ("fig18", FIG18), ("fig19", FIG19)):
         out = []

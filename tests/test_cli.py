@@ -116,6 +116,41 @@ def test_bench_planner004_compares_heap_and_list_on_the_same_queries(capsys):
     assert result["turns_on"] <= result["turns_off"]
 
 
+def test_bench_seed004_sets_heat_items_turns_and_fleet_sizes_side_by_side(tmp_path, capsys):
+    assert main(["bench", "seed004", "--seeds", "1", "--orders", "24", "--vehicles", "6",
+                 "--sizes", "3,6", "--jobs", "1", "--json", "--plots", str(tmp_path)]) == 0
+    out = capsys.readouterr()
+    result = json.loads(out.out)
+    assert f"wrote {tmp_path / 'heat.png'}" in out.err
+    assert (tmp_path / "heat.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    fields = {"completion_s", "head_on", "crossing", "replans", "path_length", "turns"}
+    assert fields <= result["heat"]["off"].keys() and fields <= result["heat"]["on"].keys()
+    assert result["heat"]["off"] != result["heat"]["on"]  # the heat cost changed the routes
+    assert set(result["items"]) == {"baseline", "recall", "turn", "heap"}
+    # The heap finds the same paths as the list: only the time spent planning differs.
+    same = {k: v for k, v in result["items"]["heap"].items() if k != "planning_s"}
+    assert same == {k: v for k, v in result["items"]["baseline"].items() if k != "planning_s"}
+    assert result["turn_example"]["length_off"] == result["turn_example"]["length_on"] == 26
+    assert result["turn_example"]["turns_on"] < result["turn_example"]["turns_off"]
+    assert set(result["fleet_sizes"]) == {"3", "6"}
+    assert result["clashes"] == result["bad_moves"] == result["rule_breaches"] == \
+        result["yield_breaches"] == 0 and result["runs"] == 8
+    assert all(isinstance(v, bool) for v in result["checks"].values())
+
+
+def test_the_paired_sign_flip_test_is_exact():
+    from bench.seed004 import lower_p
+
+    assert lower_p([-3.0] * 10) == 1 / 1024  # only the observed signs are as low
+    assert lower_p([2.0, -1.0]) == 0.75  # of the sums 1, 3, -3, -1, three are 1 or less
+    assert lower_p([1.0] * 4) == 1.0 and lower_p([]) is None
+
+
+def test_bench_seed004_refuses_a_fleet_paper004_cannot_park(capsys):
+    assert main(["bench", "seed004", "--vehicles", "500"]) == 2
+    assert "paper004 parks 96 AGVs, not 500" in capsys.readouterr().err
+
+
 def parse_source(name: str) -> str:
     from importlib import resources
 

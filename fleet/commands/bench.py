@@ -91,6 +91,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                          "plot RESULT.json` draws them from a saved --json result; default: "
                          "none)")
     seed002.set_defaults(handler=run_seed002)
+    seed004 = which.add_parser("seed004", help="seed 004's Tables 5-6 and Figures 7-8: heat "
+                               "cost, recall, turning cost and heap, fleet sizes",
+                               description="Run seed 004's experiments in process on "
+                               "paper004: heat cost off and on after a history run (Table 5), "
+                               "each optimisation item against a baseline (Table 6), the "
+                               "turning-cost example (Figures 7-8) and fleet sizes, means over "
+                               "order seeds, every run judged by the verifiers of cells, "
+                               "rules and giving way (docs/experiment-004.md).")
+    seed004.add_argument("--seeds", type=positive_int, default=10,
+                         help="order seeds per point (default 10)")
+    seed004.add_argument("--orders", type=positive_int, default=500,
+                         help="orders per mission (default 500)")
+    seed004.add_argument("--vehicles", type=positive_int, default=40,
+                         help="AGVs in Tables 5 and 6 (default 40)")
+    seed004.add_argument("--sizes", type=positive_ints, default=[10, 20, 40, 60],
+                         metavar="N,N,...", help="fleet sizes compared (default 10,20,40,60)")
+    seed004.add_argument("--jobs", type=positive_int, default=None, metavar="N",
+                         help="missions run at once, each in a process of its own (default: "
+                         "one a core); only the planning times depend on it")
+    seed004.add_argument("--json", action="store_true", help="print one JSON object")
+    seed004.add_argument("--plots", type=writable_dir, metavar="DIR",
+                         help="also draw DIR/heat.png: the history run's heat and the cells "
+                         "entered with heat off and on, for order seed 0 (Figures 10-11; "
+                         "default: none)")
+    seed004.set_defaults(handler=run_seed004)
     runtime = which.add_parser("runtime", help="the distributed runtime: commit round trip, "
                                "multi-process / in-process wall time, largest real-time fleet",
                                description="Measure the distributed runtime: the "
@@ -299,6 +324,39 @@ def run_seed002(args: argparse.Namespace) -> int:
                                    args.plots):
             print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
     return 0 if result["lane_violations"] == 0 and result["double_bookings"] == 0 else 1
+
+
+def run_seed004(args: argparse.Namespace) -> int:
+    from bench import seed004
+    from fleet.world.floor004 import paper004
+
+    parking = len(paper004().parking)
+    for n in (args.vehicles, *args.sizes):
+        if n > parking:
+            raise UserError(f"paper004 parks {parking} AGVs, not {n}")
+    bar = ProgressBar(1, "seed 004 experiments", unit="missions")
+
+    def progress(done: int, total: int) -> None:
+        bar.total = total
+        bar.update(done)
+
+    result = seed004.run(args.seeds, args.orders, args.vehicles, tuple(args.sizes), progress,
+                         args.jobs)
+    bar.close()
+    if not emitted_json(result, args.json):
+        print(seed004.table(result))
+    if args.plots is not None:
+        from fleet.views.drawing import save_figure
+        from fleet.views.heat004 import heat_maps
+
+        args.plots.mkdir(parents=True, exist_ok=True)
+        path = args.plots / "heat.png"
+        save_figure(heat_maps(paper004(), seed004.heat_panels(0, args.orders, args.vehicles),
+                              f"fleet bench seed004: {args.vehicles} AGVs, {args.orders} "
+                              f"orders on paper004, the brighter the hotter"), str(path))
+        print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
+    judged = ("stuck", "clashes", "bad_moves", "rule_breaches", "yield_breaches")
+    return 0 if not any(result[k] for k in judged) else 1
 
 
 def run_runtime(args: argparse.Namespace) -> int:

@@ -15,8 +15,9 @@ KINDS: dict[str, Callable[[VehicleDims, float], VehicleKind]] = {Forklift.name: 
 
 # Kinds a layout may already name though no module implements them yet: such a layout loads,
 # shows and checks, and whatever would drive one refuses in one line (KindNotBuilt).
-PLANNED: dict[str, str] = {"lifting-agv": "seed 004's lifting AGV that drives under shelves "
-                                       "(issue 21)"}
+PLANNED: dict[str, str] = {"lifting-agv": "seed 004's lifting AGV that drives under shelves; "
+                                       "`fleet bench seed004` drives it in one process, the "
+                                       "runtime not yet (issue 21)"}
 
 
 class UnknownVehicleKind(UserError):
@@ -37,7 +38,7 @@ def is_built(name: str) -> bool:
 
 def not_built(name: str) -> str:
     return (f"the {name} vehicle kind is not built yet ({PLANNED[name]}): its layouts load, "
-            f"show and check, but nothing drives them")
+            f"show and check")
 
 
 def vehicle_kind(name: str, dims: VehicleDims, cell_size: float) -> VehicleKind:

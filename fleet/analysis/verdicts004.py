@@ -1,0 +1,70 @@
+"""A seed-004 run judged from its events by the verifiers that know nothing of the tracker or
+the planner (fleet/analysis/cells004.py, traffic004.py): the events are only read, as a
+recording would be."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from fleet.analysis.cells004 import BadMove, Clash, Move, clashes, held
+from fleet.analysis.traffic004 import Breach, Drive, Floor, breaches, yielding_breaches
+from fleet.mission.tracking004 import Conflict, Event, Met, Moved, Paused, Replanned
+from fleet.planning.rules004 import XY, Kind
+from fleet.world.floor004 import Floor004
+
+
+@dataclass(frozen=True)
+class Verdict004:
+    clashes: list[Clash]
+    bad_moves: list[BadMove]
+    rule_breaches: list[Breach]
+    yield_breaches: list[Breach]
+
+    @property
+    def passed(self) -> bool:
+        return not (self.clashes or self.bad_moves or self.rule_breaches
+                    or self.yield_breaches)
+
+
+def rules_floor(floor: Floor004) -> Floor:
+    lanes = frozenset(xy for xy, kind in floor.kinds.items() if kind is Kind.LANE)
+    return Floor(floor.width, floor.grid.aisle_columns, floor.grid.aisle_rows,
+                 frozenset(s.xy for s in floor.slots), lanes)
+
+
+def judge(floor: Floor004, events: Iterable[Event], starts: Mapping[int, XY],
+          carrying: Mapping[int, XY] | None = None) -> Verdict004:
+    """`starts`: where each AGV stood at t = 0; `carrying`: the shelf's home of those that
+    started loaded."""
+    events = list(events)
+    moves = [e for e in events if isinstance(e, Moved)]
+    spans, bad = held([Move(m.vehicle, m.t0, m.t1, m.origin, m.to) for m in moves], starts)
+    loads: dict[int, list[tuple[float, bool]]] = defaultdict(list)
+    lifted_at: dict[int, list[tuple[float, XY]]] = defaultdict(list)
+    for v, cell in (carrying or {}).items():
+        loads[v].append((0.0, True))
+        lifted_at[v].append((0.0, cell))
+    for e in events:
+        if isinstance(e, Paused) and e.label in ("lift", "drop"):
+            loads[e.vehicle].append((e.t1, e.label == "lift"))
+            if e.label == "lift":
+                lifted_at[e.vehicle].append((e.t1, e.at))
+
+    def home(v: int, t: float) -> XY | None:
+        found = None
+        for since, cell in lifted_at[v]:
+            if since > t:
+                break
+            found = cell
+        return found
+
+    drives = [Drive(m.vehicle, m.t0, m.origin, m.to, m.task.value, m.loaded, m.relaxed,
+                    home(m.vehicle, m.t0) if m.loaded else None) for m in moves]
+    head_ons = [(e.t, e.vehicle, e.other) for e in events
+                if isinstance(e, Met) and e.kind is Conflict.HEAD_ON]
+    replans = [(e.t, e.vehicle) for e in events
+               if isinstance(e, Replanned) and e.why == "head-on"]
+    return Verdict004(clashes(spans), bad, breaches(rules_floor(floor), drives),
+                      yielding_breaches(head_ons, replans, loads))

@@ -1,0 +1,654 @@
+"""Seed 004's path tracking (Section 2; seed pack note B.4.3): lifting AGVs drive their global
+paths cell by cell. Before it enters the next cell an AGV takes it from the reservation store,
+which is the race-free form of the seed's "enter when the next cell's value is 0, 3 or 7":
+the take is one commit of [now, forever) on that cell, refused while anyone else holds it.
+While moving the AGV holds the cell it leaves and the one it enters; on arrival it lets the
+one behind go. When the take is refused the holder decides what happens:
+
+- a head-on conflict (the holder wants our cell): the empty AGV replans around the blocked
+  cell and the loaded one waits (GIVEN); two empty ones: the relaxed one, else the larger id,
+  replans; two loaded ones (only at slot mouths): the larger id waits the stagnation time,
+  then replans (CHOICEs);
+- a stagnant holder (stood longer than T_stag outside a station): an empty AGV replans, since
+  the filter of Equation (3) does not expand such a cell; a loaded one waits (DERIVED);
+- anything else (a crossing or rear-end conflict): wait until the cell is let go (GIVEN).
+
+A waiting AGV outside a station turns stagnant after T_stag, and an empty one then replans
+(CHOICE). A plan that fails is retried every second; after N_relax failures in a row an empty
+AGV plans without the traffic rules until its next head-on conflict or the end of its leg.
+
+Time is discrete events in (time, vehicle) order, so a run is deterministic. The grid values
+the planner reads are derived, never stored: a cell's static kind, and whether the AGV that
+holds it in the store moves or is stagnant (`GridView`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import itertools
+import math
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import Enum
+
+from fleet.planning.astar004 import Costs, heading_of, plan
+from fleet.planning.reservations import INF, Interval, ReservationTable
+from fleet.planning.rules004 import (
+    STEP,
+    WALL_VALUE,
+    XY,
+    Direction,
+    Kind,
+    Occupancy,
+    Task,
+    allowed,
+    value,
+)
+from fleet.world.floor004 import Floor004, Station
+
+
+@dataclass(frozen=True)
+class TrackingParams:
+    """The seed's timing (Table 4 is missing; the note's CHOICEs, B.3) and the tracker's."""
+
+    t_cell: float = 1.0  # one cell at constant speed
+    t_turn: float = 1.0  # a quarter turn on the spot; driving backwards needs none
+    t_lift: float = 2.0
+    t_drop: float = 2.0
+    t_pick: float = 10.0  # at a station's work cell
+    t_stag: float = 3.0  # standing this long outside a station: stagnant
+    retry_s: float = 1.0  # a failed plan is tried again this much later
+    n_relax: int = 3  # failed plans in a row before an empty AGV plans without the rules
+    t_evict: float = 10.0  # waited this long for an idle AGV: it is sent out of the way
+    watchdog_s: float = 300.0  # an AGV that stood this long waiting or failing: stuck
+    costs: Costs = field(default_factory=Costs)
+    heap: bool = True
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One task: to `goal` (M1: the shelf's slot, then lift; M2: a station's entrance, then
+    its route through the work cell to the exit point; M3: the shelf's home slot, then drop;
+    M4: a pile)."""
+
+    task: Task
+    goal: XY
+    home: XY | None = None  # a loaded AGV's own slot (entered and left in any direction)
+    station: Station | None = None  # M2: the station whose route follows the entrance
+    make_way: bool = False  # M1 rules, nothing lifted: an idle AGV sent out of the way
+    charge_s: float = 0.0  # M4: how long it charges at the pile
+
+    def __post_init__(self) -> None:
+        if (self.task is Task.DELIVER) != (self.station is not None):
+            raise ValueError("a delivery, and only a delivery, names its station")
+        if self.make_way and self.task is not Task.FETCH:
+            raise ValueError("only an empty AGV is sent out of the way (an M1 leg)")
+        if self.station is not None and self.goal != self.station.entrance:
+            raise ValueError(f"a delivery to {self.station.name} ends at its entrance "
+                             f"{self.station.entrance}, not {self.goal}")
+
+
+class StageKind(Enum):
+    PLANNED = "planned"  # the leg's global path, replanned as tracking needs
+    ROUTE = "route"  # a station's fixed route
+    PAUSE = "pause"  # standing: lift, drop, pick
+
+
+@dataclass(frozen=True)
+class Stage:
+    kind: StageKind
+    cells: tuple[XY, ...] = ()  # ROUTE: the cells to enter
+    seconds: float = 0.0  # PAUSE
+    label: str = ""  # PAUSE: "lift", "drop" or "pick"
+
+
+def stages(leg: Leg, params: TrackingParams) -> list[Stage]:
+    """What an AGV does for a leg, in order."""
+    planned = Stage(StageKind.PLANNED)
+    if leg.task is Task.FETCH and not leg.make_way:
+        return [planned, Stage(StageKind.PAUSE, seconds=params.t_lift, label="lift")]
+    if leg.task is Task.RETURN:
+        return [planned, Stage(StageKind.PAUSE, seconds=params.t_drop, label="drop")]
+    if leg.task is Task.CHARGE and leg.charge_s > 0:
+        return [planned, Stage(StageKind.PAUSE, seconds=leg.charge_s, label="charge")]
+    if leg.task is Task.DELIVER:
+        assert leg.station is not None
+        s = leg.station
+        return [planned, Stage(StageKind.ROUTE, (*s.waiting, s.work)),
+                Stage(StageKind.PAUSE, seconds=params.t_pick, label="pick"),
+                Stage(StageKind.ROUTE, (*s.exits, s.exit_point))]
+    return [planned]
+
+
+class Conflict(Enum):
+    HEAD_ON = "head-on"
+    CROSSING = "crossing"
+    REAR_END = "rear-end"
+
+
+@dataclass(frozen=True)
+class Moved:
+    vehicle: int
+    t0: float  # leaves `origin` (it holds both cells from here)
+    t1: float  # in `to` (lets `origin` go)
+    origin: XY
+    to: XY
+    task: Task  # the leg's
+    loaded: bool
+    relaxed: bool
+
+
+@dataclass(frozen=True)
+class Turned:
+    vehicle: int
+    t0: float
+    t1: float
+    at: XY
+    heading: Direction  # after the turn
+
+
+@dataclass(frozen=True)
+class Paused:
+    vehicle: int
+    t0: float
+    t1: float
+    at: XY
+    label: str  # lift, drop, pick
+
+
+@dataclass(frozen=True)
+class Met:
+    """One conflict episode: `vehicle`, at `at`, could not take `cell`, held by `other`."""
+
+    t: float
+    vehicle: int
+    other: int
+    at: XY
+    cell: XY
+    kind: Conflict
+
+
+@dataclass(frozen=True)
+class Stagnant:
+    """A waiting AGV has stood longer than T_stag at `at` (its cell's value is 5 or 6)."""
+
+    t: float
+    vehicle: int
+    at: XY
+
+
+@dataclass(frozen=True)
+class Replanned:
+    t: float
+    vehicle: int
+    why: str
+    relaxed: bool  # the plan made, if any, lifts the traffic rules
+    found: bool
+
+
+@dataclass(frozen=True)
+class MadeWay:
+    """An idle AGV sent from `at` to `to`, out of the way of `vehicle` (CHOICE: eviction)."""
+
+    t: float
+    vehicle: int
+    idle: int
+    at: XY
+    to: XY
+
+
+@dataclass(frozen=True)
+class Picked:
+    """The worker has picked from the shelf the AGV brought to `station`."""
+
+    t: float
+    vehicle: int
+    station: str
+
+
+@dataclass(frozen=True)
+class LegDone:
+    t: float
+    vehicle: int
+    leg: Leg
+
+
+Milestone = Picked | LegDone  # what the work above the tracker acts on
+Event = Moved | Turned | Paused | Met | Stagnant | Replanned | MadeWay | Milestone
+
+
+@dataclass
+class Agv:
+    vehicle: int
+    cell: XY  # where it stands, or the cell it leaves while moving
+    heading: Direction
+    loaded: bool = False
+    leg: Leg | None = None
+    stages: list[Stage] = field(default_factory=list)  # the leg's, the current one first
+    path: list[XY] = field(default_factory=list)  # the cells still to enter in this stage
+    moving_to: XY | None = None
+    planned: bool = False  # the leg's first plan is made
+    busy_until: float = 0.0  # turning or pausing until then
+    standing_since: float = 0.0  # since it last arrived (or was placed): stagnant after T_stag
+    waiting_on: XY | None = None
+    trouble_since: float | None = None  # waiting or without a path since, until it moves
+    met: tuple[int, XY] | None = None  # the conflict episode in progress
+    stagnant_said: bool = False  # Stagnant logged for this standing
+    failures: int = 0  # failed plans in a row
+    relaxed: bool = False
+    blocked: frozenset[XY] = frozenset()  # cells the next plan avoids
+    running_s: float = 0.0  # moving, turning and lifting: the seed's consumption
+
+
+class Stuck(RuntimeError):
+    """Nothing can happen any more, yet legs are unfinished."""
+
+
+# Due events: arrivals before decisions at one instant, so every cell let go at t is free to
+# be taken at t; then by vehicle, then in the order they were made.
+_ARRIVE, _ACT = 0, 1
+# An AGV deciding this often at one instant is going round in circles: a defect, named.
+MAX_ACTS_AT_ONCE = 1000
+STEPPED_ASIDE = "head-on: stepped aside"  # the Replanned of one giving way where it cannot
+# plan around (the cell it wants is its goal; or the other could not give way at all)
+
+
+class Tracker:
+    """Every AGV of one floor, driven event by event against one reservation table (in the
+    project's cells: row 0 at the bottom)."""
+
+    def __init__(self, floor: Floor004, params: TrackingParams = TrackingParams(),
+                 store: ReservationTable | None = None) -> None:
+        self.floor = floor
+        self.params = params
+        self.store = store if store is not None else ReservationTable()
+        self.agvs: dict[int, Agv] = {}
+        self.events: list[Event] = []
+        self.t = 0.0
+        self._due: list[tuple[float, int, int, int]] = []  # (t, rank, vehicle, order)
+        self._order = itertools.count()
+        self._waiters: dict[XY, set[int]] = {}
+        self._acts: Counter[int] = Counter()  # decisions by AGV at the current instant
+        self.replans = 0  # planner calls while tracking, each leg's first plan not counted
+        self.planning_s = 0.0  # wall time in the planner (measured; it decides nothing)
+
+    # -- the fleet -----------------------------------------------------------------------------
+    def place(self, vehicle: int, xy: XY, heading: Direction = Direction.DOWN,
+              t: float = 0.0, loaded: bool = False) -> None:
+        """An AGV standing at xy from t (it holds the cell from then on), carrying a shelf
+        when `loaded`."""
+        if vehicle in self.agvs:
+            raise ValueError(f"AGV {vehicle} is placed already")
+        if self.floor.kind(xy) in (Kind.WALL, Kind.STRUCTURE):
+            raise ValueError(f"AGV {vehicle}: {xy} is not a cell an AGV can stand on")
+        result = self.store.park(vehicle, [self.floor.cell(xy)], t)
+        if not result.ok:
+            raise ValueError(f"AGV {vehicle}: {xy} is taken ({result.reason})")
+        self.agvs[vehicle] = Agv(vehicle, xy, heading, loaded, standing_since=t)
+
+    def assign(self, vehicle: int, leg: Leg, t: float | None = None) -> None:
+        """Start `leg` (the AGV must be idle and loaded as its task needs) from t (now)."""
+        agv = self.agvs[vehicle]
+        if agv.leg is not None:
+            raise ValueError(f"AGV {vehicle} is on a leg already")
+        if leg.task.loaded != agv.loaded:
+            raise ValueError(f"AGV {vehicle} is {'loaded' if agv.loaded else 'empty'}: it "
+                             f"cannot take a {leg.task.name.lower()} leg ({leg.task.value})")
+        self._start(agv, leg)
+        self._wake(vehicle, self.t if t is None else t)
+
+    def recallable(self, vehicle: int) -> bool:
+        """Whether the AGV carries its shelf home and has not begun to drop it."""
+        agv = self.agvs[vehicle]
+        return agv.leg is not None and agv.leg.task is Task.RETURN and agv.loaded and \
+            agv.stages[0].kind is StageKind.PLANNED
+
+    def recall(self, vehicle: int, leg: Leg) -> None:
+        """The shelf it returns is wanted at a station (Equation 5): deliver it there
+        instead, planned from the cell it stands on or is entering."""
+        if not self.recallable(vehicle):
+            raise ValueError(f"AGV {vehicle} returns no shelf that can be recalled")
+        if leg.task is not Task.DELIVER:
+            raise ValueError(f"a recalled shelf is delivered, not given a {leg.task.value} leg")
+        agv = self.agvs[vehicle]
+        self._start(agv, leg)
+        if agv.moving_to is None:
+            self._wake(vehicle, self.t)  # (moving: its arrival acts)
+
+    def _start(self, agv: Agv, leg: Leg) -> None:
+        """Take up `leg`, planned now if the AGV stands (so others see where it heads),
+        else on arrival."""
+        agv.leg, agv.stages, agv.path, agv.planned = leg, stages(leg, self.params), [], False
+        agv.failures, agv.relaxed, agv.blocked = 0, False, frozenset()
+        agv.waiting_on, agv.met, agv.trouble_since = None, None, None
+        if agv.moving_to is None and agv.cell != leg.goal:
+            agv.planned = self._plan(agv, first=True)
+            agv.failures = 0  # a failure here is met again, and counted, when it acts
+
+    # -- running -------------------------------------------------------------------------------
+    def advance(self, until: float = INF) -> Milestone | None:
+        """Run events up to `until`, stopping after the first pick or leg end (None: none by
+        then). Raises Stuck when no event is left but a leg is unfinished."""
+        while self._due:
+            t, rank, vehicle, _ = self._due[0]
+            if t > until:
+                return None
+            heapq.heappop(self._due)
+            if t != self.t:
+                self._acts.clear()
+            self._acts[vehicle] += 1
+            if self._acts[vehicle] > MAX_ACTS_AT_ONCE:
+                raise Stuck(f"at t={t:.2f} AGV {vehicle} decided {MAX_ACTS_AT_ONCE} times "
+                            f"without time passing (last: {self.events[-1]})")
+            self.t = t
+            agv = self.agvs[vehicle]
+            if rank == _ARRIVE:
+                self._arrive(agv)
+            elif (done := self._act(agv)) is not None:
+                return done
+        busy = sorted(v for v, a in self.agvs.items() if a.leg is not None)
+        if busy:
+            raise Stuck(f"at t={self.t:.2f} nothing moves any more: " + "; ".join(
+                f"AGV {v} at {self.agvs[v].cell} waits for {self.agvs[v].waiting_on}"
+                for v in busy))
+        return None
+
+    def run(self) -> list[Milestone]:
+        """Every assigned leg to its end."""
+        done = []
+        while (d := self.advance()) is not None:
+            done.append(d)
+        return done
+
+    def counts(self) -> Counter[str]:
+        """Conflicts by kind, replans, turns and cells driven, as Table 5 counts them."""
+        out: Counter[str] = Counter(e.kind.value for e in self.events if isinstance(e, Met))
+        out["replans"] = self.replans
+        out["stepped_aside"] = sum(isinstance(e, Replanned) and e.why == STEPPED_ASIDE
+                                   for e in self.events)
+        out["turns"] = sum(isinstance(e, Turned) for e in self.events)
+        out["cells"] = sum(isinstance(e, Moved) for e in self.events)
+        return out
+
+    # -- one AGV -------------------------------------------------------------------------------
+    def _wake(self, vehicle: int, t: float, rank: int = _ACT) -> None:
+        heapq.heappush(self._due, (t, rank, vehicle, next(self._order)))
+
+    def _arrive(self, agv: Agv) -> None:
+        """In the next cell: let the one behind go, and wake whoever waits for it."""
+        assert agv.moving_to is not None
+        origin, agv.cell, agv.moving_to = agv.cell, agv.moving_to, None
+        agv.standing_since = self.t
+        self.store.release(agv.vehicle, self.t, [self.floor.cell(origin)])
+        for v in sorted(self._waiters.pop(origin, ())):
+            self._wake(v, self.t)
+        self._wake(agv.vehicle, self.t)
+
+    def _act(self, agv: Agv) -> Milestone | None:
+        t, p = self.t, self.params
+        if agv.moving_to is not None or t < agv.busy_until or agv.leg is None:
+            return None  # driving, turning or pausing: that ends with its own event
+        if agv.trouble_since is not None and t - agv.trouble_since > p.watchdog_s:
+            raise Stuck(f"at t={t:.2f} AGV {agv.vehicle} at {agv.cell} has stood "
+                        f"{t - agv.trouble_since:.0f} s " + (
+                            f"waiting for {agv.waiting_on}, held by AGV "
+                            f"{self._holder(agv.vehicle, agv.waiting_on)}"
+                            if agv.waiting_on is not None else
+                            f"without a path to {agv.leg.goal} ({agv.leg.task.value})"))
+        while not agv.path:
+            if not agv.stages:
+                return self._leg_done(agv)
+            stage = agv.stages[0]
+            if stage.kind is StageKind.PLANNED:
+                if agv.cell == agv.leg.goal:
+                    agv.stages.pop(0)
+                elif agv.planned:
+                    self._replan(agv, "no path yet")
+                    return None
+                else:
+                    agv.planned = True
+                    if not self._plan(agv, first=True):
+                        self._wake(agv.vehicle, t + p.retry_s)
+                        return None
+                continue
+            if stage.kind is StageKind.ROUTE:
+                agv.path = list(agv.stages.pop(0).cells)
+                continue
+            return self._pause(agv, stage)
+        nxt = agv.path[0]
+        need = heading_of(agv.cell, nxt)
+        if _perpendicular(agv.heading, need):
+            agv.heading, agv.busy_until = need, t + p.t_turn
+            agv.running_s += p.t_turn
+            self.events.append(Turned(agv.vehicle, t, agv.busy_until, agv.cell, need))
+            self._wake(agv.vehicle, agv.busy_until)
+            return None
+        if self.store.commit(agv.vehicle, [Interval(self.floor.cell(nxt), t, INF)]).ok:
+            self._drive(agv, nxt)
+            return None
+        holder = self._holder(agv.vehicle, nxt)
+        assert holder is not None, f"the store refused {nxt} and names no holder"
+        self._blocked(agv, nxt, self.agvs[holder])
+        return None
+
+    def _holder(self, vehicle: int, xy: XY) -> int | None:
+        """Who else holds xy from now on."""
+        return self.store.conflict(vehicle, self.floor.cell(xy), self.t, INF)
+
+    def _drive(self, agv: Agv, nxt: XY) -> None:
+        t, p = self.t, self.params
+        agv.path.pop(0)
+        agv.moving_to, agv.waiting_on, agv.met, agv.stagnant_said = nxt, None, None, False
+        agv.trouble_since = None
+        agv.running_s += p.t_cell
+        assert agv.leg is not None
+        self.events.append(Moved(agv.vehicle, t, t + p.t_cell, agv.cell, nxt, agv.leg.task,
+                                 agv.loaded, agv.relaxed))
+        self._wake(agv.vehicle, t + p.t_cell, _ARRIVE)
+
+    def _pause(self, agv: Agv, stage: Stage) -> Picked | None:
+        """Lift, drop, pick or charge: stand for the stage's time, then its effect."""
+        t = self.t
+        if stage.seconds > 0:  # not begun
+            agv.busy_until = t + stage.seconds
+            if stage.label in ("lift", "drop"):  # the AGV's work; picking and charging not
+                agv.running_s += stage.seconds
+            self.events.append(Paused(agv.vehicle, t, agv.busy_until, agv.cell, stage.label))
+            agv.stages[0] = dataclasses.replace(stage, seconds=0.0)  # under way
+            self._wake(agv.vehicle, agv.busy_until)
+            return None
+        agv.stages.pop(0)
+        self._wake(agv.vehicle, t)
+        if stage.label == "lift":
+            agv.loaded = True
+        elif stage.label == "drop":
+            agv.loaded = False
+        elif stage.label == "pick":
+            assert agv.leg is not None and agv.leg.station is not None
+            picked = Picked(t, agv.vehicle, agv.leg.station.name)
+            self.events.append(picked)
+            return picked
+        return None
+
+    def _leg_done(self, agv: Agv) -> LegDone:
+        leg = agv.leg
+        assert leg is not None
+        agv.leg, agv.relaxed, agv.blocked, agv.failures = None, False, frozenset(), 0
+        done = LegDone(self.t, agv.vehicle, leg)
+        self.events.append(done)
+        return done
+
+    def _blocked(self, agv: Agv, nxt: XY, other: Agv) -> None:
+        t = self.t
+        head_on = other.moving_to is None and other.path[:1] == [agv.cell]
+        if head_on:
+            kind = Conflict.HEAD_ON
+        elif other.moving_to is not None and _perpendicular(other.heading, agv.heading):
+            kind = Conflict.CROSSING
+        else:
+            kind = Conflict.REAR_END
+        if agv.met != (other.vehicle, nxt):
+            agv.met = (other.vehicle, nxt)
+            self.events.append(Met(t, agv.vehicle, other.vehicle, agv.cell, nxt, kind))
+        if not agv.stagnant_said and self._stagnant(agv, t):
+            agv.stagnant_said = True
+            self.events.append(Stagnant(t, agv.vehicle, agv.cell))
+        around = self._can_go_around(agv, nxt)
+        if head_on:
+            agv.relaxed = False  # relaxed mode ends at the first head-on conflict
+            if not _yields(agv, other):
+                self._wait(agv, nxt)
+                self._wake(other.vehicle, t)  # the other gives way: it must act to see it
+                return
+            if agv.loaded and agv.waiting_on != nxt:  # two loaded: wait a while, then around
+                self._wait(agv, nxt)
+                return
+            if around:
+                agv.blocked = frozenset({nxt})
+                if self._replan(agv, "head-on"):
+                    return
+            if not self._step_aside(agv, other) and not (
+                    other.busy_until <= t and self._step_aside(other, agv)):
+                self._wait(agv, nxt)  # neither can give way: wait (the watchdog names it)
+            return
+        if self._stagnant(other, t) and not agv.loaded and around:
+            agv.blocked = frozenset({nxt})
+            self._replan(agv, "stagnant AGV ahead")
+            return
+        if other.leg is None and not other.loaded and agv.waiting_on == nxt and \
+                t - self._in_trouble(agv) >= self.params.t_evict:
+            self._make_way(agv, other)
+        elif self._stagnant(agv, t) and not agv.loaded and agv.waiting_on == nxt and around:
+            agv.blocked = frozenset({nxt})  # waited too long: try around (CHOICE)
+            self._replan(agv, "waited too long")
+            return
+        self._wait(agv, nxt)
+
+    def _can_go_around(self, agv: Agv, cell: XY) -> bool:
+        """Whether a new plan can avoid `cell`: on the leg's planned part, not its goal."""
+        return agv.leg is not None and agv.leg.goal != cell and bool(agv.stages) and \
+            agv.stages[0].kind is StageKind.PLANNED
+
+    def _step_aside(self, agv: Agv, other: Agv) -> bool:
+        """Give way where going around cannot (the cell wanted is the goal): move to a free
+        neighbour off the other's way, the rules kept, then plan the leg again from there."""
+        if agv.leg is None or not agv.stages or agv.stages[0].kind is not StageKind.PLANNED:
+            return False  # on a station's fixed route, or pausing: it cannot leave its way
+        rules = allowed(self.floor.grid, agv.leg.task, agv.cell, agv.leg.home)
+        for d in sorted(rules):
+            dx, dy = STEP[d]
+            n = (agv.cell[0] + dx, agv.cell[1] + dy)
+            kind = self.floor.kind(n)
+            if n == other.cell or n in other.path[:2] or self._holder(agv.vehicle, n) is not None \
+                    or kind not in ((Kind.FLOOR,) if agv.loaded else (Kind.FLOOR, Kind.SLOT)):
+                continue
+            self.events.append(Replanned(self.t, agv.vehicle, STEPPED_ASIDE, agv.relaxed, True))
+            self.replans += 1
+            agv.path, agv.waiting_on = [n], None
+            self._wake(agv.vehicle, self.t)
+            return True
+        return False
+
+    def _make_way(self, agv: Agv, idle: Agv) -> None:
+        """Send an idle AGV to the nearest slot or parking place that is free for good and
+        off the waiting AGV's way."""
+        keep = {agv.cell, *agv.path}
+        if agv.leg is not None:
+            keep.add(agv.leg.goal)
+        places = [s.xy for s in self.floor.slots] + list(self.floor.parking)
+        free = [xy for xy in places if xy not in keep and self._holder(idle.vehicle, xy) is None]
+        if not free:
+            return
+        to = min(free, key=lambda xy: (abs(xy[0] - idle.cell[0]) + abs(xy[1] - idle.cell[1]),
+                                       xy))
+        self.events.append(MadeWay(self.t, agv.vehicle, idle.vehicle, idle.cell, to))
+        self.assign(idle.vehicle, Leg(Task.FETCH, to, make_way=True))
+
+    def _in_trouble(self, agv: Agv) -> float:
+        """Since when the AGV has been waiting or without a path (from now, if it was not)."""
+        if agv.trouble_since is None:
+            agv.trouble_since = self.t
+        return agv.trouble_since
+
+    def _wait(self, agv: Agv, cell: XY) -> None:
+        """Stand until `cell` is let go, or until it turns stagnant."""
+        self._in_trouble(agv)
+        agv.waiting_on = cell
+        self._waiters.setdefault(cell, set()).add(agv.vehicle)
+        stagnant_at = agv.standing_since + self.params.t_stag
+        self._wake(agv.vehicle, math.nextafter(stagnant_at, INF) if stagnant_at >= self.t
+                   else self.t + self.params.retry_s)
+
+    # -- planning ------------------------------------------------------------------------------
+    def _plan(self, agv: Agv, first: bool = False) -> bool:
+        """Plan the leg's path from where the AGV stands; False: no path now."""
+        leg = agv.leg
+        assert leg is not None
+        if not first:
+            self.replans += 1
+        started = time.perf_counter()
+        found = plan(self.floor.grid, leg.task, agv.cell, leg.goal, agv.heading,
+                     self.params.costs, self._values(agv), self.params.heap,
+                     relaxed=agv.relaxed, home=leg.home)
+        self.planning_s += time.perf_counter() - started
+        agv.blocked = frozenset()  # avoided in this plan only: the next one sees the grid anew
+        if found is None:
+            self._in_trouble(agv)
+            agv.failures += 1
+            if agv.failures >= self.params.n_relax and not agv.loaded:
+                agv.relaxed = True  # deadlock 4: the rules are what walls it in
+            agv.path = []
+            return False
+        agv.failures = 0
+        agv.path = list(found.cells[1:])
+        return True
+
+    def _replan(self, agv: Agv, why: str) -> bool:
+        """Plan again now; False: no path (it tries again in `retry_s`)."""
+        found = self._plan(agv)
+        self.events.append(Replanned(self.t, agv.vehicle, why, agv.relaxed, found))
+        if found:
+            agv.waiting_on = None
+        self._wake(agv.vehicle, self.t if found else self.t + self.params.retry_s)
+        return found
+
+    def _values(self, agv: Agv) -> Callable[[XY], int]:
+        """The grid as this AGV's planner reads it now (its blocked cells as walls)."""
+        t, blocked = self.t, agv.blocked
+
+        def values(xy: XY) -> int:
+            if xy in blocked:
+                return WALL_VALUE
+            return value(self.floor.kind(xy), self._occupancy(agv.vehicle, xy, t))
+        return values
+
+    def _occupancy(self, vehicle: int, xy: XY, t: float) -> Occupancy:
+        holder = self.store.conflict(vehicle, self.floor.cell(xy), t, math.nextafter(t, INF))
+        if holder is None:
+            return Occupancy.FREE
+        other = self.agvs[holder]
+        if other.moving_to is not None:
+            return Occupancy.MOVING
+        return Occupancy.STAGNANT if self._stagnant(other, t) else Occupancy.FREE
+
+    def _stagnant(self, agv: Agv, t: float) -> bool:
+        """Standing longer than T_stag, but in a station's lane (its queue)."""
+        return agv.moving_to is None and self.floor.kind(agv.cell) is not Kind.LANE and \
+            t - agv.standing_since > self.params.t_stag
+
+
+def _perpendicular(a: Direction, b: Direction) -> bool:
+    return (a in (Direction.UP, Direction.DOWN)) != (b in (Direction.UP, Direction.DOWN))
+
+
+def _yields(agv: Agv, other: Agv) -> bool:
+    """Whether `agv` gives way in a head-on conflict with `other`: the empty one; of two
+    empty ones the relaxed one, else the larger id; of two loaded ones the larger id."""
+    if agv.loaded != other.loaded:
+        return not agv.loaded
+    if agv.relaxed != other.relaxed:
+        return agv.relaxed
+    return agv.vehicle > other.vehicle
