@@ -29,3 +29,9 @@ def test_moves_that_cannot_be_driven_are_named():
                      Move(7, 0.0, 1.0, (9, 9), (9, 8))], {1: (0, 0)})
     assert bad == ["(0, 0) -> (1, 1) is not one cell in one of four directions",
                    "starts at (5, 5), but the AGV is at (1, 1)", "AGV 7 has no start"]
+
+
+def test_a_move_begun_before_the_last_one_ended_is_named():
+    _, bad = _judge([Move(1, 0.0, 1.0, (0, 0), (1, 0)), Move(1, 0.2, 1.2, (1, 0), (2, 0))],
+                    {1: (0, 0)})
+    assert bad == ["starts at t=0.2 before the last move ended or ends before it starts"]

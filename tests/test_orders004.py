@@ -60,21 +60,20 @@ def test_every_order_is_picked_once_at_its_station_and_every_shelf_ends_home():
         elif isinstance(e, Paused) and e.label == "drop":
             assert on.pop(e.vehicle) == e.at
     assert on == {}
-    # A station picks one shelf at a time, and never more than Q_max orders are in flight.
+    # A station picks one shelf at a time.
     picks = defaultdict(list)
     for e in result.events:
         if isinstance(e, Paused) and e.label == "pick":
             picks[e.at].append((e.t0, e.t1))
     for spans in picks.values():
         assert all(b0 >= a1 for (_, a1), (b0, _) in itertools.pairwise(spans))
-    # Idle at the end: under the shelf it last returned, or where it started.
-    last_home = {}
-    for e in result.events:
-        if isinstance(e, LegDone) and e.leg.task is Task.RETURN:
-            last_home[e.vehicle] = e.leg.goal
+    # Idle at the end where its last leg ended (under the shelf it returned, unless it was
+    # sent out of the way since), or where it started.
+    last = {e.vehicle: e.leg for e in result.events if isinstance(e, LegDone)}
     for v, agv in mission.tracker.agvs.items():
         assert agv.leg is None and not agv.loaded
-        assert agv.cell == last_home.get(v, SMALL.parking[v - 1])
+        assert agv.cell == (last[v].goal if v in last else SMALL.parking[v - 1])
+        assert v not in last or last[v].task in (Task.RETURN, Task.CHARGE) or last[v].make_way
 
 
 def test_a_shelf_on_its_way_home_is_recalled_when_it_is_the_nearest():
@@ -106,6 +105,17 @@ def test_agvs_below_the_threshold_charge_at_piles_one_at_a_time():
                 and e.loaded]
     assert len([e for e in result.events if isinstance(e, Picked)]) == 60
     assert _safe(result, SMALL, 4)
+
+
+def test_an_agv_waiting_for_a_pile_and_sent_out_of_the_way_charges_once_it_is_there():
+    micro = build(Floor004Shape(blocks_across=2, double_rows=2, stations=1, piles_per_side=1,
+                                block_width=3, transit_rows=2), "micro004")
+    battery = BatteryParams(drain_per_s=FULL / 100.0, charge_per_s=FULL / 50.0)
+    mission = Mission004(micro, 8, generate_orders(micro, 40, 0),
+                         work=WorkParams(battery=battery))
+    result = mission.run()
+    assert len(result.picked) == 40 and result.charges > 0
+    assert _safe(result, micro, 8)
 
 
 def test_a_mission_is_a_function_of_its_inputs():

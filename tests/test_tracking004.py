@@ -99,6 +99,38 @@ def test_an_agv_leaves_its_pile_outward_and_another_charges_beside_an_occupied_o
     assert tracker.agvs[3].cell == (0, 6) and tracker.agvs[2].cell == (0, 9)
 
 
+def test_of_two_empty_agvs_head_on_the_relaxed_one_gives_way():
+    tracker = Tracker(MICRO)
+    tracker.place(1, (3, 2), Direction.LEFT)
+    tracker.place(2, (2, 2), Direction.RIGHT)
+    tracker.assign(1, Leg(Task.FETCH, (1, 2)))
+    tracker.agvs[1].relaxed = True  # as after N_relax failed plans, its relaxed path west
+    tracker.agvs[1].path = [(2, 2), (1, 2)]
+    tracker.assign(2, Leg(Task.FETCH, (6, 2)))
+    tracker.run()
+    gave_way = [e.vehicle for e in tracker.events if isinstance(e, Replanned)]
+    assert gave_way[:1] == [1] and 2 not in gave_way
+    assert not tracker.agvs[1].relaxed  # relaxed mode ends at the head-on conflict
+
+
+@pytest.mark.parametrize("until", [0.0, 0.5, 1.5, 3.5])
+def test_a_shelf_on_its_way_home_is_delivered_instead_wherever_its_agv_is(until):
+    """Recall (Equation 5) while the AGV stands, turns or moves: it delivers from the cell
+    it is in or entering, and the station picks."""
+    station = MICRO.stations[0]
+    tracker = Tracker(MICRO)
+    tracker.place(1, (2, 1), Direction.DOWN, loaded=True)
+    tracker.assign(1, Leg(Task.RETURN, (7, 8), home=(7, 8)))
+    tracker.advance(until)
+    assert tracker.recallable(1)
+    tracker.recall(1, Leg(Task.DELIVER, station.entrance, home=(7, 8), station=station))
+    assert [type(m) for m in tracker.run()] == [Picked, LegDone]
+    assert tracker.agvs[1].loaded and tracker.agvs[1].cell == station.exit_point
+    assert judge(MICRO, tracker.events, {1: (2, 1)}, {1: (7, 8)}).passed
+    with pytest.raises(ValueError, match="returns no shelf that can be recalled"):
+        tracker.recall(1, Leg(Task.DELIVER, station.entrance, home=(7, 8), station=station))
+
+
 def test_walled_in_by_stagnant_agvs_an_empty_agv_relaxes_the_rules_after_n_failures():
     """Figure 5 (B-DL-4): both exits the rules allow out of (3, 7), left and down, hold idle
     AGVs that turn stagnant; after N_relax failed plans the AGV plans without the rules."""

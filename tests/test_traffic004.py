@@ -14,9 +14,10 @@ from fleet.analysis.traffic004 import (
     directions,
     yielding_breaches,
 )
-from fleet.analysis.verdicts004 import rules_floor
+from fleet.analysis.verdicts004 import judge, rules_floor
+from fleet.mission.tracking004 import Moved, Paused
 from fleet.planning.rules004 import Kind, Task, allowed
-from fleet.world.floor004 import paper004
+from fleet.world.floor004 import Floor004Shape, build, paper004
 
 FLOOR = paper004()
 RULES = rules_floor(FLOOR)
@@ -58,3 +59,38 @@ def test_a_loaded_agv_that_gives_way_to_an_empty_one_is_named():
     assert yielding_breaches([(9.0, 1, 2)], [(9.0, 1)], loads)[0].vehicle == 1
     assert yielding_breaches([(9.0, 2, 1)], [(9.0, 2)], loads) == []
     assert yielding_breaches([(4.0, 1, 2)], [(4.0, 1)], loads) == []  # not loaded yet
+
+
+MICRO = build(Floor004Shape(blocks_across=2, double_rows=2, stations=1, piles_per_side=1,
+                            block_width=3, transit_rows=2), "micro004")
+
+
+@pytest.mark.parametrize("events, start, named", [
+    ([Paused(1, 0.0, 2.0, (2, 7), "lift"),
+      Moved(1, 1.0, 2.0, (2, 7), (2, 6), Task.DELIVER, True, False)], (2, 7),
+     "drives while lift"),
+    ([Moved(1, 0.0, 1.0, (5, 11), (5, 12), Task.FETCH, False, True)], (5, 11),
+     "not a cell to drive on"),
+    ([Moved(1, 0.0, 1.0, (2, 0), (2, -1), Task.FETCH, False, True)], (2, 0),
+     "not a cell to drive on"),
+    ([Paused(1, 0.0, 2.0, (6, 11), "lift"),
+      Moved(1, 3.0, 4.0, (6, 11), (6, 12), Task.DELIVER, True, False)], (6, 11),
+     "not along a station's route"),
+    # Still carrying the shelf it lifted, though the moves say empty: into a foreign slot.
+    ([Paused(1, 0.0, 2.0, (2, 7), "lift"),
+      Moved(1, 2.0, 3.0, (2, 7), (2, 6), Task.DELIVER, True, False),
+      Moved(1, 3.0, 4.0, (2, 6), (3, 6), Task.DELIVER, False, False),
+      Moved(1, 4.0, 5.0, (3, 6), (3, 7), Task.DELIVER, False, False)], (2, 7),
+     "loaded into slot (3, 7)"),
+])
+def test_the_judge_reads_what_the_agvs_did_not_what_their_moves_say(events, start, named):
+    verdict = judge(MICRO, events, {1: start})
+    said = [b.why for b in verdict.bad_moves] + [b.what for b in verdict.rule_breaches]
+    assert any(named in s for s in said), said
+
+
+def test_a_loaded_agv_stepping_aside_for_an_empty_one_is_named_whenever_it_replans():
+    loads = {1: [(0.0, True)]}
+    # Met at t=3, gave way at t=6 (two loaded wait first; one loaded must never).
+    assert yielding_breaches([(3.0, 1, 2)], [(6.0, 1)], loads)[0].what == \
+        "loaded, gave way to empty AGV 2"

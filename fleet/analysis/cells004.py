@@ -44,18 +44,18 @@ def held(moves: Iterable[Move], starts: Mapping[int, Cell]
     for m in moves:
         by_vehicle[m.vehicle].append(m)
     for v, start in sorted(starts.items()):
-        cell, since = start, 0.0
+        cell, since, free_at = start, 0.0, 0.0  # free_at: when the last move ended
         for m in sorted(by_vehicle.pop(v, []), key=lambda m: m.t0):
             if m.origin != cell:
                 bad.append(BadMove(m, f"starts at {m.origin}, but the AGV is at {cell}"))
             elif abs(m.to[0] - cell[0]) + abs(m.to[1] - cell[1]) != 1:
                 bad.append(BadMove(m, f"{m.origin} -> {m.to} is not one cell in one of "
                                       f"four directions"))
-            elif not since <= m.t0 < m.t1:
+            elif not free_at <= m.t0 < m.t1:
                 bad.append(BadMove(m, f"starts at t={m.t0} before the last move ended or "
                                       f"ends before it starts"))
             spans.append((v, cell, since, m.t1))
-            cell, since = m.to, m.t0
+            cell, since, free_at = m.to, m.t0, m.t1
         spans.append((v, cell, since, math.inf))
     bad += [BadMove(m, f"AGV {v} has no start") for v, ms in by_vehicle.items() for m in ms]
     return spans, bad

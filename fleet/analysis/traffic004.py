@@ -8,7 +8,8 @@ its rule module: the directions allowed out of each cell are derived here again.
 - Pile columns are only left, outward; going to charge, the columns beside the piles run
   toward them.
 - A loaded AGV enters no slot but its own shelf's home; only a delivering AGV drives a
-  station's lane.
+  station's lane, and only along its fixed route; nobody drives into a wall or a station's
+  structure.
 - Moves made in relaxed mode (logged as such) are exempt from the directions, and only an
   empty AGV may make them.
 - In a head-on conflict between an empty and a loaded AGV, the empty one replans.
@@ -36,6 +37,8 @@ class Floor:
     aisle_rows: tuple[int, ...]  # horizontal aisles, top to bottom
     slots: frozenset[Cell]
     lanes: frozenset[Cell]  # stations' waiting, work and exit cells
+    drivable: frozenset[Cell]  # floor, slots and lanes: not walls nor station structure
+    route_steps: frozenset[tuple[Cell, Cell]]  # each station's fixed route, step by step
 
 
 @dataclass(frozen=True)
@@ -107,8 +110,14 @@ def breaches(floor: Floor, drives: Iterable[Drive]) -> list[Breach]:
         if d.loaded and d.to in floor.slots and d.to != d.home:
             out.append(Breach(d.vehicle, d.t, f"loaded into slot {d.to}, not its shelf's "
                                               f"home {d.home}"))
+        if d.to not in floor.drivable:
+            out.append(Breach(d.vehicle, d.t, f"{d.origin} -> {d.to}: not a cell to drive on"))
         if d.to in floor.lanes and not (d.loaded and d.task == "M2"):
             out.append(Breach(d.vehicle, d.t, f"into station lane {d.to} on {d.task}"))
+        if (d.origin in floor.lanes or d.to in floor.lanes) and \
+                (d.origin, d.to) not in floor.route_steps:
+            out.append(Breach(d.vehicle, d.t, f"{d.origin} -> {d.to} is not along a "
+                                              f"station's route"))
         if code(d.origin, d.to) is None:
             out.append(Breach(d.vehicle, d.t, f"{d.origin} -> {d.to} is not one cell"))
             continue
@@ -120,24 +129,28 @@ def breaches(floor: Floor, drives: Iterable[Drive]) -> list[Breach]:
     return out
 
 
+def loaded_at(loads: Mapping[int, list[tuple[float, bool]]], v: int, t: float) -> bool:
+    """Whether AGV v carried a shelf at t, from its loads over time ((t, loaded) from then
+    on, in time order)."""
+    state = False
+    for since, value in loads.get(v, []):
+        if since > t:
+            break
+        state = value
+    return state
+
+
 def yielding_breaches(head_ons: Iterable[tuple[float, int, int]],
                       replans: Iterable[tuple[float, int]],
-                      loaded_at: Mapping[int, list[tuple[float, bool]]]) -> list[Breach]:
-    """Head-on replans (t, vehicle) made by a loaded AGV against an empty one, with the
-    head-on meetings (t, vehicle, other) and each AGV's load over time ((t, loaded) from
-    then on, in time order)."""
-    def loaded(v: int, t: float) -> bool:
-        state = False
-        for since, value in loaded_at.get(v, []):
-            if since > t:
-                break
-            state = value
-        return state
-
-    met = {(t, v): other for t, v, other in head_ons}
+                      loads: Mapping[int, list[tuple[float, bool]]]) -> list[Breach]:
+    """Replans to give way (t, vehicle) made by a loaded AGV for an empty one: each is
+    matched with the vehicle's last head-on meeting (t, vehicle, other) at or before it."""
+    met: dict[int, list[tuple[float, int]]] = {}
+    for t, v, other in sorted(head_ons):
+        met.setdefault(v, []).append((t, other))
     out = []
     for t, v in replans:
-        other = met.get((t, v))
-        if other is not None and loaded(v, t) and not loaded(other, t):
-            out.append(Breach(v, t, f"loaded, replanned to give way to empty AGV {other}"))
+        before = [other for since, other in met.get(v, []) if since <= t]
+        if before and loaded_at(loads, v, t) and not loaded_at(loads, before[-1], t):
+            out.append(Breach(v, t, f"loaded, gave way to empty AGV {before[-1]}"))
     return out

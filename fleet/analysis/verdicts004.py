@@ -4,13 +4,22 @@ recording would be."""
 
 from __future__ import annotations
 
+import bisect
+import itertools
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from fleet.analysis.cells004 import BadMove, Clash, Move, clashes, held
-from fleet.analysis.traffic004 import Breach, Drive, Floor, breaches, yielding_breaches
-from fleet.mission.tracking004 import Conflict, Event, Met, Moved, Paused, Replanned
+from fleet.analysis.traffic004 import (
+    Breach,
+    Drive,
+    Floor,
+    breaches,
+    loaded_at,
+    yielding_breaches,
+)
+from fleet.mission.tracking004 import Conflict, Event, Met, Moved, Paused, Replanned, Turned
 from fleet.planning.rules004 import XY, Kind
 from fleet.world.floor004 import Floor004
 
@@ -30,8 +39,11 @@ class Verdict004:
 
 def rules_floor(floor: Floor004) -> Floor:
     lanes = frozenset(xy for xy, kind in floor.kinds.items() if kind is Kind.LANE)
+    drivable = frozenset(xy for xy, kind in floor.kinds.items()
+                         if kind in (Kind.FLOOR, Kind.SLOT, Kind.LANE))
+    steps = frozenset(step for s in floor.stations for step in itertools.pairwise(s.route))
     return Floor(floor.width, floor.grid.aisle_columns, floor.grid.aisle_rows,
-                 frozenset(s.xy for s in floor.slots), lanes)
+                 frozenset(s.xy for s in floor.slots), lanes, drivable, steps)
 
 
 def judge(floor: Floor004, events: Iterable[Event], starts: Mapping[int, XY],
@@ -60,11 +72,39 @@ def judge(floor: Floor004, events: Iterable[Event], starts: Mapping[int, XY],
             found = cell
         return found
 
-    drives = [Drive(m.vehicle, m.t0, m.origin, m.to, m.task.value, m.loaded, m.relaxed,
-                    home(m.vehicle, m.t0) if m.loaded else None) for m in moves]
+    # Loaded or not is what its lifts and drops say, not what the move says of itself.
+    drives = [Drive(m.vehicle, m.t0, m.origin, m.to, m.task.value,
+                    loaded := loaded_at(loads, m.vehicle, m.t0), m.relaxed,
+                    home(m.vehicle, m.t0) if loaded else None) for m in moves]
     head_ons = [(e.t, e.vehicle, e.other) for e in events
                 if isinstance(e, Met) and e.kind is Conflict.HEAD_ON]
     replans = [(e.t, e.vehicle) for e in events
-               if isinstance(e, Replanned) and e.why == "head-on"]
-    return Verdict004(clashes(spans), bad, breaches(rules_floor(floor), drives),
+               if isinstance(e, Replanned) and e.why.startswith("head-on")]
+    return Verdict004(clashes(spans), bad + _driving_while_still(moves, events),
+                      breaches(rules_floor(floor), drives),
                       yielding_breaches(head_ons, replans, loads))
+
+
+def _driving_while_still(moves: list[Moved], events: list[Event]) -> list[BadMove]:
+    """Moves begun while the AGV was lifting, dropping, picking, charging or turning."""
+    still: dict[int, list[tuple[float, float, str]]] = defaultdict(list)
+    for e in events:
+        if isinstance(e, Paused):
+            still[e.vehicle].append((e.t0, e.t1, e.label))
+        elif isinstance(e, Turned):
+            still[e.vehicle].append((e.t0, e.t1, "turning"))
+    for spans in still.values():
+        spans.sort()
+    longest = {v: max(t1 - t0 for t0, t1, _ in spans) for v, spans in still.items()}
+    starts = {v: [t0 for t0, _, _ in spans] for v, spans in still.items()}
+    out = []
+    for m in moves:
+        if m.vehicle not in still:
+            continue
+        first = bisect.bisect_left(starts[m.vehicle], m.t0 - longest[m.vehicle])
+        last = bisect.bisect_left(starts[m.vehicle], m.t1)
+        for t0, t1, doing in still[m.vehicle][first:last]:  # the spans that may overlap it
+            if t0 <= m.t0 < t1 or m.t0 < t0 < m.t1:
+                out.append(BadMove(Move(m.vehicle, m.t0, m.t1, m.origin, m.to),
+                                   f"drives while {doing} from t={t0} to t={t1}"))
+    return out

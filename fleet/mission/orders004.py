@@ -314,8 +314,8 @@ class Mission004:
         taken = {a.cell for a in agvs} | {a.leg.goal for a in agvs if a.leg is not None
                                           and a.leg.task is Task.CHARGE}
         for v, a in sorted(self._agvs.items()):
-            if not a.needs_pile:
-                continue
+            if not a.needs_pile or self.tracker.agvs[v].leg is not None:
+                continue  # (one sent out of the way meanwhile goes when it is there)
             free = [p for p in self.floor.piles if p not in taken]
             if not free:
                 return

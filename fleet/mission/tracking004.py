@@ -298,7 +298,7 @@ class Tracker:
             raise ValueError(f"AGV {vehicle} is {'loaded' if agv.loaded else 'empty'}: it "
                              f"cannot take a {leg.task.name.lower()} leg ({leg.task.value})")
         self._start(agv, leg)
-        self._wake(vehicle, self.t if t is None else t)
+        self._wake(vehicle, self.t if t is None else max(t, self.t))
 
     def recallable(self, vehicle: int) -> bool:
         """Whether the AGV carries its shelf home and has not begun to drop it."""
@@ -498,8 +498,9 @@ class Tracker:
             self.events.append(Stagnant(t, agv.vehicle, agv.cell))
         around = self._can_go_around(agv, nxt)
         if head_on:
+            yields = _yields(agv, other)
             agv.relaxed = False  # relaxed mode ends at the first head-on conflict
-            if not _yields(agv, other):
+            if not yields:
                 self._wait(agv, nxt)
                 self._wake(other.vehicle, t)  # the other gives way: it must act to see it
                 return
@@ -511,7 +512,8 @@ class Tracker:
                 if self._replan(agv, "head-on"):
                     return
             if not self._step_aside(agv, other) and not (
-                    other.busy_until <= t and self._step_aside(other, agv)):
+                    other.busy_until <= t and (agv.loaded or not other.loaded)
+                    and self._step_aside(other, agv)):
                 self._wait(agv, nxt)  # neither can give way: wait (the watchdog names it)
             return
         if self._stagnant(other, t) and not agv.loaded and around:
