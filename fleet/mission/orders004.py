@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 from fleet.errors import UserError
 from fleet.mission.battery import FULL, BatteryParams
+from fleet.mission.orders import manhattan
 from fleet.mission.tracking004 import (
     Event,
     Leg,
@@ -271,11 +272,11 @@ class Mission004:
             if shelf.order is not None:
                 continue
             if shelf.carrier is None:
-                d = float(_manhattan(shelf.home, entrance))
+                d = float(manhattan(shelf.home, entrance))
             elif self.work.recall and shelf.returning and \
                     self.tracker.recallable(shelf.carrier):
                 at = self._carrier_cell(shelf.carrier)
-                d = float(_manhattan(at, entrance) - _manhattan(at, shelf.home))
+                d = float(manhattan(at, entrance) - manhattan(at, shelf.home))
             else:
                 continue
             if best is None or (d, shelf.home) < best:
@@ -291,7 +292,7 @@ class Mission004:
                 if self.tracker.agvs[v].leg is None and a.shelf is None and not a.needs_pile]
         if not idle:
             return None
-        return min(idle, key=lambda v: (_manhattan(self.tracker.agvs[v].cell, at), v))
+        return min(idle, key=lambda v: (manhattan(self.tracker.agvs[v].cell, at), v))
 
     def _fetch(self, order: Order004, shelf: _Shelf, v: int) -> None:
         shelf.carrier, shelf.order = v, order.id
@@ -320,12 +321,8 @@ class Mission004:
             if not free:
                 return
             at = self.tracker.agvs[v].cell
-            pile = min(free, key=lambda p: (_manhattan(at, p), p))
+            pile = min(free, key=lambda p: (manhattan(at, p), p))
             a.needs_pile = False
             taken.add(pile)
             self.tracker.assign(v, Leg(Task.CHARGE, pile))
-
-
-def _manhattan(a: XY, b: XY) -> int:
-    return abs(a[0] - b[0]) + abs(a[1] - b[1])
 

@@ -45,6 +45,7 @@ from fleet.planning.rules004 import (
     Occupancy,
     Task,
     allowed,
+    perpendicular,
     value,
 )
 from fleet.world.floor004 import Floor004, Station
@@ -420,7 +421,7 @@ class Tracker:
             return self._pause(agv, stage)
         nxt = agv.path[0]
         need = heading_of(agv.cell, nxt)
-        if _perpendicular(agv.heading, need):
+        if perpendicular(agv.heading, need):
             agv.heading, agv.busy_until = need, t + p.t_turn
             agv.running_s += p.t_turn
             self.events.append(Turned(agv.vehicle, t, agv.busy_until, agv.cell, need))
@@ -486,7 +487,7 @@ class Tracker:
         head_on = other.moving_to is None and other.path[:1] == [agv.cell]
         if head_on:
             kind = Conflict.HEAD_ON
-        elif other.moving_to is not None and _perpendicular(other.heading, agv.heading):
+        elif other.moving_to is not None and perpendicular(other.heading, agv.heading):
             kind = Conflict.CROSSING
         else:
             kind = Conflict.REAR_END
@@ -640,10 +641,6 @@ class Tracker:
         """Standing longer than T_stag, but in a station's lane (its queue)."""
         return agv.moving_to is None and self.floor.kind(agv.cell) is not Kind.LANE and \
             t - agv.standing_since > self.params.t_stag
-
-
-def _perpendicular(a: Direction, b: Direction) -> bool:
-    return (a in (Direction.UP, Direction.DOWN)) != (b in (Direction.UP, Direction.DOWN))
 
 
 def _yields(agv: Agv, other: Agv) -> bool:

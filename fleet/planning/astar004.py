@@ -29,6 +29,7 @@ from fleet.planning.rules004 import (
     Task,
     allowed,
     direction_code,
+    perpendicular,
     plannable,
     value,
 )
@@ -72,14 +73,10 @@ def count_turns(cells: tuple[XY, ...], heading: Direction | None = None) -> int:
     turns = 0
     for a, b in itertools.pairwise(cells):
         d = heading_of(a, b)
-        if heading is not None and _perpendicular(heading, d):
+        if heading is not None and perpendicular(heading, d):
             turns += 1
         heading = d
     return turns
-
-
-def _perpendicular(a: Direction, b: Direction) -> bool:
-    return (a in (Direction.UP, Direction.DOWN)) != (b in (Direction.UP, Direction.DOWN))
 
 
 class _ListOpen:
@@ -150,7 +147,7 @@ def plan(grid: Grid004, task: Task, start: XY, goal: XY, heading: Direction | No
                 continue
             if n != goal and not plannable(task, values(n)):
                 continue
-            step = 1.0 + (costs.turn if came is not None and _perpendicular(came, d) else 0.0)
+            step = 1.0 + (costs.turn if came is not None and perpendicular(came, d) else 0.0)
             step += costs.heat * costs.t_value.get(n, 0.0)
             if n in g and g[current] + step >= g[n]:
                 continue

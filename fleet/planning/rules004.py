@@ -63,6 +63,11 @@ STEP: dict[Direction, XY] = {Direction.UP: (0, -1), Direction.LEFT: (-1, 0),
 ALL = frozenset(Direction)
 
 
+def perpendicular(a: Direction, b: Direction) -> bool:
+    """Whether going from a to b is a quarter turn (a reversal is none: the AGV drives back)."""
+    return (a in (Direction.UP, Direction.DOWN)) != (b in (Direction.UP, Direction.DOWN))
+
+
 def direction_code(dx: int, dy: int) -> int:
     """Equation (3)'s code of a move (dx, dy) with y down: dx + 3|dx| + dy + 2|dy|, which is
     4, 2, 3, 1 for right, left, down, up (note B.4.2, decoded)."""
