@@ -27,11 +27,13 @@ from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
+from dispatcher.remote004 import dispatch_mission004
 from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
 from fleet.mission.faults import load_scenario
 from fleet.mission.order_work import order_fleet
+from fleet.mission.orders004 import fleet004
 from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
@@ -92,6 +94,8 @@ class MissionSetup:
 def fleet_limit(mission: Mission, layout: Layout) -> int:
     """The mission's fleet, or at most: one forklift per start pose, or on an order mission
     the paper's ten AGVs (one per charging pile at most, where they start)."""
+    if layout.floor is not None:
+        return fleet004(layout.floor, mission.vehicles)
     if mission.kind is MissionKind.ORDERS:
         return order_fleet(layout, mission.vehicles)
     return mission.vehicles or len(layout.vehicle_starts)
@@ -215,6 +219,9 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
     that could not finish: the error goes into the result)."""
     config, vehicles = setup.config, setup.vehicles
+    if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
+        return dispatch_mission004(session, keys, setup.mission, setup.layout.floor, vehicles,
+                                   liveness, config.startup_timeout_s, publish)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

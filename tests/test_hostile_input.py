@@ -32,6 +32,8 @@ from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.maneuvers import Manner
 from fleet.planning.planner import HybridAStar
 from fleet.planning.reservations import ReservationTable
+from fleet.planning.rules004 import Direction
+from fleet.planning.rules004 import Task as Task004
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import recorded_run
 from fleet.recording.reader import RecordingError, read_recording
@@ -42,11 +44,13 @@ from fleet.wire.protocol import (
     SCHEMA_VERSION,
     TYPES,
     CommitRequest,
+    DirectionCode,
     ManeuverLabel,
     ManeuverOrRest,
     Message,
     PoseText,
     ProtocolError,
+    Task004Name,
     TaskRequest,
     TaskResult,
     WireChange,
@@ -85,7 +89,9 @@ WELL_FORMED_POSES = st.builds("{},{},{}".format, SMALL_INT | INT64, SMALL_INT | 
                               st.sampled_from("ENWSenws"))
 KNOWN_LABELS = st.sampled_from([m.label for m in Manner])
 SYNTAX = {PoseText: WELL_FORMED_POSES, ManeuverLabel: KNOWN_LABELS,
-          ManeuverOrRest: st.just("") | KNOWN_LABELS}
+          ManeuverOrRest: st.just("") | KNOWN_LABELS,
+          Task004Name: st.sampled_from([t.value for t in Task004]),
+          DirectionCode: st.sampled_from([int(d) for d in Direction])}
 
 
 def valid(hint: typing.Any) -> st.SearchStrategy:

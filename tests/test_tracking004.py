@@ -219,7 +219,7 @@ def test_a_fleet_fetching_delivering_and_returning_never_shares_a_cell_and_finis
         assert not tracker.agvs[v].loaded and tracker.agvs[v].leg is None
     # The store agrees: each AGV ends holding exactly the cell it stands on.
     for v, agv in tracker.agvs.items():
-        assert {r.cell for r in tracker.store.reservations(v) if r.t1 == float("inf")} == \
+        assert {r.cell for r in tracker.vehicles.view.reservations(v) if r.t1 == float("inf")} == \
             {SMALL.cell(agv.cell)}
 
 

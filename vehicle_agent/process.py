@@ -22,6 +22,7 @@ from fleet.wire.topics import Keys, genuine, vehicle_sender
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout, parse_layout
 from vehicle_agent.agent import Agent
+from vehicle_agent.lifting import LiftingAgent
 
 log = logging.getLogger("fleet.agent")
 MISSION_WAIT_S = 120.0  # for the dispatcher to say what the mission is (as it waits for us)
@@ -57,8 +58,15 @@ def serve(config: AgentConfig) -> int:
             layout, starts, whose = given, given.vehicle_starts, f"layout {given.name}"
         else:
             info, layout, starts = mission_layout(session, keys)
-            battery = battery_of(info, vehicle, layout)
             whose = "the mission"
+            if layout.floor is None:
+                battery = battery_of(info, vehicle, layout)
+        if layout.floor is not None:  # seed 004: the tracker places it (dispatcher/remote004)
+            lifting = LiftingAgent(session, keys, vehicle, layout.floor)
+            stop_on_signals(lifting.stop)
+            with suppress(Stopped):
+                lifting.run(exit_when_done=config.exit_when_done)
+            return 0
         start = config.start
         if start is None:
             if not 1 <= vehicle <= len(starts):

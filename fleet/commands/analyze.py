@@ -44,6 +44,11 @@ def print_analysis(recording: Path, as_json: bool = False) -> int:
 
     first = recording_file(recording)  # refuses what is no recording, saying why
     read = read_recording(recording)
+    if read.info is not None and read.layout().floor is not None:
+        report004 = _print_analysis004(read, as_json)
+        if recording.is_dir() or recording.name == RUN_FILE:
+            write_summary(first.parent, report004)
+        return 0 if report004.passed else 1
     report = analyze(read)
     stopped = recorded_standstill(read)
     if recording.is_dir() or recording.name == RUN_FILE:  # a run's, every segment
@@ -54,6 +59,19 @@ def print_analysis(recording: Path, as_json: bool = False) -> int:
     else:
         print("\n".join(report.lines() + (stopped_lines(stopped) if stopped else [])))
     return 0 if report.passed else 1
+
+
+def _print_analysis004(read, as_json: bool):
+    """A seed-004 recording: its events judged (fleet/analysis/analyze004.py)."""
+    from fleet.analysis.analyze004 import analyze004, report_json, report_lines, verdict_lines
+
+    report = analyze004(read)
+    if as_json:
+        print(json.dumps(report_json(report)))
+    else:
+        print("\n".join([*report_lines(report), f"  {'recording':<19}{report.path}",
+                         *verdict_lines(report)]))
+    return report
 
 
 def stopped_lines(stopped: Standstill) -> list[str]:

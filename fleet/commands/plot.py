@@ -17,6 +17,7 @@ from fleet.errors import UserError
 from fleet.recording.reader import Recording, read_recording, recording_file
 from fleet.recording.segments import RUN_FILE
 from fleet.runtime.argtypes import positive_int, sim_seconds, writable_dir
+from fleet.world.floor004 import Floor004
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -41,6 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "filling sequence, a Gantt chart of every AGV's trips, the time on "
                        "each cell and the congestion (heatmap.png), and the lanes, shelves, "
                        "packing stations and piles in the snapshots and the animation. Of a "
+                       "seed-004 run: its heat maps in the style of the seed's Figures 10-11 "
+                       "(heat.png). Of a "
                        "`fleet bench seed002 --json` result: the makespan curves of seed "
                        "002's Figures 17-19 (fig17.png, fig18.png, fig19.png).")
     p.add_argument("recording", type=Path,
@@ -66,14 +69,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
-def read_run(path: Path) -> tuple[Recording, MissionSummary]:
-    """A run's recording (every segment of it) and its mission record
-    (fleet.recording.mission_record.summary_of). A truncated recording (a killed recorder) is
-    read as far as it goes, and windows without a recorder are skipped, each with a note."""
+def read_run(path: Path, recording: Recording | None = None
+             ) -> tuple[Recording, MissionSummary]:
+    """A run's recording (every segment of it; `recording` if read already) and its mission
+    record (fleet.recording.mission_record.summary_of). A truncated recording (a killed
+    recorder) is read as far as it goes, and windows without a recorder are skipped, each
+    with a note."""
     from fleet.recording.mission_record import summary_of
 
     file = recording_file(path)
-    recording = read_recording(path)
+    recording = recording or read_recording(path)
     record = summary_of(recording)
     if not recording.complete:
         print(f"note: {file if len(recording.segments) < 2 else path} is incomplete "
@@ -135,7 +140,11 @@ def run(args: argparse.Namespace) -> int:
     result = bench_result(args.recording)
     if result is not None:
         return plot_bench(args, result)
-    recording, record = read_run(args.recording)
+    recording = read_recording(args.recording)
+    floor = recording.layout().floor if recording.info is not None else None
+    if floor is not None:
+        return plot004(args, recording, floor)
+    recording, record = read_run(args.recording, recording)
     layout = recording.layout()
     tl = None
     if record.mission.kind == "orders":
@@ -162,6 +171,32 @@ def run(args: argparse.Namespace) -> int:
     print(summary)
     for path in written:
         print(f"wrote {path}")
+    return 0
+
+
+def plot004(args: argparse.Namespace, recording: Recording, floor: Floor004) -> int:
+    """A seed-004 run: its heat in the style of the seed's Figures 10-11 (heat.png)."""
+    from fleet.analysis.analyze004 import recorded_events
+    from fleet.mission.heat004 import heat_counts, t_values
+    from fleet.views.drawing import save_figure
+    from fleet.views.heat004 import heat_maps
+
+    if args.at:
+        raise UserError("--at: snapshots of a seed-004 run are not drawn yet; fleet plot "
+                        "draws its heat maps (heat.png)")
+    events, _ = recorded_events(recording, floor)
+    counts = heat_counts(events)
+    info = recording.info
+    out = args.out or recording.path.parent
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "heat.png"
+    save_figure(heat_maps(floor, [
+        ("T_value of this run (Equation 6, scaled to 0..1)", t_values(counts.heat())),
+        ("cells entered", {xy: float(n) for xy, n in counts.passes.items()})],
+        f"{info.layout}: {info.orders} orders, {info.vehicles} lifting AGVs, seed "
+        f"{info.seed}; the brighter, the hotter"), str(path))
+    print(f"{sum(counts.passes.values())} cells entered, {len(counts.passes)} cells used")
+    print(f"wrote {path}")
     return 0
 
 

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from fleet.commands.analyze import stopped_lines
 from fleet.commands.progress import MissionProgress, ProgressBar
+from fleet.commands.run004 import run004
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
@@ -190,6 +191,8 @@ def summary_json(report: Report, wall_s: float, digest: str,
 
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
+    if layout.floor is not None:  # seed 004's lifting AGVs
+        return run004(args, layout, command_line())
     mission = mission_from_args(args, layout)
     if not registry.is_built(layout.vehicle.kind):  # a planned kind: nothing drives it yet
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")

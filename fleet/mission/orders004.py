@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import random
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from fleet.errors import UserError
@@ -39,8 +40,8 @@ from fleet.mission.tracking004 import (
     Picked,
     Tracker,
     TrackingParams,
+    Vehicles,
 )
-from fleet.planning.reservations import ReservationTable
 from fleet.planning.rules004 import XY, Direction, Task
 from fleet.world.floor004 import CLASSES, Floor004
 
@@ -49,6 +50,19 @@ E_MAX_S = 1800.0  # running seconds a full battery lasts (CHOICE, note B.3)
 RHO = 0.5  # charging time per second consumed (CHOICE)
 # Seed 004's battery in seed 002's terms: drains per running second, charges 1/rho as fast.
 BATTERY_004 = BatteryParams(drain_per_s=FULL / E_MAX_S, charge_per_s=FULL / (RHO * E_MAX_S))
+
+
+DEFAULT_AGVS_004 = 10  # `fleet run`'s fleet when none is given (the seed runs 10 to 60)
+
+
+def fleet004(floor: Floor004, vehicles: int | None) -> int:
+    """The fleet of a mission on `floor`: `vehicles`, or DEFAULT_AGVS_004, one per parking
+    place at most (each starts on one)."""
+    n = min(DEFAULT_AGVS_004, len(floor.parking)) if vehicles is None else vehicles
+    if not 1 <= n <= len(floor.parking):
+        raise UserError(f"--vehicles {n}: the AGVs of {floor.name} start on its "
+                        f"{len(floor.parking)} parking places, one each")
+    return n
 
 
 @dataclass(frozen=True)
@@ -127,13 +141,16 @@ class Result004:
 
 @dataclass
 class Mission004:
-    """One order mission on one floor, in process: `run` drives it to the end."""
+    """One order mission on one floor: `run` drives it to the end. The AGVs act in this
+    process, or through `fleet` (their agent processes: dispatcher/remote004.py)."""
 
     floor: Floor004
     vehicles: int
     orders: tuple[Order004, ...]
     tracking: TrackingParams = field(default_factory=TrackingParams)
     work: WorkParams = field(default_factory=WorkParams)
+    fleet: Vehicles | None = None  # None: every AGV in this process
+    on_event: Callable[[Event], None] | None = None  # each tracking event as it happens
 
     def __post_init__(self) -> None:
         if not 1 <= self.vehicles <= len(self.floor.parking):
@@ -148,7 +165,7 @@ class Mission004:
             if o.goods not in goods:
                 raise UserError(f"order {o.id} is for goods {o.goods!r}, which no shelf on "
                                 f"{self.floor.name} holds")
-        self.tracker = Tracker(self.floor, self.tracking, ReservationTable())
+        self.tracker = Tracker(self.floor, self.tracking, self.fleet, self.on_event)
         for v in range(1, self.vehicles + 1):
             self.tracker.place(v, self.floor.parking[v - 1], Direction.DOWN)
         self._agvs = {v: _Agv() for v in range(1, self.vehicles + 1)}

@@ -19,7 +19,13 @@ AGV plans without the traffic rules until its next head-on conflict or the end o
 
 Time is discrete events in (time, vehicle) order, so a run is deterministic. The grid values
 the planner reads are derived, never stored: a cell's static kind, and whether the AGV that
-holds it in the store moves or is stagnant (`GridView`).
+holds it in the store moves or is stagnant (`grid_values`).
+
+What each AGV does for itself, taking and letting go of cells and planning its path, goes
+through one seam (`Vehicles`): `LocalVehicles` in this process against a `ReservationTable`,
+or each AGV's agent process against the reservation service (dispatcher/remote004.py). The
+tracker waits for every answer before the next event, so the requests of one instant reach
+the store in the events' fixed order and a run of processes is the in-process run.
 """
 
 from __future__ import annotations
@@ -33,9 +39,10 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Protocol
 
 from fleet.planning.astar004 import Costs, heading_of, plan
-from fleet.planning.reservations import INF, Interval, ReservationTable
+from fleet.planning.reservations import INF, Interval, ReservationTable, ReservationView
 from fleet.planning.rules004 import (
     STEP,
     WALL_VALUE,
@@ -90,6 +97,99 @@ class Leg:
         if self.station is not None and self.goal != self.station.entrance:
             raise ValueError(f"a delivery to {self.station.name} ends at its entrance "
                              f"{self.station.entrance}, not {self.goal}")
+
+
+@dataclass(frozen=True)
+class RouteQuery:
+    """What an AGV's planner is asked: its leg's path from where it stands, on the grid as it
+    is at `t` (the store's holders, and which of them move or are stagnant)."""
+
+    vehicle: int
+    t: float
+    task: Task
+    start: XY
+    goal: XY
+    heading: Direction
+    home: XY | None = None
+    relaxed: bool = False
+    blocked: frozenset[XY] = frozenset()  # avoided in this plan only (read as walls)
+    moving: frozenset[int] = frozenset()  # AGVs between two cells now
+    stagnant: frozenset[int] = frozenset()  # AGVs standing longer than T_stag outside a lane
+
+
+def grid_values(floor: Floor004, view: ReservationView, query: RouteQuery
+                ) -> Callable[[XY], int]:
+    """The multi-valued grid as the asking AGV reads it at the query's instant: the cell's
+    static kind and its holder's motion, derived from the store, never stored."""
+    t, blocked, me = query.t, query.blocked, query.vehicle
+    after = math.nextafter(t, INF)
+
+    def occupancy(xy: XY) -> Occupancy:
+        holder = view.conflict(me, floor.cell(xy), t, after)
+        if holder is None:
+            return Occupancy.FREE
+        if holder in query.moving:
+            return Occupancy.MOVING
+        return Occupancy.STAGNANT if holder in query.stagnant else Occupancy.FREE
+
+    def values(xy: XY) -> int:
+        if xy in blocked:
+            return WALL_VALUE
+        return value(floor.kind(xy), occupancy(xy))
+    return values
+
+
+def route(floor: Floor004, view: ReservationView, query: RouteQuery, costs: Costs,
+          heap: bool = True) -> tuple[XY, ...] | None:
+    """The improved A*'s path for the query (start first); None: none now."""
+    found = plan(floor.grid, query.task, query.start, query.goal, query.heading, costs,
+                 grid_values(floor, view, query), heap, relaxed=query.relaxed, home=query.home)
+    return None if found is None else found.cells
+
+
+@dataclass(frozen=True)
+class Routed:
+    cells: tuple[XY, ...] | None  # start first; None: no path now
+    planning_s: float  # wall time the planner took (measured; it decides nothing)
+
+
+class Vehicles(Protocol):
+    """What each AGV does for itself: take a cell from the store before it enters (one
+    commit of [t, forever), refused while another holds it), let the cell behind go, and
+    plan. `view` is the store as the tracker reads it, holding every change made so far."""
+
+    @property
+    def view(self) -> ReservationView: ...
+
+    def take(self, vehicle: int, xy: XY, t: float) -> bool: ...
+
+    def release(self, vehicle: int, xy: XY, t: float) -> None: ...
+
+    def route(self, query: RouteQuery) -> Routed: ...
+
+
+class LocalVehicles:
+    """Every AGV in this process, against one `ReservationTable`."""
+
+    def __init__(self, floor: Floor004, params: TrackingParams,
+                 table: ReservationTable | None = None) -> None:
+        self.floor, self.params = floor, params
+        self.table = table if table is not None else ReservationTable()
+
+    @property
+    def view(self) -> ReservationView:
+        return self.table
+
+    def take(self, vehicle: int, xy: XY, t: float) -> bool:
+        return self.table.commit(vehicle, [Interval(self.floor.cell(xy), t, INF)]).ok
+
+    def release(self, vehicle: int, xy: XY, t: float) -> None:
+        self.table.release(vehicle, t, [self.floor.cell(xy)])
+
+    def route(self, query: RouteQuery) -> Routed:
+        started = time.perf_counter()
+        cells = route(self.floor, self.table, query, self.params.costs, self.params.heap)
+        return Routed(cells, time.perf_counter() - started)
 
 
 class StageKind(Enum):
@@ -262,10 +362,12 @@ class Tracker:
     project's cells: row 0 at the bottom)."""
 
     def __init__(self, floor: Floor004, params: TrackingParams = TrackingParams(),
-                 store: ReservationTable | None = None) -> None:
+                 vehicles: Vehicles | None = None,
+                 on_event: Callable[[Event], None] | None = None) -> None:
         self.floor = floor
         self.params = params
-        self.store = store if store is not None else ReservationTable()
+        self.vehicles = vehicles if vehicles is not None else LocalVehicles(floor, params)
+        self.on_event = on_event  # told of each event as it happens (a run's publisher)
         self.agvs: dict[int, Agv] = {}
         self.events: list[Event] = []
         self.t = 0.0
@@ -285,9 +387,8 @@ class Tracker:
             raise ValueError(f"AGV {vehicle} is placed already")
         if self.floor.kind(xy) in (Kind.WALL, Kind.STRUCTURE):
             raise ValueError(f"AGV {vehicle}: {xy} is not a cell an AGV can stand on")
-        result = self.store.park(vehicle, [self.floor.cell(xy)], t)
-        if not result.ok:
-            raise ValueError(f"AGV {vehicle}: {xy} is taken ({result.reason})")
+        if not self.vehicles.take(vehicle, xy, t):
+            raise ValueError(f"AGV {vehicle}: {xy} is taken by AGV {self._holder(vehicle, xy)}")
         self.agvs[vehicle] = Agv(vehicle, xy, heading, loaded, standing_since=t)
 
     def assign(self, vehicle: int, leg: Leg, t: float | None = None) -> None:
@@ -375,6 +476,11 @@ class Tracker:
         return out
 
     # -- one AGV -------------------------------------------------------------------------------
+    def _log(self, event: Event) -> None:
+        self.events.append(event)
+        if self.on_event is not None:
+            self.on_event(event)
+
     def _wake(self, vehicle: int, t: float, rank: int = _ACT) -> None:
         heapq.heappush(self._due, (t, rank, vehicle, next(self._order)))
 
@@ -383,7 +489,7 @@ class Tracker:
         assert agv.moving_to is not None
         origin, agv.cell, agv.moving_to = agv.cell, agv.moving_to, None
         agv.standing_since = self.t
-        self.store.release(agv.vehicle, self.t, [self.floor.cell(origin)])
+        self.vehicles.release(agv.vehicle, origin, self.t)
         for v in sorted(self._waiters.pop(origin, ())):
             self._wake(v, self.t)
         self._wake(agv.vehicle, self.t)
@@ -424,10 +530,10 @@ class Tracker:
         if perpendicular(agv.heading, need):
             agv.heading, agv.busy_until = need, t + p.t_turn
             agv.running_s += p.t_turn
-            self.events.append(Turned(agv.vehicle, t, agv.busy_until, agv.cell, need))
+            self._log(Turned(agv.vehicle, t, agv.busy_until, agv.cell, need))
             self._wake(agv.vehicle, agv.busy_until)
             return None
-        if self.store.commit(agv.vehicle, [Interval(self.floor.cell(nxt), t, INF)]).ok:
+        if self.vehicles.take(agv.vehicle, nxt, t):
             self._drive(agv, nxt)
             return None
         holder = self._holder(agv.vehicle, nxt)
@@ -437,7 +543,7 @@ class Tracker:
 
     def _holder(self, vehicle: int, xy: XY) -> int | None:
         """Who else holds xy from now on."""
-        return self.store.conflict(vehicle, self.floor.cell(xy), self.t, INF)
+        return self.vehicles.view.conflict(vehicle, self.floor.cell(xy), self.t, INF)
 
     def _drive(self, agv: Agv, nxt: XY) -> None:
         t, p = self.t, self.params
@@ -446,7 +552,7 @@ class Tracker:
         agv.trouble_since = None
         agv.running_s += p.t_cell
         assert agv.leg is not None
-        self.events.append(Moved(agv.vehicle, t, t + p.t_cell, agv.cell, nxt, agv.leg.task,
+        self._log(Moved(agv.vehicle, t, t + p.t_cell, agv.cell, nxt, agv.leg.task,
                                  agv.loaded, agv.relaxed))
         self._wake(agv.vehicle, t + p.t_cell, _ARRIVE)
 
@@ -457,7 +563,7 @@ class Tracker:
             agv.busy_until = t + stage.seconds
             if stage.label in ("lift", "drop"):  # the AGV's work; picking and charging not
                 agv.running_s += stage.seconds
-            self.events.append(Paused(agv.vehicle, t, agv.busy_until, agv.cell, stage.label))
+            self._log(Paused(agv.vehicle, t, agv.busy_until, agv.cell, stage.label))
             agv.stages[0] = dataclasses.replace(stage, seconds=0.0)  # under way
             self._wake(agv.vehicle, agv.busy_until)
             return None
@@ -470,7 +576,7 @@ class Tracker:
         elif stage.label == "pick":
             assert agv.leg is not None and agv.leg.station is not None
             picked = Picked(t, agv.vehicle, agv.leg.station.name)
-            self.events.append(picked)
+            self._log(picked)
             return picked
         return None
 
@@ -479,7 +585,7 @@ class Tracker:
         assert leg is not None
         agv.leg, agv.relaxed, agv.blocked, agv.failures = None, False, frozenset(), 0
         done = LegDone(self.t, agv.vehicle, leg)
-        self.events.append(done)
+        self._log(done)
         return done
 
     def _blocked(self, agv: Agv, nxt: XY, other: Agv) -> None:
@@ -493,10 +599,10 @@ class Tracker:
             kind = Conflict.REAR_END
         if agv.met != (other.vehicle, nxt):
             agv.met = (other.vehicle, nxt)
-            self.events.append(Met(t, agv.vehicle, other.vehicle, agv.cell, nxt, kind))
+            self._log(Met(t, agv.vehicle, other.vehicle, agv.cell, nxt, kind))
         if not agv.stagnant_said and self._stagnant(agv, t):
             agv.stagnant_said = True
-            self.events.append(Stagnant(t, agv.vehicle, agv.cell))
+            self._log(Stagnant(t, agv.vehicle, agv.cell))
         around = self._can_go_around(agv, nxt)
         if head_on:
             yields = _yields(agv, other)
@@ -548,7 +654,7 @@ class Tracker:
             if n == other.cell or n in other.path[:2] or self._holder(agv.vehicle, n) is not None \
                     or kind not in ((Kind.FLOOR,) if agv.loaded else (Kind.FLOOR, Kind.SLOT)):
                 continue
-            self.events.append(Replanned(self.t, agv.vehicle, STEPPED_ASIDE, agv.relaxed, True))
+            self._log(Replanned(self.t, agv.vehicle, STEPPED_ASIDE, agv.relaxed, True))
             self.replans += 1
             agv.path, agv.waiting_on = [n], None
             self._wake(agv.vehicle, self.t)
@@ -567,7 +673,7 @@ class Tracker:
             return
         to = min(free, key=lambda xy: (abs(xy[0] - idle.cell[0]) + abs(xy[1] - idle.cell[1]),
                                        xy))
-        self.events.append(MadeWay(self.t, agv.vehicle, idle.vehicle, idle.cell, to))
+        self._log(MadeWay(self.t, agv.vehicle, idle.vehicle, idle.cell, to))
         self.assign(idle.vehicle, Leg(Task.FETCH, to, make_way=True))
 
     def _in_trouble(self, agv: Agv) -> float:
@@ -592,11 +698,13 @@ class Tracker:
         assert leg is not None
         if not first:
             self.replans += 1
-        started = time.perf_counter()
-        found = plan(self.floor.grid, leg.task, agv.cell, leg.goal, agv.heading,
-                     self.params.costs, self._values(agv), self.params.heap,
-                     relaxed=agv.relaxed, home=leg.home)
-        self.planning_s += time.perf_counter() - started
+        t = self.t
+        routed = self.vehicles.route(RouteQuery(
+            agv.vehicle, t, leg.task, agv.cell, leg.goal, agv.heading, leg.home, agv.relaxed,
+            agv.blocked, frozenset(v for v, a in self.agvs.items() if a.moving_to is not None),
+            frozenset(v for v, a in self.agvs.items() if self._stagnant(a, t))))
+        self.planning_s += routed.planning_s
+        found = routed.cells
         agv.blocked = frozenset()  # avoided in this plan only: the next one sees the grid anew
         if found is None:
             self._in_trouble(agv)
@@ -606,36 +714,17 @@ class Tracker:
             agv.path = []
             return False
         agv.failures = 0
-        agv.path = list(found.cells[1:])
+        agv.path = list(found[1:])
         return True
 
     def _replan(self, agv: Agv, why: str) -> bool:
         """Plan again now; False: no path (it tries again in `retry_s`)."""
         found = self._plan(agv)
-        self.events.append(Replanned(self.t, agv.vehicle, why, agv.relaxed, found))
+        self._log(Replanned(self.t, agv.vehicle, why, agv.relaxed, found))
         if found:
             agv.waiting_on = None
         self._wake(agv.vehicle, self.t if found else self.t + self.params.retry_s)
         return found
-
-    def _values(self, agv: Agv) -> Callable[[XY], int]:
-        """The grid as this AGV's planner reads it now (its blocked cells as walls)."""
-        t, blocked = self.t, agv.blocked
-
-        def values(xy: XY) -> int:
-            if xy in blocked:
-                return WALL_VALUE
-            return value(self.floor.kind(xy), self._occupancy(agv.vehicle, xy, t))
-        return values
-
-    def _occupancy(self, vehicle: int, xy: XY, t: float) -> Occupancy:
-        holder = self.store.conflict(vehicle, self.floor.cell(xy), t, math.nextafter(t, INF))
-        if holder is None:
-            return Occupancy.FREE
-        other = self.agvs[holder]
-        if other.moving_to is not None:
-            return Occupancy.MOVING
-        return Occupancy.STAGNANT if self._stagnant(other, t) else Occupancy.FREE
 
     def _stagnant(self, agv: Agv, t: float) -> bool:
         """Standing longer than T_stag, but in a station's lane (its queue)."""

@@ -54,11 +54,17 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
                  speed: float = 1.0, command: str = "") -> MissionInfo:
     """What a recording says about its run (the dispatcher publishes it): with this
     process's package versions and, without `command`, its command line."""
+    versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
+                "mcap": _package_version("mcap")}
+    if layout.floor is not None:  # seed 004: its AGVs start on the parking places, in order
+        parked = [Pose(layout.floor.cell(xy), 0) for xy in layout.floor.parking[:vehicles]]
+        return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
+                           mission.strategy.value, vehicles, mission.seed, clock, speed,
+                           [str(p) for p in parked], command or " ".join(sys.argv), versions,
+                           mission.orders)
     starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
     if mission.kind is MissionKind.ORDERS and not mission.starts:
         starts = [Pose(p.cell, 0) for p in start_piles(layout, vehicles)]
-    versions = {"python": platform.python_version(), "zenoh": _package_version("eclipse-zenoh"),
-                "mcap": _package_version("mcap")}
     orders = mission.kind is MissionKind.ORDERS
     released = [o.shelf for o in mission_orders(mission, layout)] if orders else []
     _, battery = mission_battery(mission)

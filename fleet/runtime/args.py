@@ -150,7 +150,7 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
     layout with shelf slots runs order missions)."""
     if args.mission is not None:
         kind = MissionKind(args.mission)
-    elif args.orders is not None or (layout is not None and layout.slots):
+    elif args.orders is not None or (layout is not None and (layout.slots or layout.floor)):
         kind = MissionKind.ORDERS
     else:
         kind = MissionKind.FILL

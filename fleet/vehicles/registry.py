@@ -16,8 +16,9 @@ KINDS: dict[str, Callable[[VehicleDims, float], VehicleKind]] = {Forklift.name: 
 # Kinds a layout may already name though no module implements them yet: such a layout loads,
 # shows and checks, and whatever would drive one refuses in one line (KindNotBuilt).
 PLANNED: dict[str, str] = {"lifting-agv": "seed 004's lifting AGV that drives under shelves; "
-                                       "`fleet bench seed004` drives it in one process, the "
-                                       "runtime not yet (issue 21)"}
+                                       "it drives on seed-004 floors only, generated from a "
+                                       "[floor004] table (docs/agv-004.md), not on a floor "
+                                       "of stacks or lanes"}
 
 
 class UnknownVehicleKind(UserError):

@@ -17,6 +17,8 @@ from typing import Annotated, Any, ClassVar
 
 import msgpack
 
+from fleet.planning.rules004 import Direction
+from fleet.planning.rules004 import Task as Task004
 from fleet.planning.trajectory import Pose, step_manner
 
 SCHEMA_VERSION = 1
@@ -41,6 +43,19 @@ def _maneuver_or_rest(text: str) -> None:
 PoseText = Annotated[str, Pose.parse]  # "col,row,H"
 ManeuverLabel = Annotated[str, _maneuver_label]
 ManeuverOrRest = Annotated[str, _maneuver_or_rest]  # "" at rest
+
+def _task004(text: str) -> None:
+    Task004(text)
+
+
+def _direction(code: int) -> None:
+    Direction(code)
+
+
+# Seed 004's task types (M1..M4) and direction code (1..4); its cells are (x, y) of its floor.
+Task004Name = Annotated[str, _task004]
+DirectionCode = Annotated[int, _direction]
+XY004 = tuple[int, int]
 
 # (col, row, t0, t1): one reserved cell over [t0, t1); t1 may be infinity.
 WireInterval = tuple[int, int, float, float]
@@ -549,6 +564,85 @@ class RecorderStatus(Message):
 
 
 @dataclass(frozen=True)
+class CellRequest(Message):
+    """Seed 004, to a lifting AGV's agent: take `cell` for good from `t` before entering it
+    (`take`), or let it go from `t` (the cell behind, on arrival)."""
+
+    TYPE: ClassVar[str] = "agv004.cell"
+    request_id: str
+    vehicle: int
+    cell: XY004
+    t: float
+    take: bool
+
+
+@dataclass(frozen=True)
+class CellReply(Message):
+    """The agent's answer: whether the store gave it the cell, at which table revision."""
+
+    TYPE: ClassVar[str] = "agv004.cell_reply"
+    request_id: str
+    ok: bool
+    revision: int
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class RouteRequest(Message):
+    """Seed 004, to a lifting AGV's agent: plan the leg's path from `start` on the grid as it
+    is at `t` (fleet/mission/tracking004.py, RouteQuery), on no older table than `revision`."""
+
+    TYPE: ClassVar[str] = "agv004.route"
+    request_id: str
+    vehicle: int
+    t: float
+    task: Task004Name
+    start: XY004
+    goal: XY004
+    heading: DirectionCode
+    revision: int
+    home: XY004 | None = None
+    relaxed: bool = False
+    blocked: list[XY004] = field(default_factory=list)
+    moving: list[int] = field(default_factory=list)
+    stagnant: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class RouteReply(Message):
+    TYPE: ClassVar[str] = "agv004.route_reply"
+    request_id: str
+    found: bool
+    cells: list[XY004] = field(default_factory=list)  # start first
+    planning_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class AgvEvent(Message):
+    """Seed 004: one event of the tracking (fleet/mission/record004.py converts): `kind` is
+    moved, turned, paused, met, stagnant, replanned, made_way, picked or leg_done; the other
+    fields are those the kind has (docs/protocol.md)."""
+
+    TYPE: ClassVar[str] = "agv004.event"
+    kind: str
+    vehicle: int
+    t0: float
+    t1: float = 0.0
+    at: XY004 = (0, 0)
+    to: XY004 | None = None  # moved, made_way; leg_done: the leg's goal
+    other: int = 0  # met: the holder; made_way: the idle AGV
+    task: str = ""  # moved, leg_done: M1..M4
+    loaded: bool = False
+    relaxed: bool = False
+    label: str = ""  # paused: lift..; met: head-on..; replanned: why; picked, leg_done: station
+    found: bool = False  # replanned
+    heading: int = 0  # turned
+    home: XY004 | None = None  # leg_done
+    make_way: bool = False  # leg_done
+    charge_s: float = 0.0  # leg_done
+
+
+@dataclass(frozen=True)
 class Envelope:
     message: Message
     sender: str
@@ -564,7 +658,8 @@ TYPES: dict[str, type[Message]] = {
                               DeadlockSeen, RecorderStatus, HaltRequest, AmendRequest,
                               ResumeRequest, Halt, Resume, StackReopened, ZoneClosed,
                               VehicleFault, InjectFault, StatusRequest, VehicleStatus,
-                              VehicleClaim, ClaimReply)
+                              VehicleClaim, ClaimReply, CellRequest, CellReply, RouteRequest,
+                              RouteReply, AgvEvent)
 }
 
 

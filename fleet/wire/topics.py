@@ -19,7 +19,9 @@ from dataclasses import dataclass
 from enum import Flag, auto
 
 from fleet.wire.protocol import (
+    AgvEvent,
     AmendRequest,
+    CellRequest,
     ClockAck,
     ClockTick,
     CommitRequest,
@@ -39,6 +41,7 @@ from fleet.wire.protocol import (
     ReleaseRequest,
     Resume,
     ResumeRequest,
+    RouteRequest,
     SnapshotRequest,
     StackDone,
     StackReopened,
@@ -153,8 +156,8 @@ class Keys:
     vehicle_state = Topic("vehicle/{vehicle}/state", TopicKind.PUBLICATION, (VehicleState,),
                           VEHICLE)
     vehicle_task = Topic("vehicle/{vehicle}/task", TopicKind.QUERYABLE,
-                         (TaskRequest, HaltRequest, AmendRequest, ResumeRequest, StatusRequest),
-                         DISPATCHER)
+                         (TaskRequest, HaltRequest, AmendRequest, ResumeRequest, StatusRequest,
+                          CellRequest, RouteRequest), DISPATCHER)
     vehicle_inject = Topic("vehicle/{vehicle}/inject", TopicKind.QUERYABLE, (InjectFault,),
                            INJECTOR)
     vehicle_fault = Topic("vehicle/{vehicle}/fault", TopicKind.PUBLICATION, (VehicleFault,),
@@ -182,6 +185,7 @@ class Keys:
     dispatch_zone = Topic("dispatch/zone", TopicKind.PUBLICATION, (ZoneClosed,), DISPATCHER)
     dispatch_stopped = Topic("dispatch/stopped", TopicKind.PUBLICATION, (MissionStopped,),
                              DISPATCHER)
+    dispatch_agv = Topic("dispatch/agv", TopicKind.PUBLICATION, (AgvEvent,), DISPATCHER)
     dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
     dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)

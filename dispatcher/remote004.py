@@ -1,0 +1,121 @@
+"""Seed 004 as processes: the tracker's seam (fleet/mission/tracking004.py, `Vehicles`) when
+each lifting AGV is its agent process (vehicle_agent/lifting.py), and the order mission run
+through it.
+
+The dispatcher keeps the mission and the tracker's events, as the engine does for seed 000;
+each AGV takes and lets go of its cells in the reservation service and plans its own paths,
+on request. Requests go one at a time, in the events' fixed order, and the dispatcher waits
+for its mirror of the service to hold every change before the next event: the requests of
+one instant reach the store in one order, so a run of processes is the in-process run, bit
+for bit.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from contextlib import ExitStack
+from typing import TypeVar
+
+import zenoh
+
+from dispatcher.liveness import Liveness, ParticipantLost
+from fleet.errors import UserError
+from fleet.mission.record004 import Publish, run_mission004
+from fleet.mission.spec import Mission
+from fleet.mission.tracking004 import Routed, RouteQuery, Stuck
+from fleet.planning.reservations import ReservationView
+from fleet.planning.rules004 import XY
+from fleet.runtime.bus import Requester, RequestFailed
+from fleet.wire.protocol import (
+    CellReply,
+    CellRequest,
+    MissionDone,
+    RouteReply,
+    RouteRequest,
+)
+from fleet.wire.topics import DISPATCHER, Keys
+from fleet.world.floor004 import Floor004
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
+
+log = logging.getLogger("fleet.dispatcher")
+REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
+SYNC_TIMEOUT_S = 30.0
+Answer = TypeVar("Answer", CellReply, RouteReply)
+
+
+class RemoteVehicles:
+    def __init__(self, session: zenoh.Session, keys: Keys, mirror: TableMirror,
+                 liveness: Liveness) -> None:
+        self.keys, self.mirror, self.liveness = keys, mirror, liveness
+        # no retry: an agent that does not answer is gone (liveliness says so)
+        self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
+
+    @property
+    def view(self) -> ReservationView:
+        # The table itself: only this dispatcher's requests change it, and it waits for each
+        # change to arrive before it reads again.
+        return self.mirror.table
+
+    def take(self, vehicle: int, xy: XY, t: float) -> bool:
+        reply = self._ask(vehicle, CellRequest(self.requester.next_id(), vehicle, xy, t, True),
+                          CellReply, t)
+        if reply.ok:
+            self._sync(reply.revision)
+        return reply.ok
+
+    def release(self, vehicle: int, xy: XY, t: float) -> None:
+        reply = self._ask(vehicle, CellRequest(self.requester.next_id(), vehicle, xy, t, False),
+                          CellReply, t)
+        if not reply.ok:
+            raise ParticipantLost(f"AGV {vehicle} could not let {xy} go at t={t}: "
+                                  f"{reply.reason}")
+        self._sync(reply.revision)
+
+    def route(self, query: RouteQuery) -> Routed:
+        request = RouteRequest(
+            self.requester.next_id(), query.vehicle, query.t, query.task.value, query.start,
+            query.goal, int(query.heading), self.mirror.revision, query.home, query.relaxed,
+            sorted(query.blocked), sorted(query.moving), sorted(query.stagnant))
+        reply = self._ask(query.vehicle, request, RouteReply, query.t)
+        return Routed(tuple(reply.cells) if reply.found else None, reply.planning_s)
+
+    def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
+             expected: type[Answer], t: float) -> Answer:
+        try:
+            reply = self.requester.request(self.keys.vehicle_task(vehicle), message, t).message
+        except RequestFailed as exc:
+            gone = self.liveness.wait_gone(vehicle, 2.0)
+            raise ParticipantLost(f"AGV {vehicle}{' is gone' if gone else ''}: "
+                                  f"{exc}") from None
+        if not isinstance(reply, expected) or reply.request_id != message.request_id:
+            raise ParticipantLost(f"AGV {vehicle} answered {message.TYPE} "
+                                  f"{message.request_id} with {reply}")
+        return reply
+
+    def _sync(self, revision: int) -> None:
+        if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):
+            raise ParticipantLost(f"the reservation table did not reach revision {revision} "
+                                  f"within {SYNC_TIMEOUT_S:g} s")
+
+
+def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, floor: Floor004,
+                        vehicles: list[int], liveness: Liveness, startup_timeout_s: float,
+                        publish: Publish) -> MissionDone:
+    """Wait for the reservation service and the AGVs, then run the mission through them
+    (never raises for a mission that could not finish: the error goes into the result)."""
+    t0 = time.perf_counter()
+    with ExitStack() as scope:
+        try:
+            liveness.wait_for_service(startup_timeout_s)
+            mirror = TableMirror()
+            reservations = ReservationClient(session, keys, Requester(session, DISPATCHER))
+            scope.enter_context(reservations.follow(mirror))
+            liveness.wait_for(vehicles, startup_timeout_s)
+            log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
+            return run_mission004(mission, floor, len(vehicles),
+                                  RemoteVehicles(session, keys, mirror, liveness), publish)
+        except (ParticipantLost, Stuck, UserError, ValueError) as exc:
+            log.error("mission failed: %s", exc)
+            return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

@@ -1,0 +1,202 @@
+"""What a seed-004 recording says, from the recording alone: its tracking events read back,
+judged by the verifiers that know nothing of the tracker or planner (verdicts004.py: cells,
+traffic rules, giving way), and the work checked from lifts, drops and picks: every order
+picked once, every shelf lifted at its slot put down there again, by the AGV that lifted it,
+before the mission ended."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+from fleet.analysis.verdicts004 import Verdict004, judge
+from fleet.errors import UserError
+from fleet.mission.record004 import NotAnEvent, event_from_wire
+from fleet.mission.tracking004 import Event, Met, Moved, Paused, Picked, Replanned, Turned
+from fleet.planning.trajectory import Pose
+from fleet.recording.reader import Recording
+from fleet.wire.protocol import AgvEvent, MissionDone, MissionStopped
+from fleet.world.floor004 import Floor004
+
+
+@dataclass(frozen=True)
+class ShelfSlip:
+    """A lift or drop that breaks shelf conservation."""
+
+    t: float
+    vehicle: int
+    at: tuple[int, int]
+    why: str
+
+
+@dataclass
+class Report004:
+    path: str
+    layout: str
+    clock: str
+    vehicles: int
+    seed: int
+    orders_expected: int
+    orders_picked: int
+    completion_s: float  # the last order picked
+    end_time_s: float  # the last event's end
+    counts: dict[str, int]
+    verdict: Verdict004
+    shelf_slips: list[ShelfSlip]
+    unreadable: list[str] = field(default_factory=list)  # AgvEvents naming no event
+    finished: bool = False  # the dispatcher's result is recorded and says done
+
+    # What `fleet runs` keeps of a judged run (fleet/commands/runs.py, summary_of), as seed
+    # 000's report has it.
+    @property
+    def mission(self) -> dict[str, object]:
+        return {"kind": "orders", "layout": self.layout, "strategy": "nearest",
+                "clock": self.clock, "vehicles": self.vehicles, "seed": self.seed}
+
+    @property
+    def safe(self) -> bool:
+        v = self.verdict
+        return not (v.clashes or v.bad_moves or v.rule_breaches or v.yield_breaches)
+
+    @property
+    def messages_whole(self) -> bool:
+        return not self.unreadable
+
+    incomplete: tuple[str, ...] = ()
+
+    @property
+    def work_done(self) -> bool:
+        return self.finished and self.orders_picked == self.orders_expected and \
+            not self.shelf_slips
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict.passed and self.work_done and not self.unreadable
+
+
+def shelf_slips(floor: Floor004, events: list[Event]) -> list[ShelfSlip]:
+    """Shelves conserved: an AGV lifts only at a slot, only when empty, and drops only what
+    it carries, where it lifted it (its home); nobody lifts a shelf that is away; at the
+    end every shelf is home."""
+    slots = {s.xy for s in floor.slots}
+    carrying: dict[int, tuple[int, int]] = {}  # AGV -> the slot of the shelf it carries
+    away: set[tuple[int, int]] = set()
+    out = []
+    for e in sorted((e for e in events if isinstance(e, Paused)), key=lambda e: (e.t1, e.vehicle)):
+        if e.label == "lift":
+            why = "not at a slot" if e.at not in slots else \
+                "it carries a shelf already" if e.vehicle in carrying else \
+                "that shelf is away" if e.at in away else ""
+            if why:
+                out.append(ShelfSlip(e.t1, e.vehicle, e.at, f"lifted {why}"))
+                continue
+            carrying[e.vehicle] = e.at
+            away.add(e.at)
+        elif e.label == "drop":
+            home = carrying.pop(e.vehicle, None)
+            if home != e.at:
+                out.append(ShelfSlip(e.t1, e.vehicle, e.at, "dropped nothing" if home is None
+                                     else f"dropped the shelf of {home} elsewhere"))
+            away.discard(home)
+    out.extend(ShelfSlip(float("inf"), v, at, "never brought home")
+               for v, at in sorted(carrying.items()))
+    return out
+
+
+def recorded_events(recording: Recording, floor: Floor004) -> tuple[list[Event], list[str]]:
+    """The tracking events the recording holds, and why any recorded one names no event."""
+    events, unreadable = [], []
+    for _, m in recording.of(AgvEvent):
+        try:
+            events.append(event_from_wire(m, floor))
+        except NotAnEvent as exc:
+            unreadable.append(str(exc))
+    return events, unreadable
+
+
+def analyze004(recording: Recording) -> Report004:
+    info = recording.info
+    if info is None:
+        raise UserError(f"{recording.path}: no mission description was recorded")
+    floor = recording.layout().floor
+    if floor is None:
+        raise UserError(f"{recording.path}: layout {info.layout} is no seed-004 floor")
+    events, unreadable = recorded_events(recording, floor)
+    starts = {v: _xy(floor, Pose.parse(p)) for v, p in enumerate(info.starts, 1)}
+    verdict = judge(floor, events, starts)
+    picked = [e for e in events if isinstance(e, Picked)]
+    done = [m for _, m in recording.of(MissionDone)]
+    stopped = recording.of(MissionStopped)
+    counts: Counter[str] = Counter(e.kind.value for e in events if isinstance(e, Met))
+    counts["replans"] = sum(isinstance(e, Replanned) for e in events)
+    counts["turns"] = sum(isinstance(e, Turned) for e in events)
+    counts["cells"] = sum(isinstance(e, Moved) for e in events)
+    ends = [getattr(e, "t1", getattr(e, "t", 0.0)) for e in events]
+    return Report004(str(recording.path), info.layout, info.clock, info.vehicles, info.seed,
+                     info.orders, len(picked), max((e.t for e in picked), default=0.0),
+                     max(ends, default=0.0), dict(sorted(counts.items())), verdict,
+                     shelf_slips(floor, events), unreadable,
+                     bool(done) and done[-1].ok and not stopped)
+
+
+def _xy(floor: Floor004, pose: Pose) -> tuple[int, int]:
+    """The floor's (x, y) of a recorded start pose's cell (row 0 at the bottom)."""
+    col, row = pose.cell
+    return (col, floor.height - 1 - row)
+
+
+def _verdict(ok: bool, text: str) -> str:
+    return f"{'pass' if ok else 'FAIL'}: {text}"
+
+
+def report_lines(r: Report004) -> list[str]:
+    """The numbers, as `fleet analyze` prints them (labels as seed 000's)."""
+    c = r.counts
+    lines = [
+        f"mission orders on {r.layout} with {r.vehicles} lifting AGVs, seed {r.seed}, "
+        f"{r.clock} clock",
+        f"  {'orders':<19}{r.orders_picked} of {r.orders_expected} picked, the last at "
+        f"t={r.completion_s:.1f} s",
+        f"  {'end time':<19}{r.end_time_s:.1f} s (the last move, lift or drop)",
+        f"  {'driving':<19}{c.get('cells', 0)} cells, {c.get('turns', 0)} turns, "
+        f"{c.get('replans', 0)} replans",
+        f"  {'conflicts':<19}{c.get('head-on', 0)} head-on, {c.get('crossing', 0)} crossing, "
+        f"{c.get('rear-end', 0)} rear-end",
+    ]
+    return lines
+
+
+def verdict_lines(r: Report004) -> list[str]:
+    v = r.verdict
+    lines = [
+        f"  {'cells':<19}" + _verdict(not (v.clashes or v.bad_moves),
+                                       f"{len(v.clashes)} shared, {len(v.bad_moves)} bad moves"),
+        f"  {'traffic rules':<19}" + _verdict(not v.rule_breaches,
+                                               f"{len(v.rule_breaches)} moves against them"),
+        f"  {'giving way':<19}" + _verdict(not v.yield_breaches,
+                                            f"{len(v.yield_breaches)} head-on conflicts not "
+                                            f"given way by the empty AGV"),
+        f"  {'work':<19}" + _verdict(r.work_done, f"{r.orders_picked} of {r.orders_expected} "
+                                     f"orders, {len(r.shelf_slips)} shelf slips"
+                                     + ("" if r.finished else ", no result recorded")),
+    ]
+    for problem in [*v.clashes, *v.bad_moves, *v.rule_breaches, *v.yield_breaches,
+                    *r.shelf_slips][:5]:
+        lines.append(f"  {'':<19}{problem}")
+    if r.unreadable:
+        lines.append(f"  {'events':<19}FAIL: {len(r.unreadable)} name no event of the floor: "
+                     f"{r.unreadable[0]}")
+    return lines
+
+
+def report_json(r: Report004) -> dict:
+    v = r.verdict
+    return {"mission": {"kind": "orders", "layout": r.layout, "vehicles": r.vehicles,
+                        "seed": r.seed, "clock": r.clock},
+            "orders": r.orders_expected, "picked": r.orders_picked,
+            "completion_s": r.completion_s, "end_time_s": r.end_time_s, "counts": r.counts,
+            "recording": r.path,
+            "verdicts": {"cells": not (v.clashes or v.bad_moves),
+                         "rules": not v.rule_breaches, "giving_way": not v.yield_breaches,
+                         "work": r.work_done, "events": not r.unreadable,
+                         "passed": r.passed}}

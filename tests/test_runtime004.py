@@ -1,0 +1,120 @@
+"""Seed 004 as processes: one agent process per lifting AGV taking its cells from the real
+reservation service and planning its own paths, the dispatcher tracking them, the recorder
+writing the events; the run equals the in-process one and is judged from its recording."""
+
+from pathlib import Path
+
+import mcap.reader
+import pytest
+from mission_check import journal_overlaps
+
+from fleet.analysis.analyze004 import analyze004
+from fleet.cli import main
+from fleet.dispatching.decision import Strategy
+from fleet.mission.orders004 import Mission004, generate_orders
+from fleet.mission.record import digest_of
+from fleet.mission.record004 import event_from_wire, event_to_wire, record_of
+from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.tracking004 import MadeWay, Met, Replanned
+from fleet.recording.reader import read_recording
+from fleet.runtime.bus import wait_alive
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.wire.protocol import CellRequest, encode
+from fleet.world.floor004 import Floor004Shape, build
+from fleet.world.layout_file import load_layout
+
+SHAPE = dict(blocks_across=4, double_rows=4, stations=2, piles_per_side=2, block_width=3,
+             transit_rows=2)
+
+
+def small_floor_file(folder: Path) -> Path:
+    """A small seed-004 floor as a layout file (its numbers; the loader builds the floor)."""
+    floor = build(Floor004Shape(**SHAPE), "small004")
+    numbers = "\n".join(f"{k} = {v}" for k, v in SHAPE.items())
+    path = folder / "small004.toml"
+    path.write_text(f'name = "small004"\ncell_size = 1.0\nvehicle = {{ kind = "lifting-agv" }}\n'
+                    f"[bounds]\nx = [0.0, {floor.width}.0]\ny = [0.0, {floor.height}.0]\n"
+                    f"[floor004]\n{numbers}\n")
+    return path
+
+
+def test_fast_mode_processes_equal_the_inprocess_run_and_the_recording_is_judged(tmp_path):
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    vehicles, orders, seed = 8, 20, 2
+    reference = Mission004(floor, vehicles, generate_orders(floor, orders, seed)).run()
+    assert any(isinstance(e, Replanned) for e in reference.events)  # the remote planner replans
+    assert any(isinstance(e, Met) for e in reference.events)
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, vehicles, seed,
+                      orders=orders)
+    run_dir = tmp_path / "run"
+    refusals: list[str] = []
+
+    def intrude(session, keys, launcher) -> None:
+        """Requests no AGV may act on, mid-run: each refused with a reason, nothing taken."""
+        assert wait_alive(session, keys.vehicle_alive(1), 60.0)
+        for payload in (b"\x93garbage", encode(CellRequest("x1", 1, (999, 3), 0.0, True),
+                                                  "dispatcher", 1, 0.0),
+                        encode(CellRequest("x2", 2, (1, 1), 0.0, True), "dispatcher", 2, 0.0)):
+            for reply in session.get(keys.vehicle_task(1), payload=payload, timeout=10.0):
+                assert reply.ok is None
+                refusals.append(reply.err.payload.to_string())
+
+    outcome = run_processes(RunSpec(mission, vehicles, run_dir), on_ready=intrude)
+    assert [r.split(":")[0] for r in refusals] == ["rejected", "refused", "a request for AGV 2 "
+                                                   "sent to AGV 1"], refusals
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)  # move for move: the events' digest
+    assert outcome.done.digest == digest_of(record_of(reference))
+    # The store never held a cell for two AGVs at once, over the whole history.
+    assert journal_overlaps(run_dir / "reservation.journal") == []
+    with open(run_dir / "run.mcap", "rb") as f:  # the mcap library's own reader
+        summary = mcap.reader.make_reader(f).get_summary()
+    schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert schemas["fleet/default/dispatch/agv"] == "agv004.event"
+    report = analyze004(read_recording(run_dir))
+    assert report.passed and report.finished
+    assert report.orders_picked == orders and report.clock == "fast"
+    assert report.completion_s == reference.completion_s
+    assert report.counts["cells"] == reference.counts["cells"]
+
+
+def test_every_event_kind_goes_over_the_wire_and_back_unchanged():
+    floor = build(Floor004Shape(**SHAPE), "small004")
+    events = Mission004(floor, 8, generate_orders(floor, 20, 2)).run().events
+    kinds = {type(e).__name__ for e in events}
+    assert {"Moved", "Turned", "Paused", "Met", "Replanned", "Picked", "LegDone"} <= kinds
+    extra = MadeWay(3.0, 1, 2, (4, 5), (6, 7))  # rarer kinds, made by hand
+    for e in [*events, extra]:
+        assert event_from_wire(event_to_wire(e), floor) == e
+
+
+def test_fleet_run_on_paper004_in_process_then_analyze(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", "--layout", "paper004", "--orders", "4", "--vehicles", "3",
+                 "--inprocess", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "mission orders on paper004 with 3 lifting AGVs, seed 0, inprocess clock" in printed
+    assert "orders             4 of 4 picked" in printed
+    assert "work               pass: 4 of 4 orders, 0 shelf slips" in printed
+    wide = [line for line in printed.splitlines() if len(line) > 80 and str(out) not in line]
+    assert wide == []
+    assert main(["analyze", str(out)]) == 0
+    assert "giving way         pass" in capsys.readouterr().out
+    assert main(["runs", str(tmp_path)]) == 0
+    assert "paper004" in capsys.readouterr().out
+    assert main(["plot", str(out)]) == 0  # Figures 10-11 of this run
+    assert f"wrote {out / 'heat.png'}" in capsys.readouterr().out
+    assert (out / "heat.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("flags,named", [
+    (["--clock", "realtime"], "--clock realtime"), (["--faults", "breakdown"], "--faults"),
+    (["--mission", "fill"], "runs order missions, not --mission fill"),
+    (["--vehicles", "500"], "--vehicles 500: the AGVs of paper004 start on its 96 parking"),
+])
+def test_what_paper004_does_not_run_is_refused_by_name(flags, named, tmp_path, capsys):
+    assert main(["run", "--layout", "paper004", "--out", str(tmp_path / "r"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert named in err and "Traceback" not in err
+    assert not (tmp_path / "r").exists()  # refused before anything started

@@ -1,0 +1,140 @@
+"""A seed-004 lifting AGV's agent: one AGV, its own OS process, talking only over zenoh.
+
+It keeps a mirror of the reservation service's table and answers the tracker's requests on
+fleet/<run>/vehicle/<id>/task (dispatcher/remote004.py): take the next cell from the store
+before entering it (one commit of [t, forever), which the store refuses while another AGV
+holds the cell: the race-free form of the seed's "enter when the cell's value allows"), let
+the cell behind go, and plan the leg's path with the improved A* on the grid values derived
+from its mirror (fleet/mission/tracking004.py, `route`).
+
+Zenoh callbacks only enqueue; one worker thread answers, in arrival order.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import time
+from contextlib import ExitStack
+
+import zenoh
+
+from fleet.mission.tracking004 import RouteQuery, TrackingParams, route
+from fleet.planning.reservations import INF, Interval
+from fleet.planning.rules004 import Direction, Task
+from fleet.runtime.bus import Requester, asked, received, wait_alive
+from fleet.runtime.lifecycle import Stopped
+from fleet.wire.protocol import (
+    CellReply,
+    CellRequest,
+    Message,
+    MissionDone,
+    RouteReply,
+    RouteRequest,
+    encode,
+)
+from fleet.wire.topics import Keys, vehicle_sender
+from fleet.world.floor004 import Floor004
+from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
+
+log = logging.getLogger("fleet.agent")
+SYNC_TIMEOUT_S = 10.0
+
+
+class LiftingAgent:
+    def __init__(self, session: zenoh.Session, keys: Keys, vehicle: int, floor: Floor004,
+                 params: TrackingParams | None = None) -> None:
+        self.session, self.keys, self.vehicle = session, keys, vehicle
+        self.floor, self.params = floor, params or TrackingParams()
+        self.sender = vehicle_sender(vehicle)
+        self.mirror = TableMirror()
+        self.now = 0.0  # the instant of the request in hand (its envelopes carry it)
+        self.reservations = ReservationClient(session, keys, Requester(session, self.sender),
+                                              lambda: self.now)
+        self.inbox: queue.Queue[zenoh.Query | zenoh.Sample] = queue.Queue()
+        self.seq = 0
+        self.last: tuple[str, Message] | None = None  # a repeated request is answered again
+
+    def run(self, service_timeout_s: float = 60.0, exit_when_done: bool = False) -> None:
+        """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
+        if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
+            raise RuntimeError(f"no reservation service on {self.keys.root} within "
+                               f"{service_timeout_s:g} s")
+        with ExitStack() as scope:
+            scope.enter_context(self.reservations.follow(self.mirror))
+            session, keys, put = self.session, self.keys, self.inbox.put
+            scope.enter_context(session.declare_queryable(keys.vehicle_task(self.vehicle), put))
+            scope.enter_context(session.declare_subscriber(keys.dispatch_done, put))
+            scope.enter_context(session.liveliness().declare_token(
+                keys.vehicle_alive(self.vehicle)))
+            log.info("lifting AGV %d ready", self.vehicle)
+            while True:
+                item = self.inbox.get()
+                if isinstance(item, zenoh.Query):
+                    self._answer(item)
+                elif exit_when_done and received(item, MissionDone, log) is not None:
+                    log.info("AGV %d: the mission is over", self.vehicle)
+                    return
+                if self.mirror.needs_resync:
+                    self.reservations.resync(self.mirror)
+
+    def stop(self) -> None:
+        """Stop now, from a signal handler: a commit is one request the service applies
+        whole or not at all, so nothing is left half done."""
+        raise Stopped("stopped by a signal")
+
+    def _answer(self, query: zenoh.Query) -> None:
+        try:
+            message = asked(query, (CellRequest, RouteRequest), log)
+            if message is None:
+                return
+            if message.vehicle != self.vehicle:
+                query.reply_err(f"a request for AGV {message.vehicle} sent to AGV "
+                                f"{self.vehicle}".encode())
+                return
+            if self.last is not None and self.last[0] == message.request_id:
+                answer = self.last[1]
+            else:
+                self.now = message.t
+                try:
+                    answer = self._cell(message) if isinstance(message, CellRequest) else \
+                        self._route(message)
+                except ValueError as exc:  # a cell off the floor, a rule table's refusal
+                    log.warning("refused %s %s: %s", message.TYPE, message.request_id, exc)
+                    query.reply_err(f"refused: {exc}".encode())
+                    return
+                self.last = (message.request_id, answer)
+            self.seq += 1
+            query.reply(query.key_expr, encode(answer, self.sender, self.seq, message.t))
+        finally:
+            query.drop()
+
+    def _on_floor(self, *cells: tuple[int, int] | None) -> None:
+        for xy in cells:
+            if xy is not None and not (0 <= xy[0] < self.floor.width
+                                       and 0 <= xy[1] < self.floor.height):
+                raise ValueError(f"{xy} is not a cell of {self.floor.name}")
+
+    def _cell(self, request: CellRequest) -> CellReply:
+        self._on_floor(request.cell)
+        cell = self.floor.cell(request.cell)
+        if request.take:
+            written = self.reservations.commit(self.vehicle, [Interval(cell, request.t, INF)])
+        else:
+            written = self.reservations.release(self.vehicle, request.t, [cell])
+        return CellReply(request.request_id, written.ok, written.revision, written.reason)
+
+    def _route(self, request: RouteRequest) -> RouteReply:
+        self._on_floor(request.start, request.goal, request.home, *request.blocked)
+        if not self.mirror.wait_for(request.revision, SYNC_TIMEOUT_S):
+            self.reservations.resync(self.mirror)
+        query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
+                           request.goal, Direction(request.heading), request.home,
+                           request.relaxed, frozenset(request.blocked),
+                           frozenset(request.moving), frozenset(request.stagnant))
+        started = time.perf_counter()
+        with self.mirror.frozen() as table:
+            cells = route(self.floor, table, query, self.params.costs, self.params.heap)
+        spent = time.perf_counter() - started
+        return RouteReply(request.request_id, cells is not None, list(cells or ()), spent)
