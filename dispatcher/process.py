@@ -166,7 +166,8 @@ def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
     """The mission with the fleet that claimed its ids (--claims), and who holds which;
     the claims are served (to a restarted agent) for as long as `scope` lasts."""
     mission = config.mission
-    limit = mission.vehicles or (len(layout.piles) if mission.kind is MissionKind.ORDERS
+    limit = mission.vehicles or (len(layout.floor.parking) if layout.floor is not None
+                                 else len(layout.piles) if mission.kind is MissionKind.ORDERS
                                  else len(layout.vehicle_starts))
     claims = scope.enter_context(closing(
         Claims(session, keys, Roster(limit, roster or {}, closed=bool(roster)))))
@@ -221,7 +222,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
     config, vehicles = setup.config, setup.vehicles
     if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
         return dispatch_mission004(session, keys, setup.mission, setup.layout.floor, vehicles,
-                                   liveness, config.startup_timeout_s, publish)
+                                   liveness, config.startup_timeout_s, publish, config.clock,
+                                   config.speed)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

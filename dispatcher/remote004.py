@@ -12,6 +12,7 @@ for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from contextlib import ExitStack
@@ -20,9 +21,10 @@ from typing import TypeVar
 import zenoh
 
 from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.pacing import LEAD_WALL_S
 from fleet.errors import UserError
 from fleet.mission.record004 import Publish, run_mission004
-from fleet.mission.spec import Mission
+from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.tracking004 import Routed, RouteQuery, Stuck
 from fleet.planning.reservations import ReservationView
 from fleet.planning.rules004 import XY
@@ -42,6 +44,7 @@ from reservation.mirror import TableMirror
 log = logging.getLogger("fleet.dispatcher")
 REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
 SYNC_TIMEOUT_S = 30.0
+LATE_S = 0.3  # an instant handled this much wall time after it came is late
 Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
@@ -100,11 +103,39 @@ class RemoteVehicles:
                                   f"within {SYNC_TIMEOUT_S:g} s")
 
 
+class RealtimePace:
+    """The real-time clock of a seed-004 run: sim time = speed x wall seconds since sim time
+    0, which comes LEAD_WALL_S after the clock is made (as seed 000's). Each instant of the
+    tracker waits until its wall time; one handled more than LATE_S after it (the AGVs'
+    answers took longer than the time between instants) is counted late: a fleet that keeps
+    up has none, and then gives the fast run's events."""
+
+    def __init__(self, speed: float, lead_wall_s: float = LEAD_WALL_S) -> None:
+        self.speed = speed
+        self.zero = time.monotonic() + lead_wall_s
+        self.instants = 0
+        self.late: list[float] = []  # how late each late instant was (wall seconds)
+
+    def __call__(self, t: float) -> None:
+        self.instants += 1
+        wait = self.zero + t / self.speed - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)  # the clock itself: nothing is due before then
+        elif -wait > LATE_S:
+            self.late.append(-wait)
+
+    def summary(self) -> dict[str, float]:
+        return {"speed": self.speed, "instants": self.instants, "late": len(self.late),
+                "worst_late_s": max(self.late, default=0.0)}
+
+
 def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, floor: Floor004,
                         vehicles: list[int], liveness: Liveness, startup_timeout_s: float,
-                        publish: Publish) -> MissionDone:
-    """Wait for the reservation service and the AGVs, then run the mission through them
-    (never raises for a mission that could not finish: the error goes into the result)."""
+                        publish: Publish, clock: ClockMode = ClockMode.FAST,
+                        speed: float = 1.0) -> MissionDone:
+    """Wait for the reservation service and the AGVs, then run the mission through them on
+    the fast or the real-time clock (never raises for a mission that could not finish: the
+    error goes into the result)."""
     t0 = time.perf_counter()
     with ExitStack() as scope:
         try:
@@ -114,8 +145,16 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
             scope.enter_context(reservations.follow(mirror))
             liveness.wait_for(vehicles, startup_timeout_s)
             log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
-            return run_mission004(mission, floor, len(vehicles),
-                                  RemoteVehicles(session, keys, mirror, liveness), publish)
+            pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
+            done = run_mission004(mission, floor, len(vehicles),
+                                  RemoteVehicles(session, keys, mirror, liveness), publish, pace)
+            if pace is None:
+                return done
+            timing = pace.summary()
+            log.info("real time at speed %g: %d of %d instants handled late (the latest by "
+                     "%.2f s)", speed, timing["late"], timing["instants"],
+                     timing["worst_late_s"])
+            return dataclasses.replace(done, timing=timing)
         except (ParticipantLost, Stuck, UserError, ValueError) as exc:
             log.error("mission failed: %s", exc)
             return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

@@ -161,7 +161,7 @@ class Recorder:
             return RecorderStatus(str(self.writer.path), self.writer.messages, self.done_seen)
 
     def _describe(self, info: MissionInfo, log_ns: int) -> None:
-        from fleet.views.scene import SceneViews
+        from fleet.views.scene004 import scene_views
 
         self.writer.describe(info)
         try:
@@ -169,7 +169,7 @@ class Recorder:
         except LayoutError as exc:
             log.warning("no Foxglove views: %s", exc)
             return
-        self.views = SceneViews(layout, log_ns, kind=info.kind, vehicles=info.vehicles)
+        self.views = scene_views(layout, log_ns, kind=info.kind, vehicles=info.vehicles)
         self._show(self.views.start())
 
     def _show(self, messages) -> None:

@@ -138,6 +138,18 @@ def test_bench_seed004_sets_heat_items_turns_and_fleet_sizes_side_by_side(tmp_pa
     assert all(isinstance(v, bool) for v in result["checks"].values())
 
 
+def test_bench_runtime004_compares_processes_with_in_process_and_paces_real_time(capsys):
+    assert main(["bench", "runtime004", "--orders", "3", "--vehicles", "2", "--repeats", "1",
+                 "--agents", "3", "--rt-orders", "2", "--speed", "50", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    side = result["side_by_side"]
+    assert side["same_record"] and side["passed"] and side["cells_driven"] > 0
+    assert side["ratio"] > 0 and side["processes_ms_per_cell"] > 0
+    (rt,) = result["real_time"]
+    assert rt["vehicles"] == 3 and rt["instants"] > 0 and rt["rss_per_agent_mb"] > 10
+    assert rt["keeps_real_time"] == (rt["late_instants"] == 0)
+
+
 def test_the_paired_sign_flip_test_is_exact():
     from bench.seed004 import lower_p
 

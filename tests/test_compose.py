@@ -17,10 +17,13 @@ import pytest
 import zenoh
 
 from fleet.analysis.analyze import analyze
+from fleet.analysis.analyze004 import analyze004
 from fleet.commands.compose import collect, compose_command, write_secrets
 from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import run_mission
+from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.record import digest
+from fleet.mission.record004 import record_of
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
@@ -185,6 +188,23 @@ def test_compose_up_runs_an_order_mission_on_a_lane_layout(deployment):
     report = analyze(recording)
     assert report.passed and report.complete, report
     assert (len(report.overlaps), len(report.outside_reservation)) == (0, 0)
+
+
+def test_compose_up_runs_lifting_agvs_on_a_seed004_floor(deployment):
+    """FLEET_LAYOUT=paper004: three lifting-AGV containers claim their ids, take their cells
+    from the reservation service and plan their own paths; every container exits by itself
+    and the recording passes its verdicts with the events of the in-process run."""
+    d = deployment(FLEET_LAYOUT="paper004", FLEET_ORDERS="4", FLEET_VEHICLES="3")
+    d.compose("up", "-d", "--no-build", "--scale", "vehicle=3")
+    codes = [d.wait(service) for service in ("dispatcher", "recorder", "vehicle", "router")]
+    assert codes == [[0], [0], [0] * 3, [0]], d.logs()
+    recording = read_recording(d.recording())
+    (done,) = [m for _, m in recording.of(MissionDone)]
+    floor = load_layout("paper004").floor
+    reference = Mission004(floor, 3, generate_orders(floor, 4, 0)).run()
+    assert done.ok and done.record == record_of(reference)
+    report = analyze004(recording)
+    assert report.passed and report.orders_picked == 4
 
 
 def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(deployment):

@@ -14,7 +14,7 @@ from fleet.dispatching.decision import Strategy
 from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.record import digest_of
 from fleet.mission.record004 import event_from_wire, event_to_wire, record_of
-from fleet.mission.spec import Mission, MissionKind
+from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.tracking004 import MadeWay, Met, Replanned
 from fleet.recording.reader import read_recording
 from fleet.runtime.bus import wait_alive
@@ -77,6 +77,23 @@ def test_fast_mode_processes_equal_the_inprocess_run_and_the_recording_is_judged
     assert report.orders_picked == orders and report.clock == "fast"
     assert report.completion_s == reference.completion_s
     assert report.counts["cells"] == reference.counts["cells"]
+
+
+def test_the_real_time_clock_paces_the_instants_and_gives_the_fast_runs_events(tmp_path):
+    """Sim time runs at 40 x wall time; what the AGVs do depends only on sim time, so the
+    events are the fast run's whatever the machine's load (a late instant is counted)."""
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
+    outcome = run_processes(RunSpec(mission, 4, tmp_path / "run", ClockMode.REALTIME, 40.0))
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)
+    timing = outcome.done.timing
+    assert timing["speed"] == 40.0 and timing["instants"] > 100
+    assert 0 <= timing["late"] <= timing["instants"]
+    report = analyze004(read_recording(tmp_path / "run"))
+    assert report.passed and report.clock == "realtime"
 
 
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():

@@ -136,6 +136,28 @@ def register(sub: argparse._SubParsersAction) -> None:
                          help="seconds of state messages measured per fleet (default 15)")
     runtime.add_argument("--json", action="store_true", help="print one JSON object")
     runtime.set_defaults(handler=run_runtime)
+    runtime004 = which.add_parser(
+        "runtime004", help="seed 004 as processes: against in process, and real time",
+        description="Seed 004's lifting AGVs as one agent process each: an order mission on "
+        "paper004 as processes against in process, side by side (same record), and whole "
+        "missions of large fleets on the real-time clock at speed 1: instants handled late "
+        "and the memory of each agent process (docs/benchmarks.md).")
+    runtime004.add_argument("--orders", type=positive_int, default=100,
+                            help="orders of the side-by-side mission (default 100)")
+    runtime004.add_argument("--vehicles", type=positive_int, default=10,
+                            help="AGVs of the side-by-side mission (default 10)")
+    runtime004.add_argument("--repeats", type=non_negative_int, default=3,
+                            help="runs of each, alternated (default 3; 0 skips)")
+    runtime004.add_argument("--agents", type=fleet_sizes, default="40,96",
+                            help="fleets run in real time at speed 1 (default 40,96: "
+                            "paper004 parks 96; 'none' skips)")
+    runtime004.add_argument("--rt-orders", type=positive_int, default=100,
+                            help="orders of each real-time mission (default 100)")
+    runtime004.add_argument("--speed", type=positive_float, default=1.0,
+                            help="sim seconds per wall second of the real-time missions "
+                            "(default 1)")
+    runtime004.add_argument("--json", action="store_true", help="print one JSON object")
+    runtime004.set_defaults(handler=run_runtime004)
     recorder = which.add_parser("recorder", help="the recorder: messages a second without "
                                 "loss, and what recording costs a mission's wall time",
                                 description="Measure the recorder: how many messages a "
@@ -393,6 +415,34 @@ def run_runtime(args: argparse.Namespace) -> int:
                   f"lateness p99 {row['late_p99_ms']} ms, {row['rss_per_agent_mb']} MB per "
                   f"agent -> {'keeps' if row['keeps_real_time'] else 'misses'} real time")
         print(f"  largest fleet in real time: {result['max_realtime_agents']}")
+    return 0
+
+
+def run_runtime004(args: argparse.Namespace) -> int:
+    from bench import runtime004
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    result: dict = {}
+    if args.repeats > 0:
+        result["side_by_side"] = runtime004.side_by_side(args.orders, args.vehicles,
+                                                         args.repeats, say)
+    result["real_time"] = [runtime004.real_time(n, args.rt_orders, args.speed, say)
+                           for n in (args.agents or [])]
+    if emitted_json(result, args.json):
+        return 0
+    if "side_by_side" in result:
+        r = result["side_by_side"]
+        print(f"{r['orders']} orders, {r['vehicles']} AGVs on paper004, median of "
+              f"{r['repeats']}: processes {r['processes_wall_s']} s, in process "
+              f"{r['inprocess_wall_s']} s, ratio {r['ratio']} ({r['processes_ms_per_cell']} "
+              f"ms a cell driven; same record: {r['same_record']})")
+    for r in result["real_time"]:
+        print(f"{r['vehicles']:>4} AGVs, {r['orders']} orders in real time at speed "
+              f"{r['speed']:g}: {r['late_instants']} of {r['instants']} instants late (worst "
+              f"{r['worst_late_s']} s), {r['rss_per_agent_mb']} MB per agent -> "
+              f"{'keeps' if r['keeps_real_time'] else 'misses'} real time")
     return 0
 
 

@@ -191,6 +191,7 @@ def summary_json(report: Report, wall_s: float, digest: str,
 
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
+    _check_run_flags(args)
     if layout.floor is not None:  # seed 004's lifting AGVs
         return run004(args, layout, command_line())
     mission = mission_from_args(args, layout)
@@ -201,20 +202,6 @@ def run(args: argparse.Namespace) -> int:
         OrderWork(layout, mission, n)  # its orders and batteries, checked before any start
     else:
         n = fleet_size(layout, mission.vehicles)
-    if args.force and args.out is None:
-        raise UserError("--force replaces the directory given with --out DIR; without --out "
-                        "a run gets a new directory of its own and replaces nothing")
-    process_only = [flag for flag, given in (
-        ("--clock realtime", args.clock != ClockMode.FAST), ("--port", args.port is not None),
-        ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
-    if args.inprocess and process_only:
-        raise UserError(f"--inprocess runs the fast clock in this one process, without a "
-                        f"router, a live view or logins: it takes no "
-                        f"{' and no '.join(process_only)}")
-    for flag, number in (("--port", args.port), ("--foxglove", args.foxglove)):
-        busy = port_problem(number) if number is not None else None
-        if busy:
-            raise UserError(f"{flag} {number}: {busy}")
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
     scenario = fault_scenario(args.faults, layout, n) if args.faults else None
@@ -251,6 +238,25 @@ def run(args: argparse.Namespace) -> int:
     else:
         print("\n".join(summary_lines(report, wall_s, digest)))
     return 0 if report.passed else 1  # a failed verdict fails the run
+
+
+def _check_run_flags(args: argparse.Namespace) -> None:
+    """What no mission runs with: --force without --out, a flag of a run of processes with
+    --inprocess, a port something already listens on."""
+    if args.force and args.out is None:
+        raise UserError("--force replaces the directory given with --out DIR; without --out "
+                        "a run gets a new directory of its own and replaces nothing")
+    process_only = [flag for flag, given in (
+        ("--clock realtime", args.clock != ClockMode.FAST), ("--port", args.port is not None),
+        ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
+    if args.inprocess and process_only:
+        raise UserError(f"--inprocess runs the fast clock in this one process, without a "
+                        f"router, a live view or logins: it takes no "
+                        f"{' and no '.join(process_only)}")
+    for flag, number in (("--port", args.port), ("--foxglove", args.foxglove)):
+        busy = port_problem(number) if number is not None else None
+        if busy:
+            raise UserError(f"{flag} {number}: {busy}")
 
 
 def _say_failed(out: Path, failure: str, wall_s: float, as_json: bool) -> None:

@@ -31,9 +31,7 @@ from fleet.world.layout import Layout
 
 # What runs on seed 000's and 002's missions but not yet on a seed-004 floor, each refused by
 # name rather than ignored (docs/agv-004.md, "As processes").
-NOT_YET = (("--clock realtime", lambda a: a.clock != ClockMode.FAST.value),
-           ("--faults", lambda a: a.faults), ("--secure", lambda a: a.secure),
-           ("--foxglove", lambda a: a.foxglove is not None),
+NOT_YET = (("--faults", lambda a: a.faults), ("--secure", lambda a: a.secure),
            ("--battery", lambda a: a.battery), ("--order-area", lambda a: a.order_area),
            ("--weights", lambda a: a.weights is not None),
            ("--orders SHELF,...", lambda a: isinstance(a.orders, tuple)))
@@ -45,7 +43,7 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     refused = [flag for flag, given in NOT_YET if given(args)]
     if refused:
         raise UserError(f"layout {layout.name} (seed 004's lifting AGVs) runs order missions "
-                        f"on the fast clock, without {' or '.join(refused)} yet")
+                        f"without {' or '.join(refused)} yet")
     mission = mission_from_args(args, layout)
     if mission.kind is not MissionKind.ORDERS:
         raise UserError(f"layout {layout.name} runs order missions, not --mission "
@@ -53,9 +51,6 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     n = fleet004(floor, mission.vehicles)
     mission = dataclasses.replace(mission, vehicles=n)
     generate_orders(floor, mission.orders, mission.seed)  # a bad count: refused at once
-    if args.force and args.out is None:
-        raise UserError("--force replaces the directory given with --out DIR; without --out "
-                        "a run gets a new directory of its own and replaces nothing")
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(mission.orders, f"orders on {layout.name}", unit="orders",
@@ -66,7 +61,8 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
         if args.inprocess:
             done = _inprocess(mission, layout, n, out, command, progress)
         else:
-            spec = RunSpec(mission, n, out, command=command, port=args.port)
+            spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, command=command,
+                           port=args.port, foxglove=args.foxglove)
             progress.status(f"starting the router, recorder, reservation service, {n} AGV "
                             f"agents and the dispatcher")
             outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
@@ -85,9 +81,14 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     write_summary(out, report)  # for `fleet runs`
     if args.json:
         print(json.dumps({"finished": True, **report_json(report), "wall_s": wall_s,
-                          "digest": done.digest}))
+                          "digest": done.digest, "real_time": done.timing or None}))
     else:
-        print("\n".join([*report_lines(report), f"  {'wall time':<19}{wall_s:.1f} s",
+        timing = done.timing
+        kept = [] if not timing else [
+            f"  {'real time':<19}speed {timing['speed']:g}: {timing['late']} of "
+            f"{timing['instants']} instants handled late (the latest by "
+            f"{timing['worst_late_s']:.2f} s)"]
+        print("\n".join([*report_lines(report), *kept, f"  {'wall time':<19}{wall_s:.1f} s",
                          f"  {'record digest':<19}{done.digest[:16]}",
                          f"  {'recording':<19}{report.path}", *verdict_lines(report),
                          f"  {'look closer':<19}fleet analyze {out}"]))

@@ -151,6 +151,7 @@ class Mission004:
     work: WorkParams = field(default_factory=WorkParams)
     fleet: Vehicles | None = None  # None: every AGV in this process
     on_event: Callable[[Event], None] | None = None  # each tracking event as it happens
+    pace: Callable[[float], None] | None = None  # holds each instant until it comes
 
     def __post_init__(self) -> None:
         if not 1 <= self.vehicles <= len(self.floor.parking):
@@ -165,7 +166,7 @@ class Mission004:
             if o.goods not in goods:
                 raise UserError(f"order {o.id} is for goods {o.goods!r}, which no shelf on "
                                 f"{self.floor.name} holds")
-        self.tracker = Tracker(self.floor, self.tracking, self.fleet, self.on_event)
+        self.tracker = Tracker(self.floor, self.tracking, self.fleet, self.on_event, self.pace)
         for v in range(1, self.vehicles + 1):
             self.tracker.place(v, self.floor.parking[v - 1], Direction.DOWN)
         self._agvs = {v: _Agv() for v in range(1, self.vehicles + 1)}

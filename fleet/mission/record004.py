@@ -127,9 +127,11 @@ Publish = Callable[[Message, float], None]
 
 
 def run_mission004(mission: Mission, floor: Floor004, vehicles: int, fleet: Vehicles | None,
-                   publish: Publish) -> MissionDone:
+                   publish: Publish, pace: Callable[[float], None] | None = None
+                   ) -> MissionDone:
     """Run the order mission (its orders drawn with its seed) through `fleet` (None: in this
-    process), publishing each event and each picked order as it happens."""
+    process), publishing each event and each picked order as it happens; `pace` holds each
+    instant until its time comes (a real-time clock)."""
     t0 = time.perf_counter()
     orders = generate_orders(floor, mission.orders, mission.seed)
     picked = 0
@@ -142,7 +144,8 @@ def run_mission004(mission: Mission, floor: Floor004, vehicles: int, fleet: Vehi
             picked += 1
             publish(Progress(picked, len(orders), e.t, 0), e.t)
 
-    result = Mission004(floor, vehicles, orders, fleet=fleet, on_event=on_event).run()
+    result = Mission004(floor, vehicles, orders, fleet=fleet, on_event=on_event,
+                        pace=pace).run()
     record = record_of(result)
     return MissionDone(True, record=record, digest=digest_of(record),
                        wall_s=time.perf_counter() - t0)

@@ -363,11 +363,13 @@ class Tracker:
 
     def __init__(self, floor: Floor004, params: TrackingParams = TrackingParams(),
                  vehicles: Vehicles | None = None,
-                 on_event: Callable[[Event], None] | None = None) -> None:
+                 on_event: Callable[[Event], None] | None = None,
+                 pace: Callable[[float], None] | None = None) -> None:
         self.floor = floor
         self.params = params
         self.vehicles = vehicles if vehicles is not None else LocalVehicles(floor, params)
         self.on_event = on_event  # told of each event as it happens (a run's publisher)
+        self.pace = pace  # holds each instant until its time comes (a real-time clock)
         self.agvs: dict[int, Agv] = {}
         self.events: list[Event] = []
         self.t = 0.0
@@ -441,6 +443,8 @@ class Tracker:
             heapq.heappop(self._due)
             if t != self.t:
                 self._acts.clear()
+                if self.pace is not None:
+                    self.pace(t)
             self._acts[vehicle] += 1
             if self._acts[vehicle] > MAX_ACTS_AT_ONCE:
                 raise Stuck(f"at t={t:.2f} AGV {vehicle} decided {MAX_ACTS_AT_ONCE} times "

@@ -159,14 +159,14 @@ def write_recording(path: Path, stream: list[Outgoing], layout: Layout) -> None:
     """Write a stream as a recording, with its Foxglove view channels. Log times are the
     run's start (now) plus sim time, as the view channels have them. Written in a run
     directory, it carries that run's id, as a recorder's segment does (RecordingWriter)."""
-    from fleet.views.scene import SceneViews
+    from fleet.views.scene004 import scene_views
 
     writer = RecordingWriter(path)
     seq: dict[tuple[str, str], int] = defaultdict(int)
     now = time.time_ns()
     info = next(o.message for o in stream if isinstance(o.message, MissionInfo))
     writer.describe(info)
-    views = SceneViews(layout, now, kind=info.kind, vehicles=info.vehicles)
+    views = scene_views(layout, now, kind=info.kind, vehicles=info.vehicles)
     for topic, message, log_ns in views.start():
         writer.write_view(topic, message, log_ns)
     try:

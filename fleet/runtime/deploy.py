@@ -39,7 +39,7 @@ FOXGLOVE_PORT = 8765
 class DeployConfig:
     run: str = "default"  # keys live under fleet/RUN/
     layout: str = "paper"
-    mission: str = ""  # "": orders on a layout with shelf slots (paper002), else fill
+    mission: str = ""  # "": orders on a layout with shelf slots or a seed-004 floor, else fill
     strategy: str = ""  # "": nearest for orders, else ann
     orders: int = 0  # an order mission's orders (0: 100)
     order_area: str = ""  # draw them on this shelf area's shelves only
@@ -158,7 +158,8 @@ def dispatcher_mission(config: DeployConfig) -> Mission:
     elif config.orders or config.order_area:
         kind = MissionKind.ORDERS
     else:
-        kind = MissionKind.ORDERS if load_layout(config.layout).slots else MissionKind.FILL
+        layout = load_layout(config.layout)  # shelf slots or a seed-004 floor: orders
+        kind = MissionKind.ORDERS if layout.slots or layout.floor else MissionKind.FILL
     orders = kind is MissionKind.ORDERS
     if (config.orders or config.order_area) and not orders:
         raise UserError(f"FLEET_ORDERS and FLEET_ORDER_AREA are for order missions, not "

@@ -261,6 +261,9 @@ class MissionDone(Message):
     wall_s: float = 0.0
     rejections: list[str] = field(default_factory=list)  # commits refused before a replan
     detections: list[dict] = field(default_factory=list)  # faults seen (dispatcher/clock.py)
+    # A real-time seed-004 run: instants paced, how many were handled late, the latest
+    # (dispatcher/remote004.py, RealtimePace.summary)
+    timing: dict = field(default_factory=dict)
 
 
 # One forklift where a mission that did not finish left it (fleet/mission/standstill.py):
