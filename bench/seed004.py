@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from bench.pool import run_all
 from fleet.analysis.verdicts004 import judge
 from fleet.errors import UserError
-from fleet.mission.heat004 import heat_counts, t_values
+from fleet.mission.heat004 import HISTORY_SEED, W_HEAT, heat_counts, history_heat
 from fleet.mission.orders004 import Mission004, WorkParams, generate_orders
 from fleet.mission.tracking004 import Moved, Stuck, TrackingParams
 from fleet.planning.astar004 import Costs, count_turns, plan
@@ -37,8 +37,6 @@ SEEDS = 10
 ORDERS = 500
 VEHICLES = 40
 FLEET_SIZES = (10, 20, 40, 60)
-W_HEAT = 2.0
-HISTORY_SEED = 1000  # the history run of seed s uses the orders of seed s + 1000
 ITEMS = ("baseline", "recall", "turn", "heap")
 
 
@@ -85,9 +83,7 @@ def _config(job: Job, floor: Floor004) -> tuple[TrackingParams, WorkParams]:
         return (TrackingParams(costs=Costs(turn=1.0 if "turn" in on else 0.0),
                                heap="heap" in on), WorkParams(recall="recall" in on))
     if job.experiment == "heat" and job.variant == "on":
-        history = Mission004(floor, job.vehicles,
-                             generate_orders(floor, job.orders, job.seed + HISTORY_SEED)).run()
-        heat = t_values(heat_counts(history.events).heat())
+        heat = history_heat(floor, job.vehicles, job.orders, job.seed)
         return TrackingParams(costs=Costs(heat=W_HEAT, t_value=heat)), WorkParams()
     return TrackingParams(), WorkParams()
 
@@ -212,8 +208,7 @@ def heat_panels(seed: int, orders: int, vehicles: int) -> list[tuple[str, dict]]
     """Figures 10-11 for one order seed: the history run's T_value, and the cells entered
     with heat off and on."""
     floor = paper004()
-    history = Mission004(floor, vehicles, generate_orders(floor, orders, seed + HISTORY_SEED))
-    heat = t_values(heat_counts(history.run().events).heat())
+    heat = history_heat(floor, vehicles, orders, seed)
     panels: list[tuple[str, dict]] = [
         (f"T_value from the history run (orders of seed {seed + HISTORY_SEED})", heat)]
     for name, costs in (("off", Costs()), ("on", Costs(heat=W_HEAT, t_value=heat))):

@@ -35,6 +35,7 @@ from fleet.mission.faults import load_scenario
 from fleet.mission.order_work import order_fleet
 from fleet.mission.orders004 import fleet004
 from fleet.mission.record import MissionSummary, digest_of
+from fleet.mission.record004 import tracking_params
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
@@ -145,7 +146,7 @@ def serve(config: DispatcherConfig) -> int:
             in_mission.set()
             streams[MissionInfo].put(info, 0.0)
             done = dispatch_mission(session, keys, setup, liveness, lambda message, t:
-                                    streams[type(message)].put(message, t))
+                                    streams[type(message)].put(message, t), info)
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
@@ -216,14 +217,17 @@ def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
 
 
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
-                     liveness: Liveness, publish: Publish) -> MissionDone:
+                     liveness: Liveness, publish: Publish, info: MissionInfo) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
-    that could not finish: the error goes into the result)."""
+    that could not finish: the error goes into the result). `info` is what the run is, as
+    published."""
     config, vehicles = setup.config, setup.vehicles
     if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
+        faults = load_scenario(config.faults, setup.layout.name).faults if config.faults \
+            else ()
         return dispatch_mission004(session, keys, setup.mission, setup.layout.floor, vehicles,
-                                   liveness, config.startup_timeout_s, publish, config.clock,
-                                   config.speed)
+                                   liveness, config.startup_timeout_s, publish,
+                                   tracking_params(info), config.clock, config.speed, faults)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

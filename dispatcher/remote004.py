@@ -4,10 +4,11 @@ through it.
 
 The dispatcher keeps the mission and the tracker's events, as the engine does for seed 000;
 each AGV takes and lets go of its cells in the reservation service and plans its own paths,
-on request. Requests go one at a time, in the events' fixed order, and the dispatcher waits
-for its mirror of the service to hold every change before the next event: the requests of
-one instant reach the store in one order, so a run of processes is the in-process run, bit
-for bit.
+on request. Takes and plans go one at a time, in the events' fixed order, and the
+dispatcher waits for its mirror of the service to hold each change before the next event;
+a cell let go is let go in the background, and a take of that cell, a read of the table or
+a plan waits for it. So every take finds its cell as it would in process, and a run of
+processes gives the in-process events, move for move.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from typing import TypeVar
 
@@ -23,13 +25,15 @@ import zenoh
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
 from fleet.errors import UserError
+from fleet.mission.faults import Fault
 from fleet.mission.record004 import Publish, run_mission004
 from fleet.mission.spec import ClockMode, Mission
-from fleet.mission.tracking004 import Routed, RouteQuery, Stuck
-from fleet.planning.reservations import ReservationView
+from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
+from fleet.planning.reservations import Interval, ReservationView
 from fleet.planning.rules004 import XY
 from fleet.runtime.bus import Requester, RequestFailed
 from fleet.wire.protocol import (
+    ZONE,
     CellReply,
     CellRequest,
     MissionDone,
@@ -49,19 +53,27 @@ Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
 class RemoteVehicles:
-    def __init__(self, session: zenoh.Session, keys: Keys, mirror: TableMirror,
-                 liveness: Liveness) -> None:
-        self.keys, self.mirror, self.liveness = keys, mirror, liveness
+    def __init__(self, session: zenoh.Session, keys: Keys, floor: Floor004, mirror: TableMirror,
+                 liveness: Liveness, reservations: ReservationClient) -> None:
+        self.keys, self.floor, self.mirror, self.liveness = keys, floor, mirror, liveness
+        self.reservations = reservations  # the dispatcher's own writes: closed zones
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
+        # Cells let go are let go in the background, in order, by a sender of their own
+        # (`settle` waits for them where it matters).
+        self.releaser = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
+        self.releasing = ThreadPoolExecutor(1, thread_name_prefix="releases")
+        self.pending: dict[XY, Future[None]] = {}  # the cells let go, not yet known done
 
     @property
     def view(self) -> ReservationView:
         # The table itself: only this dispatcher's requests change it, and it waits for each
         # change to arrive before it reads again.
+        self.settle()
         return self.mirror.table
 
     def take(self, vehicle: int, xy: XY, t: float) -> bool:
+        self.settle(xy)  # the cell's last holder has let it go first, as in process
         reply = self._ask(vehicle, CellRequest(self.requester.next_id(), vehicle, xy, t, True),
                           CellReply, t)
         if reply.ok:
@@ -69,14 +81,34 @@ class RemoteVehicles:
         return reply.ok
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
-        reply = self._ask(vehicle, CellRequest(self.requester.next_id(), vehicle, xy, t, False),
-                          CellReply, t)
+        """Let the cell go without waiting for it: what a decision depends on is whether a
+        cell is free when taken, so only a take of that cell, a read of the table and a plan
+        wait (`settle`), and each decision sees what it would see in process."""
+        self.pending[xy] = self.releasing.submit(self._let_go, vehicle, xy, t)
+
+    def _let_go(self, vehicle: int, xy: XY, t: float) -> None:
+        request = CellRequest(self.releaser.next_id(), vehicle, xy, t, False)
+        reply = self._ask(vehicle, request, CellReply, t, self.releaser)
         if not reply.ok:
             raise ParticipantLost(f"AGV {vehicle} could not let {xy} go at t={t}: "
                                   f"{reply.reason}")
         self._sync(reply.revision)
 
+    def settle(self, xy: XY | None = None) -> None:
+        """Wait until the cell (None: every cell) let go is let go in the store and in this
+        mirror; an agent's failure to do so is raised here."""
+        for cell in [xy] if xy is not None else list(self.pending):
+            done = self.pending.pop(cell, None)
+            if done is not None:
+                done.result()
+
+    def close_down(self) -> None:
+        """Stop the background sender (a mission that ended well has settled it; one that
+        failed has said why already)."""
+        self.releasing.shutdown(wait=True, cancel_futures=True)
+
     def route(self, query: RouteQuery) -> Routed:
+        self.settle()  # the plan is made on a table holding every change so far
         request = RouteRequest(
             self.requester.next_id(), query.vehicle, query.t, query.task.value, query.start,
             query.goal, int(query.heading), self.mirror.revision, query.home, query.relaxed,
@@ -84,10 +116,20 @@ class RemoteVehicles:
         reply = self._ask(query.vehicle, request, RouteReply, query.t)
         return Routed(tuple(reply.cells) if reply.found else None, reply.planning_s)
 
+    def close(self, xys: list[XY], t0: float, t1: float) -> None:
+        self.settle()
+        written = self.reservations.commit(
+            ZONE, [Interval(self.floor.cell(xy), t0, t1) for xy in xys])
+        if not written.ok:
+            raise ParticipantLost(f"the reservation service refused to close a zone at "
+                                  f"t={t0}: {written.reason}")
+        self._sync(written.revision)
+
     def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
-             expected: type[Answer], t: float) -> Answer:
+             expected: type[Answer], t: float, requester: Requester | None = None) -> Answer:
         try:
-            reply = self.requester.request(self.keys.vehicle_task(vehicle), message, t).message
+            reply = (requester or self.requester).request(self.keys.vehicle_task(vehicle),
+                                                          message, t).message
         except RequestFailed as exc:
             gone = self.liveness.wait_gone(vehicle, 2.0)
             raise ParticipantLost(f"AGV {vehicle}{' is gone' if gone else ''}: "
@@ -131,8 +173,9 @@ class RealtimePace:
 
 def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, floor: Floor004,
                         vehicles: list[int], liveness: Liveness, startup_timeout_s: float,
-                        publish: Publish, clock: ClockMode = ClockMode.FAST,
-                        speed: float = 1.0) -> MissionDone:
+                        publish: Publish, tracking: TrackingParams,
+                        clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
+                        faults: tuple[Fault, ...] = ()) -> MissionDone:
     """Wait for the reservation service and the AGVs, then run the mission through them on
     the fast or the real-time clock (never raises for a mission that could not finish: the
     error goes into the result)."""
@@ -146,8 +189,11 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
             liveness.wait_for(vehicles, startup_timeout_s)
             log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
             pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
-            done = run_mission004(mission, floor, len(vehicles),
-                                  RemoteVehicles(session, keys, mirror, liveness), publish, pace)
+            fleet = RemoteVehicles(session, keys, floor, mirror, liveness, reservations)
+            scope.callback(fleet.close_down)
+            done = run_mission004(mission, floor, len(vehicles), fleet, publish, pace, tracking,
+                                  faults)
+            fleet.settle()  # the last cells let go: the store ends as the fleet stands
             if pace is None:
                 return done
             timing = pace.summary()

@@ -151,7 +151,14 @@ def test_walled_in_by_stagnant_agvs_an_empty_agv_relaxes_the_rules_after_n_failu
     moves = [e for e in tracker.events if isinstance(e, Moved)]
     first = moves[0]
     assert first.relaxed and first.origin == start and first.to in ((4, 7), (3, 6))
-    assert clashes(held_spans(tracker, {1: start, 2: (2, 7), 3: (3, 8)})) == []
+    starts = {1: start, 2: (2, 7), 3: (3, 8)}
+    assert clashes(held_spans(tracker, starts)) == []
+    # The judge finds the relaxed episode earned; without the failed plans it would not be.
+    assert judge(MICRO, tracker.events, starts).passed
+    unearned = [e for e in tracker.events if not (isinstance(e, Replanned) and not e.found)]
+    breaches = judge(MICRO, unearned, starts).rule_breaches
+    assert breaches and all("without the rules" in b.what for b in breaches)
+    assert len(breaches) == sum(m.relaxed for m in moves)
 
 
 def _orders(tracker: Tracker, floor, vehicles: int, seed: int, trips: int):

@@ -12,6 +12,7 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.mission.battery import battery_of
+from fleet.mission.record004 import tracking_params
 from fleet.planning.trajectory import Pose
 from fleet.runtime.access import read_dictionary
 from fleet.runtime.bus import Requester, RequestFailed, open_session
@@ -54,15 +55,15 @@ def serve(config: AgentConfig) -> int:
         bus = dataclasses.replace(bus, user=user, password=logins[user])
     with open_session(bus) as session:
         battery = None
-        if given is not None:
+        if given is not None and given.floor is None:
             layout, starts, whose = given, given.vehicle_starts, f"layout {given.name}"
-        else:
+        else:  # a seed-004 agent plans with the mission's costs: it asks for them too
             info, layout, starts = mission_layout(session, keys)
             whose = "the mission"
             if layout.floor is None:
                 battery = battery_of(info, vehicle, layout)
         if layout.floor is not None:  # seed 004: the tracker places it (dispatcher/remote004)
-            lifting = LiftingAgent(session, keys, vehicle, layout.floor)
+            lifting = LiftingAgent(session, keys, vehicle, layout.floor, tracking_params(info))
             stop_on_signals(lifting.stop)
             with suppress(Stopped):
                 lifting.run(exit_when_done=config.exit_when_done)

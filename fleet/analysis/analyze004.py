@@ -12,7 +12,17 @@ from dataclasses import dataclass, field
 from fleet.analysis.verdicts004 import Verdict004, judge
 from fleet.errors import UserError
 from fleet.mission.record004 import NotAnEvent, event_from_wire
-from fleet.mission.tracking004 import Event, Met, Moved, Paused, Picked, Replanned, Turned
+from fleet.mission.tracking004 import (
+    BrokeDown,
+    Event,
+    Met,
+    Moved,
+    Paused,
+    Picked,
+    Replanned,
+    Turned,
+    ZoneClosed,
+)
 from fleet.planning.trajectory import Pose
 from fleet.recording.reader import Recording
 from fleet.wire.protocol import AgvEvent, MissionDone, MissionStopped
@@ -27,6 +37,37 @@ class ShelfSlip:
     vehicle: int
     at: tuple[int, int]
     why: str
+
+
+@dataclass(frozen=True)
+class FaultBreach:
+    """Something done that a fault forbade: moving while broken down, entering a closed
+    cell while it was closed."""
+
+    t: float
+    vehicle: int
+    what: str
+
+
+def fault_breaches(events: list[Event]) -> list[FaultBreach]:
+    """From the recorded faults and moves alone: a broken-down AGV begins nothing (a move,
+    turn or pause) until it is repaired; no move enters a closed cell while it is closed."""
+    down = [e for e in events if isinstance(e, BrokeDown)]
+    zones = [e for e in events if isinstance(e, ZoneClosed)]
+    out = []
+    for e in events:
+        if isinstance(e, Moved | Turned | Paused):
+            for b in down:
+                if b.vehicle == e.vehicle and b.t <= e.t0 < b.until:
+                    out.append(FaultBreach(e.t0, e.vehicle, f"{type(e).__name__.lower()} at "
+                                           f"t={e.t0} while broken down from t={b.t} to "
+                                           f"t={b.until}"))
+        if isinstance(e, Moved):
+            for z in zones:
+                if e.to in z.cells and e.t0 < z.t1 and z.t0 < e.t1:
+                    out.append(FaultBreach(e.t0, e.vehicle, f"entered {e.to} at t={e.t0}, "
+                                           f"closed from t={z.t0} to t={z.t1}"))
+    return out
 
 
 @dataclass
@@ -45,6 +86,9 @@ class Report004:
     shelf_slips: list[ShelfSlip]
     unreadable: list[str] = field(default_factory=list)  # AgvEvents naming no event
     finished: bool = False  # the dispatcher's result is recorded and says done
+    heat_w: float = 0.0  # the heat cost's weight the AGVs planned with (0: off)
+    faults: int = 0  # breakdowns and zones closed
+    fault_breaches: list[FaultBreach] = field(default_factory=list)
 
     # What `fleet runs` keeps of a judged run (fleet/commands/runs.py, summary_of), as seed
     # 000's report has it.
@@ -56,7 +100,8 @@ class Report004:
     @property
     def safe(self) -> bool:
         v = self.verdict
-        return not (v.clashes or v.bad_moves or v.rule_breaches or v.yield_breaches)
+        return not (v.clashes or v.bad_moves or v.rule_breaches or v.yield_breaches
+                    or self.fault_breaches)
 
     @property
     def messages_whole(self) -> bool:
@@ -71,7 +116,8 @@ class Report004:
 
     @property
     def passed(self) -> bool:
-        return self.verdict.passed and self.work_done and not self.unreadable
+        return self.verdict.passed and self.work_done and not self.unreadable and \
+            not self.fault_breaches
 
 
 def shelf_slips(floor: Floor004, events: list[Event]) -> list[ShelfSlip]:
@@ -136,7 +182,9 @@ def analyze004(recording: Recording) -> Report004:
                      info.orders, len(picked), max((e.t for e in picked), default=0.0),
                      max(ends, default=0.0), dict(sorted(counts.items())), verdict,
                      shelf_slips(floor, events), unreadable,
-                     bool(done) and done[-1].ok and not stopped)
+                     bool(done) and done[-1].ok and not stopped, info.heat_w,
+                     sum(isinstance(e, BrokeDown | ZoneClosed) for e in events),
+                     fault_breaches(events))
 
 
 def _xy(floor: Floor004, pose: Pose) -> tuple[int, int]:
@@ -154,7 +202,7 @@ def report_lines(r: Report004) -> list[str]:
     c = r.counts
     lines = [
         f"mission orders on {r.layout} with {r.vehicles} lifting AGVs, seed {r.seed}, "
-        f"{r.clock} clock",
+        f"{r.clock} clock" + (f", heat cost {r.heat_w:g}" if r.heat_w else ""),
         f"  {'orders':<19}{r.orders_picked} of {r.orders_expected} picked, the last at "
         f"t={r.completion_s:.1f} s",
         f"  {'end time':<19}{r.end_time_s:.1f} s (the last move, lift or drop)",
@@ -183,6 +231,10 @@ def verdict_lines(r: Report004) -> list[str]:
     for problem in [*v.clashes, *v.bad_moves, *v.rule_breaches, *v.yield_breaches,
                     *r.shelf_slips][:5]:
         lines.append(f"  {'':<19}{problem}")
+    if r.faults:
+        lines.append(f"  {'faults':<19}" + _verdict(not r.fault_breaches, (
+            f"{r.faults} struck, {len(r.fault_breaches)} moves against them")))
+        lines += [f"  {'':<19}{b}" for b in r.fault_breaches[:5]]
     if r.unreadable:
         lines.append(f"  {'events':<19}FAIL: {len(r.unreadable)} name no event of the floor: "
                      f"{r.unreadable[0]}")
@@ -192,11 +244,12 @@ def verdict_lines(r: Report004) -> list[str]:
 def report_json(r: Report004) -> dict:
     v = r.verdict
     return {"mission": {"kind": "orders", "layout": r.layout, "vehicles": r.vehicles,
-                        "seed": r.seed, "clock": r.clock},
+                        "seed": r.seed, "clock": r.clock, "heat": r.heat_w},
             "orders": r.orders_expected, "picked": r.orders_picked,
             "completion_s": r.completion_s, "end_time_s": r.end_time_s, "counts": r.counts,
             "recording": r.path,
             "verdicts": {"cells": not (v.clashes or v.bad_moves),
                          "rules": not v.rule_breaches, "giving_way": not v.yield_breaches,
                          "work": r.work_done, "events": not r.unreadable,
-                         "passed": r.passed}}
+                         "faults": not r.fault_breaches, "passed": r.passed},
+            "faults": r.faults}

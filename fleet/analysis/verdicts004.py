@@ -19,16 +19,27 @@ from fleet.analysis.traffic004 import (
     loaded_at,
     yielding_breaches,
 )
-from fleet.mission.tracking004 import Conflict, Event, Met, Moved, Paused, Replanned, Turned
+from fleet.mission.tracking004 import (
+    Conflict,
+    Event,
+    LegDone,
+    Met,
+    Moved,
+    Paused,
+    Replanned,
+    Turned,
+)
 from fleet.planning.rules004 import XY, Kind
 from fleet.world.floor004 import Floor004
+
+N_RELAX = 3  # failed plans in a row before an empty AGV may drive without the rules (B.4.1)
 
 
 @dataclass(frozen=True)
 class Verdict004:
     clashes: list[Clash]
     bad_moves: list[BadMove]
-    rule_breaches: list[Breach]
+    rule_breaches: list[Breach]  # moves against the rules, and relaxed moves not earned
     yield_breaches: list[Breach]
 
     @property
@@ -47,9 +58,9 @@ def rules_floor(floor: Floor004) -> Floor:
 
 
 def judge(floor: Floor004, events: Iterable[Event], starts: Mapping[int, XY],
-          carrying: Mapping[int, XY] | None = None) -> Verdict004:
+          carrying: Mapping[int, XY] | None = None, n_relax: int = N_RELAX) -> Verdict004:
     """`starts`: where each AGV stood at t = 0; `carrying`: the shelf's home of those that
-    started loaded."""
+    started loaded; `n_relax`: the failed plans in a row that earn a relaxed episode."""
     events = list(events)
     moves = [e for e in events if isinstance(e, Moved)]
     spans, bad = held([Move(m.vehicle, m.t0, m.t1, m.origin, m.to) for m in moves], starts)
@@ -81,8 +92,32 @@ def judge(floor: Floor004, events: Iterable[Event], starts: Mapping[int, XY],
     replans = [(e.t, e.vehicle) for e in events
                if isinstance(e, Replanned) and e.why.startswith("head-on")]
     return Verdict004(clashes(spans), bad + _driving_while_still(moves, events),
-                      breaches(rules_floor(floor), drives),
+                      breaches(rules_floor(floor), drives) + unearned(events, n_relax),
                       yielding_breaches(head_ons, replans, loads))
+
+
+def unearned(events: list[Event], n_relax: int) -> list[Breach]:
+    """Relaxed moves outside an earned episode: an AGV may drive without the rules only once
+    `n_relax` of its plans in a row found no path (since its leg began or a plan last found
+    one), and only until its next head-on conflict or the end of its leg (B.4.1)."""
+    fails: dict[int, int] = defaultdict(int)
+    earned: set[int] = set()
+    out = []
+    for e in events:
+        if isinstance(e, Replanned):
+            fails[e.vehicle] = 0 if e.found else fails[e.vehicle] + 1
+            if fails[e.vehicle] >= n_relax:
+                earned.add(e.vehicle)
+        elif isinstance(e, LegDone):
+            fails[e.vehicle] = 0
+            earned.discard(e.vehicle)
+        elif isinstance(e, Met) and e.kind is Conflict.HEAD_ON:
+            earned.discard(e.vehicle)
+        elif isinstance(e, Moved) and e.relaxed and e.vehicle not in earned:
+            out.append(Breach(e.vehicle, e.t0, f"drives {e.origin} -> {e.to} without the "
+                              f"rules, but no {n_relax} plans in a row had failed since its "
+                              f"leg began or its last head-on conflict"))
+    return out
 
 
 def _driving_while_still(moves: list[Moved], events: list[Event]) -> list[BadMove]:

@@ -7,12 +7,15 @@ import argparse
 
 from fleet.mission.faults import (
     KINDS,
+    Scenario,
     builtin_scenarios,
     check_against,
     load_scenario,
     shipped_source,
 )
+from fleet.mission.faults004 import KINDS004, check_faults004
 from fleet.mission.order_work import order_fleet
+from fleet.mission.orders004 import fleet004
 from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
@@ -59,21 +62,37 @@ def run(args: argparse.Namespace) -> int:
         print(f"shipped scenarios for {layout.name} (fleet run --faults NAME; fleet faults "
               f"show NAME):")
         for name in builtin_scenarios():
-            print(f"  {name:<18} {load_scenario(name, layout.name).description}")
+            scenario = load_scenario(name, layout.name)
+            if layout.floor is not None and not _fits004(scenario):
+                continue  # a kind a seed-004 run does not take
+            print(f"  {name:<18} {scenario.description}")
         return 0
     if args.action == "show":
         print(shipped_source(args.scenario, layout.name), end="")
         return 0
     scenario = load_scenario(args.scenario, layout.name)
     vehicles = _fleet(layout, args.vehicles)
-    check_against(scenario, layout, vehicles)
+    if layout.floor is not None:
+        check_faults004(scenario.faults, layout.floor, vehicles, scenario.name)
+    else:
+        check_against(scenario, layout, vehicles)
+    noun = "forklifts" if not (layout.has_lanes or layout.floor) else \
+        "lifting AGVs" if layout.floor else "AGVs"
     print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
-          f"with {vehicles} {'AGVs' if layout.has_lanes else 'forklifts'}")
+          f"with {vehicles} {noun}")
     for fault in sorted(scenario.faults, key=lambda f: f.at):
         print(f"  {fault.describe()}")
     return 0
 
 
 def _fleet(layout: Layout, vehicles: int | None) -> int:
-    """The fleet a run on the layout has: its order mission's AGVs on a lane layout."""
+    """The fleet a run on the layout has: its order mission's AGVs on a lane layout or a
+    seed-004 floor."""
+    if layout.floor is not None:
+        return fleet004(layout.floor, vehicles)
     return order_fleet(layout, vehicles) if layout.has_lanes else fleet_size(layout, vehicles)
+
+
+def _fits004(scenario: Scenario) -> bool:
+    """Whether a seed-004 run takes every fault of the scenario."""
+    return all(f.kind in KINDS004 for f in scenario.faults)

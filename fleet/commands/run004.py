@@ -15,8 +15,10 @@ from fleet.analysis.analyze004 import analyze004, report_json, report_lines, ver
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
+from fleet.mission.faults import Fault, load_scenario
+from fleet.mission.faults004 import check_faults004
 from fleet.mission.orders004 import fleet004, generate_orders
-from fleet.mission.record004 import run_mission004
+from fleet.mission.record004 import run_mission004, tracking_params
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.tracking004 import Stuck
 from fleet.recording.inprocess import Outgoing, outgoing, write_recording
@@ -31,7 +33,7 @@ from fleet.world.layout import Layout
 
 # What runs on seed 000's and 002's missions but not yet on a seed-004 floor, each refused by
 # name rather than ignored (docs/agv-004.md, "As processes").
-NOT_YET = (("--faults", lambda a: a.faults), ("--secure", lambda a: a.secure),
+NOT_YET = (("--secure", lambda a: a.secure),
            ("--battery", lambda a: a.battery), ("--order-area", lambda a: a.order_area),
            ("--weights", lambda a: a.weights is not None),
            ("--orders SHELF,...", lambda a: isinstance(a.orders, tuple)))
@@ -51,6 +53,11 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     n = fleet004(floor, mission.vehicles)
     mission = dataclasses.replace(mission, vehicles=n)
     generate_orders(floor, mission.orders, mission.seed)  # a bad count: refused at once
+    faults: tuple[Fault, ...] = ()
+    if args.faults:
+        scenario = load_scenario(args.faults, layout.name)
+        check_faults004(scenario.faults, floor, n, scenario.name)
+        faults = scenario.faults
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(mission.orders, f"orders on {layout.name}", unit="orders",
@@ -59,10 +66,11 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     t0 = time.perf_counter()
     try:
         if args.inprocess:
-            done = _inprocess(mission, layout, n, out, command, progress)
+            done = _inprocess(mission, layout, n, out, command, progress, faults)
         else:
             spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, command=command,
-                           port=args.port, foxglove=args.foxglove)
+                           port=args.port, foxglove=args.foxglove,
+                           faults_source=args.faults or "")
             progress.status(f"starting the router, recorder, reservation service, {n} AGV "
                             f"agents and the dispatcher")
             outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))
@@ -96,7 +104,7 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
 
 
 def _inprocess(mission: Mission, layout: Layout, n: int, out: Path, command: str,
-               progress: MissionProgress) -> MissionDone:
+               progress: MissionProgress, faults: tuple[Fault, ...]) -> MissionDone:
     """The mission in this process, its messages recorded as a run of processes has them."""
     keys = Keys()
     topics = published_by(DISPATCHER)
@@ -110,7 +118,8 @@ def _inprocess(mission: Mission, layout: Layout, n: int, out: Path, command: str
 
     assert layout.floor is not None
     try:
-        done = run_mission004(mission, layout.floor, n, None, publish)
+        done = run_mission004(mission, layout.floor, n, None, publish,
+                              tracking=tracking_params(info), faults=faults)
     except (Stuck, UserError) as exc:
         done = MissionDone(False, error=str(exc))
     stream.append(outgoing(keys, topics[MissionDone], done, stream[-1].sim_time))

@@ -13,8 +13,13 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.tracking004 import Event, Met, Moved, Paused, Stagnant
 from fleet.planning.rules004 import XY
+from fleet.world.floor004 import Floor004
+
+W_HEAT = 2.0  # w_heat of the seed's runs with the heat cost
+HISTORY_SEED = 1000  # the history run of order seed s draws the orders of seed s + 1000
 
 
 @dataclass(frozen=True)
@@ -57,3 +62,10 @@ def t_values(heat: dict[XY, float]) -> dict[XY, float]:
     """T scaled to 0..1 by the hottest cell (T_min is 0: a cell nobody used)."""
     top = max(heat.values(), default=0.0)
     return {c: t / top for c, t in heat.items()} if top > 0 else {}
+
+
+def history_heat(floor: Floor004, vehicles: int, orders: int, seed: int) -> dict[XY, float]:
+    """T_value from the history run of a mission (heat off, the orders of seed + 1000): the
+    seed's protocol of a run with the heat cost."""
+    history = Mission004(floor, vehicles, generate_orders(floor, orders, seed + HISTORY_SEED))
+    return t_values(heat_counts(history.run().events).heat())

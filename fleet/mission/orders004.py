@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 
 from fleet.errors import UserError
 from fleet.mission.battery import FULL, BatteryParams
+from fleet.mission.faults import Fault
+from fleet.mission.faults004 import apply_faults, check_faults004
 from fleet.mission.orders import manhattan
 from fleet.mission.tracking004 import (
     Event,
@@ -38,6 +40,7 @@ from fleet.mission.tracking004 import (
     LegDone,
     Milestone,
     Picked,
+    Repaired,
     Tracker,
     TrackingParams,
     Vehicles,
@@ -152,6 +155,7 @@ class Mission004:
     fleet: Vehicles | None = None  # None: every AGV in this process
     on_event: Callable[[Event], None] | None = None  # each tracking event as it happens
     pace: Callable[[float], None] | None = None  # holds each instant until it comes
+    faults: tuple[Fault, ...] = ()  # breakdowns and closed zones (fleet/mission/faults004.py)
 
     def __post_init__(self) -> None:
         if not 1 <= self.vehicles <= len(self.floor.parking):
@@ -169,6 +173,8 @@ class Mission004:
         self.tracker = Tracker(self.floor, self.tracking, self.fleet, self.on_event, self.pace)
         for v in range(1, self.vehicles + 1):
             self.tracker.place(v, self.floor.parking[v - 1], Direction.DOWN)
+        check_faults004(self.faults, self.floor, self.vehicles, "of the mission")
+        apply_faults(self.tracker, self.faults)
         self._agvs = {v: _Agv() for v in range(1, self.vehicles + 1)}
         self._shelves = {s.xy: _Shelf(s.xy, s.goods) for s in self.floor.slots}
         self._stations = {s.name: s for s in self.floor.stations}
@@ -212,6 +218,8 @@ class Mission004:
         if isinstance(m, Picked):
             self._picked_at(m)
             return
+        if isinstance(m, Repaired):
+            return  # available again: the dispatch that follows sees it
         v, leg = m.vehicle, m.leg
         a = self._agvs[v]
         self._lowest = min(self._lowest, self.soc(v))
@@ -307,7 +315,8 @@ class Mission004:
 
     def _nearest_idle(self, at: XY) -> int | None:
         idle = [v for v, a in self._agvs.items()
-                if self.tracker.agvs[v].leg is None and a.shelf is None and not a.needs_pile]
+                if self.tracker.agvs[v].leg is None and a.shelf is None and not a.needs_pile
+                and not self.tracker.is_down(v)]
         if not idle:
             return None
         return min(idle, key=lambda v: (manhattan(self.tracker.agvs[v].cell, at), v))
@@ -333,7 +342,8 @@ class Mission004:
         taken = {a.cell for a in agvs} | {a.leg.goal for a in agvs if a.leg is not None
                                           and a.leg.task is Task.CHARGE}
         for v, a in sorted(self._agvs.items()):
-            if not a.needs_pile or self.tracker.agvs[v].leg is not None:
+            if not a.needs_pile or self.tracker.agvs[v].leg is not None or \
+                    self.tracker.is_down(v):
                 continue  # (one sent out of the way meanwhile goes when it is there)
             free = [p for p in self.floor.piles if p not in taken]
             if not free:

@@ -8,10 +8,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from fleet.mission.faults import Fault
 from fleet.mission.orders004 import Mission004, Result004, generate_orders
 from fleet.mission.record import digest_of
 from fleet.mission.spec import Mission
 from fleet.mission.tracking004 import (
+    BrokeDown,
     Conflict,
     Event,
     Leg,
@@ -21,13 +23,17 @@ from fleet.mission.tracking004 import (
     Moved,
     Paused,
     Picked,
+    Repaired,
     Replanned,
     Stagnant,
+    TrackingParams,
     Turned,
     Vehicles,
+    ZoneClosed,
 )
+from fleet.planning.astar004 import Costs
 from fleet.planning.rules004 import Direction, Task
-from fleet.wire.protocol import AgvEvent, Message, MissionDone, Progress
+from fleet.wire.protocol import AgvEvent, Message, MissionDone, MissionInfo, Progress
 from fleet.world.floor004 import Floor004
 
 
@@ -52,6 +58,12 @@ def event_to_wire(e: Event) -> AgvEvent:
             return AgvEvent("made_way", e.vehicle, e.t, e.t, e.at, e.to, other=e.idle)
         case Picked():
             return AgvEvent("picked", e.vehicle, e.t, e.t, label=e.station)
+        case BrokeDown():
+            return AgvEvent("broke_down", e.vehicle, e.t, e.until, e.at)
+        case Repaired():
+            return AgvEvent("repaired", e.vehicle, e.t, e.t, e.at)
+        case ZoneClosed():
+            return AgvEvent("zone_closed", 0, e.t0, e.t1, cells=list(e.cells))
         case LegDone():
             leg = e.leg
             return AgvEvent("leg_done", e.vehicle, e.t, e.t, to=leg.goal, task=leg.task.value,
@@ -96,6 +108,12 @@ def _event(m: AgvEvent, floor: Floor004) -> Event:
             return MadeWay(m.t0, m.vehicle, m.other, m.at, m.to)
         case "picked":
             return Picked(m.t0, m.vehicle, m.label)
+        case "broke_down":
+            return BrokeDown(m.t0, m.vehicle, m.at, m.t1)
+        case "repaired":
+            return Repaired(m.t0, m.vehicle, m.at)
+        case "zone_closed":
+            return ZoneClosed(m.t0, m.t1, tuple(m.cells))
         case "leg_done":
             if m.to is None:
                 raise ValueError("a leg has a goal")
@@ -126,12 +144,20 @@ def record_of(result: Result004) -> dict[str, Any]:
 Publish = Callable[[Message, float], None]
 
 
+def tracking_params(info: MissionInfo) -> TrackingParams:
+    """The tracker's settings as the run's description gives them, so the dispatcher and
+    every agent plan with the very same costs (the heat's T_value included)."""
+    return TrackingParams(costs=Costs(heat=info.heat_w,
+                                      t_value={(x, y): v for x, y, v in info.heat}))
+
+
 def run_mission004(mission: Mission, floor: Floor004, vehicles: int, fleet: Vehicles | None,
-                   publish: Publish, pace: Callable[[float], None] | None = None
+                   publish: Publish, pace: Callable[[float], None] | None = None,
+                   tracking: TrackingParams | None = None, faults: tuple[Fault, ...] = ()
                    ) -> MissionDone:
     """Run the order mission (its orders drawn with its seed) through `fleet` (None: in this
     process), publishing each event and each picked order as it happens; `pace` holds each
-    instant until its time comes (a real-time clock)."""
+    instant until its time comes (a real-time clock); `faults` strike at their instants."""
     t0 = time.perf_counter()
     orders = generate_orders(floor, mission.orders, mission.seed)
     picked = 0
@@ -144,8 +170,8 @@ def run_mission004(mission: Mission, floor: Floor004, vehicles: int, fleet: Vehi
             picked += 1
             publish(Progress(picked, len(orders), e.t, 0), e.t)
 
-    result = Mission004(floor, vehicles, orders, fleet=fleet, on_event=on_event,
-                        pace=pace).run()
+    result = Mission004(floor, vehicles, orders, tracking or TrackingParams(), fleet=fleet,
+                        on_event=on_event, pace=pace, faults=faults).run()
     record = record_of(result)
     return MissionDone(True, record=record, digest=digest_of(record),
                        wall_s=time.perf_counter() - t0)

@@ -40,3 +40,6 @@ class Mission:
     # Seed 002's batteries, as `fleet run --battery` gives them ("": the defaults):
     # fleet/mission/battery.py, `parse_battery`.
     battery: str = ""
+    # Seed 004's heat cost: w_heat (0: off), on T_value from the mission's history run
+    # (fleet/mission/heat004.py, `history_heat`).
+    heat: float = 0.0

@@ -55,6 +55,7 @@ from fleet.planning.rules004 import (
     perpendicular,
     value,
 )
+from fleet.wire.protocol import ZONE
 from fleet.world.floor004 import Floor004, Station
 
 
@@ -167,6 +168,10 @@ class Vehicles(Protocol):
 
     def route(self, query: RouteQuery) -> Routed: ...
 
+    def close(self, xys: list[XY], t0: float, t1: float) -> None:
+        """Close cells (a fault): held by ZONE over [t0, t1); none of them is held then."""
+        ...
+
 
 class LocalVehicles:
     """Every AGV in this process, against one `ReservationTable`."""
@@ -185,6 +190,10 @@ class LocalVehicles:
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
         self.table.release(vehicle, t, [self.floor.cell(xy)])
+
+    def close(self, xys: list[XY], t0: float, t1: float) -> None:
+        written = self.table.commit(ZONE, [Interval(self.floor.cell(xy), t0, t1) for xy in xys])
+        assert written.ok, written.reason
 
     def route(self, query: RouteQuery) -> Routed:
         started = time.perf_counter()
@@ -317,8 +326,37 @@ class LegDone:
     leg: Leg
 
 
-Milestone = Picked | LegDone  # what the work above the tracker acts on
-Event = Moved | Turned | Paused | Met | Stagnant | Replanned | MadeWay | Milestone
+@dataclass(frozen=True)
+class BrokeDown:
+    """A fault: the AGV stops where it stands, or where the move it is in ends, until
+    `until` (infinity: it is not repaired); it holds its cell, which reads stagnant."""
+
+    t: float
+    vehicle: int
+    at: XY
+    until: float
+
+
+@dataclass(frozen=True)
+class Repaired:
+    t: float
+    vehicle: int
+    at: XY
+
+
+@dataclass(frozen=True)
+class ZoneClosed:
+    """A fault: `cells` are closed (a spill) over [t0, t1): held in the store by ZONE.
+    Cells an AGV held at t0 stay open; they are not listed."""
+
+    t0: float
+    t1: float
+    cells: tuple[XY, ...]
+
+
+Milestone = Picked | LegDone | Repaired  # what the work above the tracker acts on
+Fault = BrokeDown | Repaired | ZoneClosed
+Event = Moved | Turned | Paused | Met | Stagnant | Replanned | MadeWay | Fault | Milestone
 
 
 @dataclass
@@ -342,6 +380,7 @@ class Agv:
     relaxed: bool = False
     blocked: frozenset[XY] = frozenset()  # cells the next plan avoids
     running_s: float = 0.0  # moving, turning and lifting: the seed's consumption
+    down_until: float = 0.0  # broken down until then (a fault; infinity: for good)
 
 
 class Stuck(RuntimeError):
@@ -350,9 +389,10 @@ class Stuck(RuntimeError):
 
 # Due events: arrivals before decisions at one instant, so every cell let go at t is free to
 # be taken at t; then by vehicle, then in the order they were made.
-_ARRIVE, _ACT = 0, 1
+_FAULT, _ARRIVE, _ACT = -1, 0, 1  # a fault strikes before anything else at its instant
 # An AGV deciding this often at one instant is going round in circles: a defect, named.
 MAX_ACTS_AT_ONCE = 1000
+FIRST_PLAN = "first plan"  # the Replanned of a leg's first plan that found no path
 STEPPED_ASIDE = "head-on: stepped aside"  # the Replanned of one giving way where it cannot
 # plan around (the cell it wants is its goal; or the other could not give way at all)
 
@@ -376,6 +416,7 @@ class Tracker:
         self._due: list[tuple[float, int, int, int]] = []  # (t, rank, vehicle, order)
         self._order = itertools.count()
         self._waiters: dict[XY, set[int]] = {}
+        self._faults: dict[int, Callable[[], Repaired | None]] = {}  # by order: a fault
         self._acts: Counter[int] = Counter()  # decisions by AGV at the current instant
         self.replans = 0  # planner calls while tracking, each leg's first plan not counted
         self.planning_s = 0.0  # wall time in the planner (measured; it decides nothing)
@@ -408,7 +449,7 @@ class Tracker:
         """Whether the AGV carries its shelf home and has not begun to drop it."""
         agv = self.agvs[vehicle]
         return agv.leg is not None and agv.leg.task is Task.RETURN and agv.loaded and \
-            agv.stages[0].kind is StageKind.PLANNED
+            agv.stages[0].kind is StageKind.PLANNED and agv.down_until <= self.t
 
     def recall(self, vehicle: int, leg: Leg) -> None:
         """The shelf it returns is wanted at a station (Equation 5): deliver it there
@@ -421,6 +462,51 @@ class Tracker:
         self._start(agv, leg)
         if agv.moving_to is None:
             self._wake(vehicle, self.t)  # (moving: its arrival acts)
+
+    # -- faults --------------------------------------------------------------------------------
+    def break_down(self, vehicle: int, t: float, until: float = INF) -> None:
+        """At t the AGV stops: the move, turn or lift it is in ends, then it stands, holding
+        its cell, until `until`."""
+        def strike() -> None:
+            agv = self.agvs[vehicle]
+            agv.down_until = until
+            self._log(BrokeDown(t, vehicle, agv.moving_to or agv.cell, until))
+            if until < INF:
+                self._at(until, repair)
+
+        def repair() -> Repaired:
+            agv = self.agvs[vehicle]
+            agv.down_until = 0.0
+            agv.standing_since = until  # it stood for a reason: stagnant only from now on
+            repaired = Repaired(until, vehicle, agv.moving_to or agv.cell)
+            self._log(repaired)
+            self._wake(vehicle, until)
+            return repaired
+        self._at(t, strike)
+
+    def close_zone(self, xys: list[XY], t0: float, t1: float) -> None:
+        """From t0 to t1 the cells nobody holds at t0 are closed: nobody enters them."""
+        def close() -> None:
+            free = [xy for xy in xys
+                    if self.vehicles.view.conflict(ZONE, self.floor.cell(xy), t0, t1) is None]
+            if free:
+                self.vehicles.close(free, t0, t1)
+            self._log(ZoneClosed(t0, t1, tuple(free)))
+            self._at(t1, lambda: self._reopen(free))
+        self._at(t0, close)
+
+    def is_down(self, vehicle: int) -> bool:
+        return self.agvs[vehicle].down_until > self.t
+
+    def _reopen(self, xys: list[XY]) -> None:
+        for xy in xys:
+            for v in sorted(self._waiters.pop(xy, ())):
+                self._wake(v, self.t)
+
+    def _at(self, t: float, action: Callable[[], Repaired | None]) -> None:
+        order = next(self._order)
+        self._faults[order] = action
+        heapq.heappush(self._due, (t, _FAULT, 0, order))
 
     def _start(self, agv: Agv, leg: Leg) -> None:
         """Take up `leg`, planned now if the AGV stands (so others see where it heads),
@@ -437,7 +523,7 @@ class Tracker:
         """Run events up to `until`, stopping after the first pick or leg end (None: none by
         then). Raises Stuck when no event is left but a leg is unfinished."""
         while self._due:
-            t, rank, vehicle, _ = self._due[0]
+            t, rank, vehicle, order = self._due[0]
             if t > until:
                 return None
             heapq.heappop(self._due)
@@ -445,6 +531,11 @@ class Tracker:
                 self._acts.clear()
                 if self.pace is not None:
                     self.pace(t)
+            if rank == _FAULT:
+                self.t = t
+                if (repaired := self._faults.pop(order)()) is not None:
+                    return repaired  # an AGV to dispatch again
+                continue
             self._acts[vehicle] += 1
             if self._acts[vehicle] > MAX_ACTS_AT_ONCE:
                 raise Stuck(f"at t={t:.2f} AGV {vehicle} decided {MAX_ACTS_AT_ONCE} times "
@@ -458,8 +549,9 @@ class Tracker:
         busy = sorted(v for v, a in self.agvs.items() if a.leg is not None)
         if busy:
             raise Stuck(f"at t={self.t:.2f} nothing moves any more: " + "; ".join(
-                f"AGV {v} at {self.agvs[v].cell} waits for {self.agvs[v].waiting_on}"
-                for v in busy))
+                f"AGV {v} at {self.agvs[v].cell} " + (
+                    "is broken down" if self.agvs[v].down_until > self.t else
+                    f"waits for {self.agvs[v].waiting_on}") for v in busy))
         return None
 
     def run(self) -> list[Milestone]:
@@ -502,6 +594,8 @@ class Tracker:
         t, p = self.t, self.params
         if agv.moving_to is not None or t < agv.busy_until or agv.leg is None:
             return None  # driving, turning or pausing: that ends with its own event
+        if agv.down_until > t:
+            return None  # broken down: its repair wakes it
         if agv.trouble_since is not None and t - agv.trouble_since > p.watchdog_s:
             raise Stuck(f"at t={t:.2f} AGV {agv.vehicle} at {agv.cell} has stood "
                         f"{t - agv.trouble_since:.0f} s " + (
@@ -521,7 +615,8 @@ class Tracker:
                     return None
                 else:
                     agv.planned = True
-                    if not self._plan(agv, first=True):
+                    if not self._plan(agv, first=True):  # logged: it counts to N_relax
+                        self._log(Replanned(t, agv.vehicle, FIRST_PLAN, agv.relaxed, False))
                         self._wake(agv.vehicle, t + p.retry_s)
                         return None
                 continue
@@ -542,6 +637,13 @@ class Tracker:
             return None
         holder = self._holder(agv.vehicle, nxt)
         assert holder is not None, f"the store refused {nxt} and names no holder"
+        if holder == ZONE:  # closed: an empty AGV goes round, a loaded one waits
+            if not agv.loaded and self._can_go_around(agv, nxt):
+                agv.blocked = frozenset({nxt})
+                self._replan(agv, "closed zone ahead")
+            else:
+                self._wait(agv, nxt)
+            return None
         self._blocked(agv, nxt, self.agvs[holder])
         return None
 
@@ -594,7 +696,8 @@ class Tracker:
 
     def _blocked(self, agv: Agv, nxt: XY, other: Agv) -> None:
         t = self.t
-        head_on = other.moving_to is None and other.path[:1] == [agv.cell]
+        head_on = other.moving_to is None and other.path[:1] == [agv.cell] and \
+            other.down_until <= t  # a broken-down AGV is an obstacle: stagnant
         if head_on:
             kind = Conflict.HEAD_ON
         elif other.moving_to is not None and perpendicular(other.heading, agv.heading):
@@ -631,7 +734,8 @@ class Tracker:
             agv.blocked = frozenset({nxt})
             self._replan(agv, "stagnant AGV ahead")
             return
-        if other.leg is None and not other.loaded and agv.waiting_on == nxt and \
+        if other.leg is None and not other.loaded and other.down_until <= t and \
+                agv.waiting_on == nxt and \
                 t - self._in_trouble(agv) >= self.params.t_evict:
             self._make_way(agv, other)
         elif self._stagnant(agv, t) and not agv.loaded and agv.waiting_on == nxt and around:
@@ -706,7 +810,7 @@ class Tracker:
         routed = self.vehicles.route(RouteQuery(
             agv.vehicle, t, leg.task, agv.cell, leg.goal, agv.heading, leg.home, agv.relaxed,
             agv.blocked, frozenset(v for v, a in self.agvs.items() if a.moving_to is not None),
-            frozenset(v for v, a in self.agvs.items() if self._stagnant(a, t))))
+            frozenset(v for v, a in self.agvs.items() if self._stagnant(a, t)) | {ZONE}))
         self.planning_s += routed.planning_s
         found = routed.cells
         agv.blocked = frozenset()  # avoided in this plan only: the next one sees the grid anew
@@ -732,6 +836,8 @@ class Tracker:
 
     def _stagnant(self, agv: Agv, t: float) -> bool:
         """Standing longer than T_stag, but in a station's lane (its queue)."""
+        if agv.moving_to is None and agv.down_until > t:
+            return True  # broken down: an obstacle at once, in a station's lane too
         return agv.moving_to is None and self.floor.kind(agv.cell) is not Kind.LANE and \
             t - agv.standing_since > self.params.t_stag
 

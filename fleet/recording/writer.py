@@ -21,6 +21,7 @@ from mcap.writer import CompressionType, Writer
 
 from fleet import __version__
 from fleet.mission.battery import start_piles
+from fleet.mission.heat004 import history_heat
 from fleet.mission.order_work import mission_battery, mission_charges, mission_orders
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.trajectory import Pose
@@ -58,10 +59,13 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
                 "mcap": _package_version("mcap")}
     if layout.floor is not None:  # seed 004: its AGVs start on the parking places, in order
         parked = [Pose(layout.floor.cell(xy), 0) for xy in layout.floor.parking[:vehicles]]
+        heat = history_heat(layout.floor, vehicles, mission.orders, mission.seed) \
+            if mission.heat else {}
         return MissionInfo(layout.name, layout_source(mission.layout), mission.kind.value,
                            mission.strategy.value, vehicles, mission.seed, clock, speed,
                            [str(p) for p in parked], command or " ".join(sys.argv), versions,
-                           mission.orders)
+                           mission.orders, heat_w=mission.heat,
+                           heat=[(x, y, v) for (x, y), v in sorted(heat.items())])
     starts = list(mission.starts or layout.vehicle_starts)[:vehicles]
     if mission.kind is MissionKind.ORDERS and not mission.starts:
         starts = [Pose(p.cell, 0) for p in start_piles(layout, vehicles)]

@@ -21,6 +21,7 @@ from fleet.runtime.argtypes import (
     endpoint,
     integer,
     layout_arg,
+    non_negative_float,
     orders_arg,
     positive_float,
     positive_int,
@@ -140,6 +141,9 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
                    help="the mission's seed, kept in its record: it draws an order "
                    "mission's orders and start charges (the dispatching itself draws no "
                    "random numbers: a mission gives the same record every time; default 0)")
+    p.add_argument("--heat", type=non_negative_float, default=0.0, metavar="W",
+                   help="seed 004's heat cost: w_heat, on the T_value of a history run with "
+                   "the orders of --seed + 1000 (the seed's runs: 2; default 0, off)")
     p.add_argument("--weights", type=text_file, metavar="FILE",
                    help="MLP weights for --strategy ann (default: the weights shipped for the "
                    "layout)")
@@ -163,6 +167,9 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
                         ("--battery", args.battery)):
         if given and not orders:
             raise UserError(f"{flag} is for order missions, not --mission {kind.value}")
+    if args.heat and layout is not None and layout.floor is None:
+        raise UserError(f"--heat is seed 004's heat cost, for its lifting AGVs on a seed-004 "
+                        f"floor (paper004), not for layout {layout.name}")
     if args.strategy is None:
         strategy = Strategy.NEAREST if orders else Strategy.ANN
     else:
@@ -175,7 +182,7 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
                    orders=0 if not orders else len(args.orders) if given_shelves
                    else args.orders or DEFAULT_ORDERS,
                    order_area=args.order_area, battery=args.battery,
-                   shelves=args.orders if given_shelves else ())
+                   shelves=args.orders if given_shelves else (), heat=args.heat)
 
 
 def mission_argv(mission: Mission) -> list[str]:
@@ -187,6 +194,8 @@ def mission_argv(mission: Mission) -> list[str]:
         orders += ["--order-area", mission.order_area]
     if mission.battery:
         orders += ["--battery", mission.battery]
+    if mission.heat:
+        orders += ["--heat", repr(mission.heat)]
     return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
             "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
 

@@ -84,7 +84,9 @@ class RunSpec:
     foxglove: int | None = None  # serve the live Foxglove view on this port
     record: bool = True  # start the recorder (benchmarks measure the run without it)
     faults: Scenario | None = None  # applied by an injector in this process
-    faults_source: str = ""  # the scenario's name or file, for the dispatcher
+    # The scenario's name or file, for the dispatcher (alone, without `faults`: a seed-004
+    # run's dispatcher applies its faults itself)
+    faults_source: str = ""
     secure: bool = False  # access control and a login per process (fleet/runtime/access.py)
 
     @property
@@ -109,7 +111,7 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
     """The dispatcher of the run (`recover`: a restarted one picks the mission up)."""
     return DispatcherConfig(bus, dataclasses.replace(spec.mission, vehicles=spec.vehicles),
                             spec.weights, spec.clock, spec.speed, command=spec.command,
-                            faults=spec.faults_source if spec.faults is not None else None,
+                            faults=spec.faults_source or None,
                             recorded=spec.record, recover=recover,
                             journal=spec.run_dir / DISPATCHER_JOURNAL
                             if spec.mission.kind is MissionKind.ORDERS else None)

@@ -47,6 +47,8 @@ FRAME_S = 0.5  # the AGVs are drawn every this many sim seconds (as forklift sta
 HEAT = "/view/heat"
 LANE_COLOR = (0.55, 0.70, 0.90)  # a station's route
 HEAT_COLOR = (1.0, 0.45, 0.10)
+ZONES = "/view/zones"
+ZONE_COLOR = (0.85, 0.10, 0.10)  # a closed zone (a fault)
 # The seed's direction code as a yaw in the project's frame (its y points up; the seed's down).
 YAW = {Direction.UP: math.pi / 2, Direction.LEFT: math.pi, Direction.DOWN: -math.pi / 2,
        Direction.RIGHT: 0.0}
@@ -62,6 +64,7 @@ class _Agv:
     shelf: XY | None = None  # the home of the shelf it carries (from the lift's end)
     lift_at: tuple[float, XY] | None = None  # a lift under way: it carries from then
     drop_at: float | None = None  # a drop under way: it carries until then
+    down: tuple[float, float] = (0.0, 0.0)  # broken down over [t0, t1)
 
 
 class Scene004Views(SceneViews):
@@ -73,12 +76,19 @@ class Scene004Views(SceneViews):
         self.agvs = {v: _Agv(xy) for v, xy in enumerate(self.floor.parking[:vehicles], 1)}
         self.entered: dict[XY, int] = {}
         self.next_frame = 0.0
+        self.zones: list[tuple[float, float, tuple[XY, ...]]] = []  # closed: t0, t1, cells
+        self.zones_shown: frozenset[XY] = frozenset()
 
     # -- entry points (SceneViews') ----------------------------------------------------------
     def on_message(self, key: str, message: Message, sim_time: float) -> list[View]:
         if isinstance(message, MissionDone):  # the last moves, to where they end
             end = max((a.t1 for a in self.agvs.values()), default=0.0)
             return self._frames_before(end + FRAME_S) if _plausible(end) else []
+        if isinstance(message, AgvEvent) and message.kind == "zone_closed" and \
+                _plausible(message.t0):
+            views = self._frames_before(message.t0)
+            self.zones.append((message.t0, message.t1, tuple(message.cells)))
+            return views
         if not isinstance(message, AgvEvent) or not _plausible(message.t0) or \
                 message.vehicle not in self.agvs:
             return []
@@ -109,6 +119,8 @@ class Scene004Views(SceneViews):
             agv.lift_at = (m.t1, m.at)
         elif m.kind == "paused" and m.label == "drop":
             agv.drop_at = m.t1
+        elif m.kind == "broke_down":
+            agv.down = (m.t0, m.t1)
 
     @staticmethod
     def _settle(agv: _Agv, t: float) -> None:
@@ -134,6 +146,14 @@ class Scene004Views(SceneViews):
             views.append((GOODS_TOPIC, self._goods_update(ns), ns))
         views.append((FORKLIFTS, SceneUpdate(entities=[
             self._lifting_agv(v, agv, t, ns) for v, agv in sorted(self.agvs.items())]), ns))
+        closed = frozenset(xy for t0, t1, cells in self.zones if t0 <= t < t1 for xy in cells)
+        if closed != self.zones_shown:
+            self.zones_shown = closed
+            side = self.layout.cell_size * 0.95
+            views.append((ZONES, SceneUpdate(entities=[SceneEntity(
+                timestamp=_stamp(ns), frame_id=FRAME, id="closed", cubes=[
+                    self._cell_box(self.floor.cell(xy), side, 0.0, 0.05,
+                                   _color(ZONE_COLOR, 0.8)) for xy in sorted(closed)])]), ns))
         return views
 
     # -- drawing -----------------------------------------------------------------------------
@@ -160,6 +180,7 @@ class Scene004Views(SceneViews):
             timestamp=_stamp(ns), frame_id=FRAME, id=f"agv/{v}", cubes=cubes,
             arrows=[arrow], texts=[_label(str(v), x, y, AGV_H + SHELF_H + 0.6)],
             metadata=[KeyValuePair(key="cell", value=f"{agv.cell[0]},{agv.cell[1]}"),
+                      KeyValuePair(key="down", value=str(agv.down[0] <= t < agv.down[1]).lower()),
                       KeyValuePair(key="heading", value=agv.heading.name.lower()),
                       KeyValuePair(key="shelf", value="" if agv.shelf is None else
                                    f"{agv.shelf[0]},{agv.shelf[1]}")])

@@ -322,6 +322,10 @@ class MissionInfo(Message):
     drain_per_s: float = 0.0  # % per second of driving
     charge_per_s: float = 0.0  # % per second parked on a pile
     charge_below: float = 0.0  # % below which an AGV goes to charge at a task's end
+    # Seed 004's heat cost: w_heat (0: off) and T_value, [x, y, value] per cell with traffic,
+    # from the mission's history run: every AGV plans with these very numbers.
+    heat_w: float = 0.0
+    heat: list[tuple[int, int, float]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -623,8 +627,9 @@ class RouteReply(Message):
 @dataclass(frozen=True)
 class AgvEvent(Message):
     """Seed 004: one event of the tracking (fleet/mission/record004.py converts): `kind` is
-    moved, turned, paused, met, stagnant, replanned, made_way, picked or leg_done; the other
-    fields are those the kind has (docs/protocol.md)."""
+    moved, turned, paused, met, stagnant, replanned, made_way, picked, leg_done, or a fault:
+    broke_down, repaired, zone_closed; the other fields are those the kind has
+    (docs/protocol.md)."""
 
     TYPE: ClassVar[str] = "agv004.event"
     kind: str
@@ -643,6 +648,7 @@ class AgvEvent(Message):
     home: XY004 | None = None  # leg_done
     make_way: bool = False  # leg_done
     charge_s: float = 0.0  # leg_done
+    cells: list[XY004] = field(default_factory=list)  # zone_closed
 
 
 @dataclass(frozen=True)
