@@ -16,7 +16,7 @@ import zenoh
 
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Amendment, Interval, TimedRoute, WriteResult
-from fleet.runtime.bus import Requester, RequestFailed, received
+from fleet.runtime.bus import Requester, RequestFailed, received, wait_alive
 from fleet.wire.convert import amends_to_wire, intervals_to_wire, route_to_wire
 from fleet.wire.protocol import (
     CommitRequest,
@@ -32,6 +32,12 @@ from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.mirror")
 Answer = TypeVar("Answer", bound=Message)
+
+
+def wait_for_service(session: zenoh.Session, keys: Keys, timeout_s: float) -> None:
+    """Block until the reservation service is up (its liveliness token), or fail naming it."""
+    if not wait_alive(session, keys.reservation_alive, timeout_s):
+        raise RuntimeError(f"no reservation service on {keys.root} within {timeout_s:g} s")
 
 
 class ReservationClient:

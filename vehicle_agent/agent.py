@@ -31,7 +31,7 @@ from fleet.mission.seam import Task
 from fleet.mission.spec import ClockMode
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Requester, Stream, asked, received, wait_alive
+from fleet.runtime.bus import Requester, Stream, asked, received
 from fleet.runtime.lifecycle import Stopped
 from fleet.runtime.tasks import result_to_wire, task_from_wire
 from fleet.vehicles.kind import Commitment
@@ -57,7 +57,7 @@ from fleet.wire.protocol import (
 from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.layout import Layout
 from fleet.world.site import planners_for
-from reservation.client import ReservationClient
+from reservation.client import ReservationClient, wait_for_service
 from reservation.mirror import TableMirror
 from vehicle_agent.clock import SimClock, tick_problem
 
@@ -135,9 +135,7 @@ class Agent:
     # -- the process ---------------------------------------------------------------------------
     def run(self, service_timeout_s: float = 60.0, exit_when_done: bool = False) -> None:
         """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
-        if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
-            raise RuntimeError(f"no reservation service on {self.keys.root} within "
-                               f"{service_timeout_s:g} s")
+        wait_for_service(self.session, self.keys, service_timeout_s)
         with ExitStack() as scope:
             scope.enter_context(self.reservations.follow(self.mirror))
             if self.mirror.table.reservations(self.vehicle):

@@ -22,7 +22,7 @@ import zenoh
 from fleet.mission.tracking004 import RouteQuery, TrackingParams, route
 from fleet.planning.reservations import INF, Interval
 from fleet.planning.rules004 import Direction, Task
-from fleet.runtime.bus import Requester, asked, received, wait_alive
+from fleet.runtime.bus import Requester, asked, received
 from fleet.runtime.lifecycle import Stopped
 from fleet.wire.protocol import (
     CellReply,
@@ -35,7 +35,7 @@ from fleet.wire.protocol import (
 )
 from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.floor004 import Floor004
-from reservation.client import ReservationClient
+from reservation.client import ReservationClient, wait_for_service
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.agent")
@@ -58,9 +58,7 @@ class LiftingAgent:
 
     def run(self, service_timeout_s: float = 60.0, exit_when_done: bool = False) -> None:
         """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
-        if not wait_alive(self.session, self.keys.reservation_alive, service_timeout_s):
-            raise RuntimeError(f"no reservation service on {self.keys.root} within "
-                               f"{service_timeout_s:g} s")
+        wait_for_service(self.session, self.keys, service_timeout_s)
         with ExitStack() as scope:
             scope.enter_context(self.reservations.follow(self.mirror))
             session, keys, put = self.session, self.keys, self.inbox.put
