@@ -201,6 +201,6 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                      "%.2f s)", speed, timing["late"], timing["instants"],
                      timing["worst_late_s"])
             return dataclasses.replace(done, timing=timing)
-        except (ParticipantLost, Stuck, UserError, ValueError) as exc:
+        except (ParticipantLost, RequestFailed, Stuck, UserError, ValueError) as exc:
             log.error("mission failed: %s", exc)
             return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)

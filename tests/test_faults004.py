@@ -110,3 +110,21 @@ def test_fleet_run_refuses_a_scenario_of_another_kind_before_starting(tmp_path, 
     listed = capsys.readouterr().out.split("shipped scenarios")[1]
     assert "mixed" in listed and "kill_vehicle" not in listed
 
+
+
+def test_waiting_out_a_fault_longer_than_the_watchdog_is_no_wedge():
+    """A breakdown and a closed zone each longer than the watchdog's 300 s: the AGVs that
+    wait them out are not named stuck, and the mission ends; one after the work is done
+    strikes nothing."""
+    column = SMALL.grid.aisle_columns[1]
+    cells = tuple(layout_cell((column, y)) for y in range(SMALL.grid.aisle_rows[0] + 1,
+                                                          SMALL.grid.aisle_rows[2]))
+    faults = (Fault(FaultKind.VEHICLE_BREAKDOWN, 30.5, vehicle=2, duration=400.0),
+              Fault(FaultKind.CLOSE_ZONE, 30.0, duration=400.0, cells=cells),
+              Fault(FaultKind.VEHICLE_BREAKDOWN, 5000.0, vehicle=3, duration=10.0))
+    _, result = run(faults)
+    assert len(result.picked) == 16
+    struck = [e for e in result.events if isinstance(e, BrokeDown)]
+    assert [e.vehicle for e in struck] == [2]  # the one at t=5000 came after the work
+    assert fault_breaches(list(result.events)) == []
+    assert judge(SMALL, result.events, starts(6)).passed

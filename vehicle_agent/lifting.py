@@ -22,7 +22,7 @@ import zenoh
 from fleet.mission.tracking004 import RouteQuery, TrackingParams, route
 from fleet.planning.reservations import INF, Interval
 from fleet.planning.rules004 import Direction, Task
-from fleet.runtime.bus import Requester, asked, received
+from fleet.runtime.bus import Requester, RequestFailed, asked, received
 from fleet.runtime.lifecycle import Stopped
 from fleet.wire.protocol import (
     CellReply,
@@ -54,7 +54,8 @@ class LiftingAgent:
                                               lambda: self.now)
         self.inbox: queue.Queue[zenoh.Query | zenoh.Sample] = queue.Queue()
         self.seq = 0
-        self.last: tuple[str, Message] | None = None  # a repeated request is answered again
+        # The last request and its answer: the same request again is answered again.
+        self.last: tuple[CellRequest | RouteRequest, Message] | None = None
 
     def run(self, service_timeout_s: float = 60.0, exit_when_done: bool = False) -> None:
         """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
@@ -91,18 +92,18 @@ class LiftingAgent:
                 query.reply_err(f"a request for AGV {message.vehicle} sent to AGV "
                                 f"{self.vehicle}".encode())
                 return
-            if self.last is not None and self.last[0] == message.request_id:
+            if self.last is not None and self.last[0] == message:
                 answer = self.last[1]
             else:
                 self.now = message.t
                 try:
                     answer = self._cell(message) if isinstance(message, CellRequest) else \
                         self._route(message)
-                except ValueError as exc:  # a cell off the floor, a rule table's refusal
+                except (ValueError, RequestFailed) as exc:  # a cell off the floor; no service
                     log.warning("refused %s %s: %s", message.TYPE, message.request_id, exc)
                     query.reply_err(f"refused: {exc}".encode())
                     return
-                self.last = (message.request_id, answer)
+                self.last = (message, answer)
             self.seq += 1
             query.reply(query.key_expr, encode(answer, self.sender, self.seq, message.t))
         finally:

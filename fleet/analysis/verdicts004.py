@@ -20,6 +20,7 @@ from fleet.analysis.traffic004 import (
     yielding_breaches,
 )
 from fleet.mission.tracking004 import (
+    STEPPED_ASIDE,
     Conflict,
     Event,
     LegDone,
@@ -104,7 +105,7 @@ def unearned(events: list[Event], n_relax: int) -> list[Breach]:
     earned: set[int] = set()
     out = []
     for e in events:
-        if isinstance(e, Replanned):
+        if isinstance(e, Replanned) and e.why != STEPPED_ASIDE:  # (a step aside plans nothing)
             fails[e.vehicle] = 0 if e.found else fails[e.vehicle] + 1
             if fails[e.vehicle] >= n_relax:
                 earned.add(e.vehicle)

@@ -197,6 +197,9 @@ class Mission004:
             if isinstance(m, LegDone) and m.leg.task is Task.RETURN:
                 shelves_home = m.t
             self._dispatch()
+            if len(self._picked) == len(self.orders) and all(
+                    a.leg is None for a in self.tracker.agvs.values()):
+                break  # the work is done: a fault still to come strikes nothing
         left = len(self.orders) - len(self._picked)
         if left:
             stranded = sorted(v for v, a in self._agvs.items() if a.needs_pile)

@@ -478,6 +478,8 @@ class Tracker:
             agv = self.agvs[vehicle]
             agv.down_until = 0.0
             agv.standing_since = until  # it stood for a reason: stagnant only from now on
+            agv.trouble_since = None  # nor was it in trouble
+            self._fault_over()
             repaired = Repaired(until, vehicle, agv.moving_to or agv.cell)
             self._log(repaired)
             self._wake(vehicle, until)
@@ -495,10 +497,36 @@ class Tracker:
             self._at(t1, lambda: self._reopen(free))
         self._at(t0, close)
 
+    def _held_by_fault(self, vehicle: int, xy: XY | None) -> bool:
+        """Whether `xy` is held by a closed zone or a broken-down AGV that will be repaired,
+        or by an AGV waiting, in a chain, for one: that is waiting out a fault, which the
+        watchdog does not count."""
+        seen = {vehicle}
+        while xy is not None:
+            holder = self._holder(vehicle, xy)
+            if holder == ZONE:
+                return True
+            if holder is None or holder in seen:
+                return False
+            other = self.agvs[holder]
+            if self.t < other.down_until < INF:
+                return True
+            seen.add(holder)
+            vehicle, xy = holder, other.waiting_on
+        return False
+
     def is_down(self, vehicle: int) -> bool:
         return self.agvs[vehicle].down_until > self.t
 
+    def _fault_over(self) -> None:
+        """A fault ended: who was waiting (maybe for it, in a chain) has the watchdog's
+        whole time again from now."""
+        for agv in self.agvs.values():
+            if agv.trouble_since is not None:
+                agv.trouble_since = self.t
+
     def _reopen(self, xys: list[XY]) -> None:
+        self._fault_over()
         for xy in xys:
             for v in sorted(self._waiters.pop(xy, ())):
                 self._wake(v, self.t)
@@ -596,7 +624,8 @@ class Tracker:
             return None  # driving, turning or pausing: that ends with its own event
         if agv.down_until > t:
             return None  # broken down: its repair wakes it
-        if agv.trouble_since is not None and t - agv.trouble_since > p.watchdog_s:
+        if agv.trouble_since is not None and t - agv.trouble_since > p.watchdog_s and \
+                not self._held_by_fault(agv.vehicle, agv.waiting_on):
             raise Stuck(f"at t={t:.2f} AGV {agv.vehicle} at {agv.cell} has stood "
                         f"{t - agv.trouble_since:.0f} s " + (
                             f"waiting for {agv.waiting_on}, held by AGV "
