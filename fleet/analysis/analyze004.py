@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from fleet.analysis.traffic004 import Breach
 from fleet.analysis.verdicts004 import Verdict004, judge
 from fleet.errors import UserError
 from fleet.mission.record004 import NotAnEvent, event_from_wire
@@ -39,17 +40,7 @@ class ShelfSlip:
     why: str
 
 
-@dataclass(frozen=True)
-class FaultBreach:
-    """Something done that a fault forbade: moving while broken down, entering a closed
-    cell while it was closed."""
-
-    t: float
-    vehicle: int
-    what: str
-
-
-def fault_breaches(events: list[Event]) -> list[FaultBreach]:
+def fault_breaches(events: list[Event]) -> list[Breach]:
     """From the recorded faults and moves alone: a broken-down AGV begins nothing (a move,
     turn or pause) until it is repaired; no move enters a closed cell while it is closed."""
     down = [e for e in events if isinstance(e, BrokeDown)]
@@ -59,13 +50,13 @@ def fault_breaches(events: list[Event]) -> list[FaultBreach]:
         if isinstance(e, Moved | Turned | Paused):
             for b in down:
                 if b.vehicle == e.vehicle and b.t <= e.t0 < b.until:
-                    out.append(FaultBreach(e.t0, e.vehicle, f"{type(e).__name__.lower()} at "
+                    out.append(Breach(e.vehicle, e.t0, f"{type(e).__name__.lower()} at "
                                            f"t={e.t0} while broken down from t={b.t} to "
                                            f"t={b.until}"))
         if isinstance(e, Moved):
             for z in zones:
                 if e.to in z.cells and e.t0 < z.t1 and z.t0 < e.t1:
-                    out.append(FaultBreach(e.t0, e.vehicle, f"entered {e.to} at t={e.t0}, "
+                    out.append(Breach(e.vehicle, e.t0, f"entered {e.to} at t={e.t0}, "
                                            f"closed from t={z.t0} to t={z.t1}"))
     return out
 
@@ -88,7 +79,7 @@ class Report004:
     finished: bool = False  # the dispatcher's result is recorded and says done
     heat_w: float = 0.0  # the heat cost's weight the AGVs planned with (0: off)
     faults: int = 0  # breakdowns and zones closed
-    fault_breaches: list[FaultBreach] = field(default_factory=list)
+    fault_breaches: list[Breach] = field(default_factory=list)
 
     # What `fleet runs` keeps of a judged run (fleet/commands/runs.py, summary_of), as seed
     # 000's report has it.
