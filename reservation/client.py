@@ -102,6 +102,12 @@ class ReservationClient:
         mirror.load(self._ask(SnapshotRequest(mirror.revision if mirror.synced else -1),
                               WireSnapshot))
 
+    def load_after(self, mirror: TableMirror, t: float) -> None:
+        """Make the copy the table as a plan made at `t` reads it: the reservations that hold
+        after `t`, one query whose answer stays small however long the run (a copy that
+        catches up only to plan would otherwise read every change since its last plan)."""
+        mirror.load(self._ask(SnapshotRequest(held_after=t), WireSnapshot))
+
     def _ask(self, request: Message, expected: type[Answer]) -> Answer:
         """The service's answer, of the type a request of this kind gets (RequestFailed if
         none comes, or another kind does)."""

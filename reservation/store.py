@@ -74,7 +74,7 @@ class ReservationStore:
                 Change(revision, message.vehicle, message.from_t, (),
                        None if cells is None else frozenset(cells), op="release"))
         if isinstance(message, SnapshotRequest):
-            return Outcome(self.snapshot(message.since_revision))
+            return Outcome(self.snapshot(message.since_revision, message.held_after))
         return Outcome(Reply("", False, self.revision,
                              reason=f"{message.TYPE} is not a request the store answers"))
 
@@ -168,12 +168,13 @@ class ReservationStore:
         if len(self.replies) > REMEMBERED_REQUESTS:
             del self.replies[next(iter(self.replies))]
 
-    def snapshot(self, since: int = -1) -> WireSnapshot:
+    def snapshot(self, since: int = -1, held_after: float | None = None) -> WireSnapshot:
         if 0 <= since <= self.revision:  # the log holds every change since revision 0
             return WireSnapshot(self.revision, [], [body_of(c) for c in self.log[since:]],
                                 diff=True)
-        rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1)
-                for r in self.table.reservations()]
+        held = self.table.reservations() if held_after is None else \
+            self.table.reservations_after(held_after)
+        rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1) for r in held]
         snap = self.table.snapshot()
         return WireSnapshot(self.revision, rows,
                             routes=[(v, route_to_wire(r)) for v, r in snap.routes])

@@ -72,6 +72,27 @@ def test_snapshot_and_diff_let_a_mirror_follow(tmp_path):
         (r.vehicle, *r.cell, r.t0, r.t1) for r in store.table.reservations())
 
 
+def test_a_snapshot_after_an_instant_holds_only_what_holds_then():
+    store = ReservationStore()
+    store.handle(commit("a", 1, [(0, 0), (0, 1)], t0=0.0, t1=INF))
+    store.handle(ReleaseRequest("b", 1, 4.0, [(0, 0)]))  # (0, 0) held [0, 4): past at 5
+    store.handle(commit("c", 2, [(2, 2)], t0=1.0, t1=5.0))  # ends at 5: past at 5, not at 4.5
+    store.handle(commit("d", 2, [(2, 2)], t0=8.0, t1=9.0))  # still to come at 5
+    at5 = store.handle(SnapshotRequest(held_after=5.0)).reply
+    assert at5.revision == store.revision and not at5.diff
+    assert at5.reservations == [(1, 0, 1, 0.0, INF), (2, 2, 2, 8.0, 9.0)]
+    at45 = store.handle(SnapshotRequest(held_after=4.5)).reply.reservations
+    assert at45 == [(1, 0, 1, 0.0, INF), (2, 2, 2, 1.0, 5.0), (2, 2, 2, 8.0, 9.0)]
+    # what a plan at 5 reads is the same in the small table as in the whole one
+    small = ReservationTable()
+    for vehicle, col, row, t0, t1 in at5.reservations:
+        small.commit(vehicle, intervals_from_wire([(col, row, t0, t1)]))
+    for cell in [(0, 0), (0, 1), (2, 2), (3, 3)]:
+        for t in (5.0, 8.5, 100.0):
+            assert small.conflict(7, cell, t, t + 0.5) == store.table.conflict(
+                7, cell, t, t + 0.5)
+
+
 def test_restart_from_the_journal_gives_the_same_table(tmp_path):
     path = tmp_path / "journal.msgpack"
     store = ReservationStore(path)

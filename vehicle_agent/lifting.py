@@ -1,11 +1,16 @@
 """A seed-004 lifting AGV's agent: one AGV, its own OS process, talking only over zenoh.
 
-It keeps a mirror of the reservation service's table and answers the tracker's requests on
-fleet/<run>/vehicle/<id>/task (dispatcher/remote004.py): take the next cell from the store
-before entering it (one commit of [t, forever), which the store refuses while another AGV
-holds the cell: the race-free form of the seed's "enter when the cell's value allows"), let
-the cell behind go, and plan the leg's path with the improved A* on the grid values derived
-from its mirror (fleet/mission/tracking004.py, `route`).
+It answers the tracker's requests on fleet/<run>/vehicle/<id>/task (dispatcher/remote004.py):
+take the next cell from the store before entering it (one commit of [t, forever), which the
+store refuses while another AGV holds the cell: the race-free form of the seed's "enter when
+the cell's value allows"), let the cell behind go, and plan the leg's path with the improved
+A* on the grid values derived from its copy of the store's table (fleet/mission/tracking004.py,
+`route`).
+
+The copy is read from the service when a plan needs it (the reservations that hold from the
+plan's instant on, one query), not kept by following every change: a hundred AGVs each
+decoding every take and let-go of the fleet cost more than the fleet's driving
+(docs/benchmarks.md, runtime004).
 
 Zenoh callbacks only enqueue; one worker thread answers, in arrival order.
 """
@@ -39,7 +44,6 @@ from reservation.client import ReservationClient, wait_for_service
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.agent")
-SYNC_TIMEOUT_S = 10.0
 
 
 class LiftingAgent:
@@ -61,7 +65,6 @@ class LiftingAgent:
         """Serve until stopped, or (`exit_when_done`) until the mission's result is out."""
         wait_for_service(self.session, self.keys, service_timeout_s)
         with ExitStack() as scope:
-            scope.enter_context(self.reservations.follow(self.mirror))
             session, keys, put = self.session, self.keys, self.inbox.put
             scope.enter_context(session.declare_queryable(keys.vehicle_task(self.vehicle), put))
             scope.enter_context(session.declare_subscriber(keys.dispatch_done, put))
@@ -75,8 +78,6 @@ class LiftingAgent:
                 elif exit_when_done and received(item, MissionDone, log) is not None:
                     log.info("AGV %d: the mission is over", self.vehicle)
                     return
-                if self.mirror.needs_resync:
-                    self.reservations.resync(self.mirror)
 
     def stop(self) -> None:
         """Stop now, from a signal handler: a commit is one request the service applies
@@ -126,14 +127,15 @@ class LiftingAgent:
 
     def _route(self, request: RouteRequest) -> RouteReply:
         self._on_floor(request.start, request.goal, request.home, *request.blocked)
-        if not self.mirror.wait_for(request.revision, SYNC_TIMEOUT_S):
-            self.reservations.resync(self.mirror)
+        self.reservations.load_after(self.mirror, request.t)
+        if self.mirror.revision < request.revision:  # the service is never behind its asker
+            raise RequestFailed(f"the reservation service answered with revision "
+                                f"{self.mirror.revision}, older than {request.revision}")
         query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
                            request.goal, Direction(request.heading), request.home,
                            request.relaxed, frozenset(request.blocked),
                            frozenset(request.moving), frozenset(request.stagnant))
         started = time.perf_counter()
-        with self.mirror.frozen() as table:
-            cells = route(self.floor, table, query, self.params.costs, self.params.heap)
+        cells = route(self.floor, self.mirror.table, query, self.params.costs, self.params.heap)
         spent = time.perf_counter() - started
         return RouteReply(request.request_id, cells is not None, list(cells or ()), spent)

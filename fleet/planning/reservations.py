@@ -234,6 +234,20 @@ class ReservationTable:
                     out.append(Reservation(owner, cell, t0, t1))
         return out
 
+    def reservations_after(self, t: float) -> list[Reservation]:
+        """The reservations that hold after `t` (end later), sorted by cell then time: the
+        table as a plan made at `t` reads it, without the past."""
+        out = []
+        for vehicle, cells in self._cells_of.items():
+            for cell, last_end in cells.items():
+                if last_end <= t:
+                    continue  # the vehicle's holds on this cell are all past
+                line = self._cells[cell]
+                out += [Reservation(owner, cell, t0, t1) for t0, t1, owner
+                        in zip(line.starts, line.ends, line.owners, strict=True)
+                        if owner == vehicle and t1 > t]
+        return sorted(out, key=lambda r: (r.cell, r.t0))
+
     def vehicles(self) -> list[int]:
         return sorted(v for v, cells in self._cells_of.items() if cells)
 

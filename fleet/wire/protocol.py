@@ -135,6 +135,9 @@ class Reply(Message):
 class SnapshotRequest(Message):
     TYPE: ClassVar[str] = "reservation.snapshot_request"
     since_revision: int = -1  # -1: the whole table; otherwise the changes after it
+    # With since_revision -1: only the reservations that hold after this instant (what a plan
+    # made then reads), a table whose size does not grow with the run's past.
+    held_after: float | None = None
 
 
 @dataclass(frozen=True)
