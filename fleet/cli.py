@@ -22,6 +22,7 @@ from fleet.commands import (
     runs,
     service,
     train,
+    vda5050,
 )
 from fleet.errors import UserError
 from fleet.runtime import lifecycle
@@ -42,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fleet {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands")
     for module in (run, runs, analyze, plot, compare, faults, plan, layout, train, bench,
-                   processes, service, compose):
+                   processes, service, compose, vda5050):
         module.register(sub)
     helper = sub.add_parser("help", help="say what a command does and its options (as "
                             "COMMAND --help)",

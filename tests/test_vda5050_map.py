@@ -1,0 +1,71 @@
+"""`fleet vda5050 map`: a forklift layout's nodes and edges for a VDA 5050 master."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from fleet.cli import main
+from fleet.world.layout_file import load_layout
+from vda5050.map import vda_map
+
+
+@pytest.mark.parametrize("name", ["small", "paper"])
+def test_every_node_is_a_pose_a_forklift_works_at_on_the_empty_floor(name):
+    layout = load_layout(name)
+    found = vda_map(layout)
+    nodes = {n["nodeId"]: n for n in found["nodes"]}
+    assert found["mapId"] == name and len(nodes) == len(found["nodes"])  # ids unique
+    parks = [n for n in found["nodes"] if n["place"] == "park"]
+    assert [n["pose"] for n in parks] == [str(p) for p in layout.vehicle_starts]
+    docks = {n["of"]: n["pose"] for n in found["nodes"] if n["place"] == "station"}
+    assert docks == {s.name: str(s.dock) for s in layout.stations}
+    free = layout.grid_map()
+    kind = layout.vehicle_kind
+    stacks = {(s.cluster, s.index): s.cell for s in layout.stacks}
+    for node in found["nodes"]:
+        if node["place"] != "stack":
+            continue
+        cluster, index, side = node["nodeId"].removeprefix("stack-").rsplit("-", 2)
+        pose = next(p for p in kind.handling_poses(stacks[cluster, int(index)])
+                    if str(p) == node["pose"])
+        assert "ENWS"[pose.heading] == side
+        assert free.all_free(kind.body_cells_at_rest(pose))
+    # every stack can be worked from some node
+    assert {n["of"] for n in found["nodes"] if n["place"] == "stack"} == {
+        f"{c}-{i}" for c, i in stacks}
+
+
+def test_positions_are_metres_and_radians_in_the_layout_frame():
+    layout = load_layout("small")
+    for node in vda_map(layout)["nodes"]:
+        col, row, heading = node["pose"].split(",")
+        at = node["nodePosition"]
+        assert at["mapId"] == "small"
+        # the forklift's reference point at rest is its cell's centre
+        assert (at["x"], at["y"]) == pytest.approx(layout.cell_center((int(col), int(row))))
+        assert at["theta"] == pytest.approx(math.remainder(
+            "ENWS".index(heading) * math.pi / 2, math.tau), abs=1e-6)
+
+
+def test_edges_join_the_work_places_both_ways_and_name_known_nodes():
+    found = vda_map(load_layout("small"))
+    ids = {n["nodeId"] for n in found["nodes"]}
+    ways = {(e["startNodeId"], e["endNodeId"]) for e in found["edges"]}
+    assert len(ways) == len(found["edges"]) == len({e["edgeId"] for e in found["edges"]})
+    assert all(a in ids and b in ids and (b, a) in ways for a, b in ways)
+    assert ("station-1", "stack-a-1-S") in ways or any(
+        a.startswith("station-") and b.startswith("stack-") for a, b in ways)
+    assert not any(a.startswith("stack-") and b.startswith("stack-") for a, b in ways)
+
+
+def test_the_command_writes_the_map_and_refuses_what_it_cannot(tmp_path, capsys):
+    out = tmp_path / "small.json"
+    assert main(["vda5050", "map", "small", "--out", str(out)]) == 0
+    assert json.loads(out.read_text()) == vda_map(load_layout("small"))
+    assert "70 nodes" in capsys.readouterr().out
+    assert main(["vda5050", "map", "paper002"]) == 2
+    err = capsys.readouterr().err
+    assert "paper002 is not a forklift layout" in err and "Traceback" not in err

@@ -1,0 +1,100 @@
+"""The map a VDA 5050 master builds orders on: a forklift layout's places as nodes with stable
+ids and poses, and the drives between them as edges (`fleet vda5050 map LAYOUT`).
+
+Nodes are the poses a forklift stands at to work, in the layout's own terms:
+
+- `park-N`: the N-th start pose (where a fleet of N or more forklifts parks);
+- `station-NAME`: the station's dock, the pose that works it;
+- `stack-CLUSTER-INDEX-H`: a pose whose forks point at that stack from side H (E N W S),
+  one node for each side a forklift can stand on with its whole body on the empty floor.
+
+Positions are the forklift's reference point at rest in the layout's metres (its origin is
+the centre of cell (0, 0)), theta in radians from +x, counter-clockwise, as the Foxglove views
+draw it. Edges join every park and station node to every stack node and every park to every
+station, both ways: the drives a warehouse's work is made of. A forklift navigates freely
+(it plans each edge itself against the reservation store), so the edges say what the work
+drives, not the only way between two nodes.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from fleet.errors import UserError
+from fleet.planning.maneuvers import HEADINGS
+from fleet.planning.trajectory import Pose
+from fleet.world.layout import Layout
+
+PARK, STATION, STACK = "park", "station", "stack"
+
+
+@dataclass(frozen=True)
+class Node:
+    node_id: str
+    place: str  # park, station or stack
+    pose: Pose
+    x: float
+    y: float
+    theta: float
+    of: str  # what it works: the station's name, the stack's cluster-index, or ""
+
+
+def nodes(layout: Layout) -> list[Node]:
+    """The layout's nodes, parks first, then stations, then stacks in fill order."""
+    if layout.has_lanes or layout.floor is not None:
+        raise UserError(f"layout {layout.name} is not a forklift layout: its VDA 5050 map "
+                        f"is not built yet (docs/vda5050.md)")
+    kind, (ox, oy) = layout.vehicle_kind, layout.origin
+
+    def node(node_id: str, place: str, pose: Pose, of: str = "") -> Node:
+        at = kind.at_rest(pose)  # in the frame of cell (0, 0): moved to the layout's, as the
+        # vehicles' states are (fleet/mission/driving.py)
+        return Node(node_id, place, pose, round(at.x + ox, 6), round(at.y + oy, 6),
+                    round(math.remainder(at.theta, math.tau), 6), of)
+
+    out = [node(f"park-{i}", PARK, pose) for i, pose in enumerate(layout.vehicle_starts, 1)]
+    out += [node(f"station-{s.name}", STATION, s.dock, s.name) for s in layout.stations]
+    for stack in layout.stacks:
+        of = f"{stack.cluster}-{stack.index}"
+        out += [node(f"stack-{of}-{HEADINGS[pose.heading]}", STACK, pose, of)
+                for pose in layout.unload_poses(stack.cell)]
+    return out
+
+
+def edges(found: list[Node]) -> list[tuple[str, str]]:
+    """(start node, end node) of each edge, both ways of each pair."""
+    by_place = {place: [n.node_id for n in found if n.place == place]
+                for place in (PARK, STATION, STACK)}
+    pairs = itertools.chain(itertools.product(by_place[PARK] + by_place[STATION],
+                                              by_place[STACK]),
+                            itertools.product(by_place[PARK], by_place[STATION]))
+    return [way for a, b in pairs for way in ((a, b), (b, a))]
+
+
+def edge_id(start: str, end: str) -> str:
+    return f"{start}>{end}"
+
+
+def node_position(node: Node, map_id: str) -> dict[str, Any]:
+    """The node's `nodePosition` as an order carries it (VDA 5050 2.0.0, 6.6)."""
+    return {"x": node.x, "y": node.y, "theta": node.theta, "mapId": map_id,
+            "allowedDeviationXY": 0.0, "allowedDeviationTheta": 0.0}
+
+
+def vda_map(layout: Layout) -> dict[str, Any]:
+    """The map as JSON-ready data: `mapId` the layout's name, its nodes and edges."""
+    found = nodes(layout)
+    return {
+        "mapId": layout.name,
+        "description": "Nodes are the poses forklifts work at; positions in metres and "
+                       "radians in the layout's frame (origin at the centre of cell (0, 0)). "
+                       "A forklift plans every edge itself: an order may join any two nodes.",
+        "cellSize": layout.cell_size,
+        "nodes": [{"nodeId": n.node_id, "place": n.place, "pose": str(n.pose), "of": n.of,
+                   "nodePosition": node_position(n, layout.name)} for n in found],
+        "edges": [{"edgeId": edge_id(a, b), "startNodeId": a, "endNodeId": b}
+                  for a, b in edges(found)],
+    }
