@@ -4,11 +4,15 @@ through it.
 
 The dispatcher keeps the mission and the tracker's events, as the engine does for seed 000;
 each AGV takes and lets go of its cells in the reservation service and plans its own paths,
-on request. Takes and plans go one at a time, in the events' fixed order, and the
-dispatcher waits for its mirror of the service to hold each change before the next event;
-a cell let go is let go in the background, and a take of that cell, a read of the table or
-a plan waits for it. So every take finds its cell as it would in process, and a run of
-processes gives the in-process events, move for move.
+on request, in the events' fixed order. Requests about one cell reach the store one after
+the other: each waits until the last one about that cell is answered and its change is in the
+dispatcher's mirror. Requests about different cells overlap: the store holds, for a cell
+whose requests are all answered, exactly what the mirror holds, so whether a take will be
+given is known before it is asked, and the tracker goes on while the AGVs' agents ask the
+store. Before the next instant every answer of this one is in; a store that refuses a take
+the mirror said it would give (someone outside the mission holds the cell) ends the mission,
+saying so. A plan waits for every answer. So every take finds its cell as it would in
+process, and a run of processes gives the in-process events, move for move.
 """
 
 from __future__ import annotations
@@ -29,7 +33,8 @@ from fleet.mission.faults import Fault
 from fleet.mission.record004 import Publish, run_mission004
 from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
-from fleet.planning.reservations import Interval, ReservationView
+from fleet.planning.geometry import Cell
+from fleet.planning.reservations import INF, Interval
 from fleet.planning.rules004 import XY
 from fleet.runtime.bus import Requester, RequestFailed
 from fleet.wire.protocol import (
@@ -48,6 +53,7 @@ from reservation.mirror import TableMirror
 log = logging.getLogger("fleet.dispatcher")
 REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
 SYNC_TIMEOUT_S = 30.0
+ASKING_AT_ONCE = 16  # requests in flight: more than a 2-core machine's processes can serve
 LATE_S = 0.3  # an instant handled this much wall time after it came is late
 Answer = TypeVar("Answer", CellReply, RouteReply)
 
@@ -59,53 +65,50 @@ class RemoteVehicles:
         self.reservations = reservations  # the dispatcher's own writes: closed zones
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
-        # Cells let go are let go in the background, in order, by a sender of their own
-        # (`settle` waits for them where it matters).
-        self.releaser = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
-        self.releasing = ThreadPoolExecutor(1, thread_name_prefix="releases")
-        self.pending: dict[XY, Future[None]] = {}  # the cells let go, not yet known done
-
-    @property
-    def view(self) -> ReservationView:
-        # The table itself: only this dispatcher's requests change it, and it waits for each
-        # change to arrive before it reads again.
-        self.settle()
-        return self.mirror.table
+        self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
+        self.pending: dict[XY, Future[None]] = {}  # the cells asked about, not yet answered
+        self.view = _SettledView(self)
 
     def take(self, vehicle: int, xy: XY, t: float) -> bool:
         self.settle(xy)  # the cell's last holder has let it go first, as in process
-        reply = self._ask(vehicle, CellRequest(self.requester.next_id(), vehicle, xy, t, True),
-                          CellReply, t)
-        if reply.ok:
-            self._sync(reply.revision)
-        return reply.ok
+        if self.mirror.table.conflict(vehicle, self.floor.cell(xy), t, INF) is not None:
+            return False  # the store holds what the mirror holds: it would refuse
+        self.pending[xy] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
+        return True
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
         """Let the cell go without waiting for it: what a decision depends on is whether a
-        cell is free when taken, so only a take of that cell, a read of the table and a plan
-        wait (`settle`), and each decision sees what it would see in process."""
-        self.pending[xy] = self.releasing.submit(self._let_go, vehicle, xy, t)
+        cell is free when taken, so only a take of that cell, a read of it and a plan wait
+        (`settle`), and each decision sees what it would see in process."""
+        self.settle(xy)  # its take is in first
+        self.pending[xy] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
 
-    def _let_go(self, vehicle: int, xy: XY, t: float) -> None:
-        request = CellRequest(self.releaser.next_id(), vehicle, xy, t, False)
-        reply = self._ask(vehicle, request, CellReply, t, self.releaser)
+    def _ask_cell(self, vehicle: int, xy: XY, t: float, take: bool) -> None:
+        request = CellRequest(self.requester.next_id(), vehicle, xy, t, take)
+        reply = self._ask(vehicle, request, CellReply, t)
         if not reply.ok:
-            raise ParticipantLost(f"AGV {vehicle} could not let {xy} go at t={t}: "
-                                  f"{reply.reason}")
+            what = "take" if take else "let go of"
+            raise ParticipantLost(f"AGV {vehicle} could not {what} {xy} at t={t}, which this "
+                                  f"dispatcher's copy of the store had "
+                                  f"{'free' if take else 'held by it'}: {reply.reason}")
         self._sync(reply.revision)
 
     def settle(self, xy: XY | None = None) -> None:
-        """Wait until the cell (None: every cell) let go is let go in the store and in this
-        mirror; an agent's failure to do so is raised here."""
+        """Wait until every request about the cell (None: every cell) is answered and its
+        change is in this mirror; a refusal or an agent's failure is raised here."""
         for cell in [xy] if xy is not None else list(self.pending):
             done = self.pending.pop(cell, None)
             if done is not None:
                 done.result()
 
+    def next_instant(self) -> None:
+        """Every answer of this instant in before the tracker moves on."""
+        self.settle()
+
     def close_down(self) -> None:
-        """Stop the background sender (a mission that ended well has settled it; one that
-        failed has said why already)."""
-        self.releasing.shutdown(wait=True, cancel_futures=True)
+        """Stop asking (a mission that ended well has settled everything; one that failed has
+        said why already)."""
+        self.asking.shutdown(wait=True, cancel_futures=True)
 
     def route(self, query: RouteQuery) -> Routed:
         self.settle()  # the plan is made on a table holding every change so far
@@ -126,10 +129,9 @@ class RemoteVehicles:
         self._sync(written.revision)
 
     def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
-             expected: type[Answer], t: float, requester: Requester | None = None) -> Answer:
+             expected: type[Answer], t: float) -> Answer:
         try:
-            reply = (requester or self.requester).request(self.keys.vehicle_task(vehicle),
-                                                          message, t).message
+            reply = self.requester.request(self.keys.vehicle_task(vehicle), message, t).message
         except RequestFailed as exc:
             gone = self.liveness.wait_gone(vehicle, 2.0)
             raise ParticipantLost(f"AGV {vehicle}{' is gone' if gone else ''}: "
@@ -143,6 +145,29 @@ class RemoteVehicles:
         if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):
             raise ParticipantLost(f"the reservation table did not reach revision {revision} "
                                   f"within {SYNC_TIMEOUT_S:g} s")
+
+
+class _SettledView:
+    """The store as the tracker reads it: a cell is read once every request about it is
+    answered and in the mirror (the tracker reads the cells it asks about, so the requests
+    about other cells stay in flight)."""
+
+    def __init__(self, fleet: RemoteVehicles) -> None:
+        self.fleet = fleet
+        self.xy_of = {fleet.floor.cell(xy): xy for xy in fleet.floor.kinds}
+
+    def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None:
+        self._settle(cell)
+        return self.fleet.mirror.table.conflict(vehicle, cell, t0, t1)
+
+    def parked_from(self, vehicle: int, cell: Cell) -> float:
+        self._settle(cell)
+        return self.fleet.mirror.table.parked_from(vehicle, cell)
+
+    def _settle(self, cell: Cell) -> None:
+        xy = self.xy_of.get(cell)
+        if xy is not None:  # a cell off the floor: nobody asks about it
+            self.fleet.settle(xy)
 
 
 class RealtimePace:
@@ -191,8 +216,14 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
             pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
             fleet = RemoteVehicles(session, keys, floor, mirror, liveness, reservations)
             scope.callback(fleet.close_down)
-            done = run_mission004(mission, floor, len(vehicles), fleet, publish, pace, tracking,
-                                  faults)
+
+            def next_instant(t: float) -> None:
+                fleet.next_instant()
+                if pace is not None:
+                    pace(t)
+
+            done = run_mission004(mission, floor, len(vehicles), fleet, publish, next_instant,
+                                  tracking, faults)
             fleet.settle()  # the last cells let go: the store ends as the fleet stands
             if pace is None:
                 return done

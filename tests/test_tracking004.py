@@ -295,3 +295,27 @@ def test_an_agv_that_can_never_move_on_is_named_by_the_watchdog():
     with pytest.raises(Stuck, match=r"AGV 1 at \(2, 6\) has stood 6\d s waiting for "
                                     r"\(2, 7\), held by AGV 2"):
         tracker.run()
+
+
+def test_a_cell_held_by_someone_outside_the_mission_is_a_closed_cell():
+    """A store that others write to too (a run without access control): a cell held by a
+    vehicle the mission does not know is driven round by an empty AGV, never taken."""
+    from fleet.mission.tracking004 import LocalVehicles
+    from fleet.planning.reservations import INF, Interval, ReservationTable
+
+    def fetch(table: ReservationTable) -> Tracker:
+        tracker = Tracker(MICRO, vehicles=LocalVehicles(MICRO, TrackingParams(), table))
+        tracker.place(1, (2, 7), Direction.UP)
+        tracker.assign(1, Leg(Task.FETCH, (2, 2)))
+        (done,) = tracker.run()
+        assert done.vehicle == 1 and tracker.agvs[1].cell == (2, 2)
+        return tracker
+
+    free_way = [e.to for e in fetch(ReservationTable()).events if isinstance(e, Moved)]
+    blocked, stranger = free_way[len(free_way) // 2], 999
+    table = ReservationTable()
+    table.commit(stranger, [Interval(MICRO.cell(blocked), 0.0, INF)])
+    tracker = fetch(table)
+    assert blocked not in {e.to for e in tracker.events if isinstance(e, Moved)}
+    assert any(isinstance(e, Replanned) for e in tracker.events)
+    assert table.conflict(1, MICRO.cell(blocked), 0.0, INF) == stranger

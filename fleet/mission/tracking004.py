@@ -23,9 +23,9 @@ holds it in the store moves or is stagnant (`grid_values`).
 
 What each AGV does for itself, taking and letting go of cells and planning its path, goes
 through one seam (`Vehicles`): `LocalVehicles` in this process against a `ReservationTable`,
-or each AGV's agent process against the reservation service (dispatcher/remote004.py). The
-tracker waits for every answer before the next event, so the requests of one instant reach
-the store in the events' fixed order and a run of processes is the in-process run.
+or each AGV's agent process against the reservation service (dispatcher/remote004.py), which
+orders the requests about each cell as the events do, so a run of processes is the
+in-process run.
 """
 
 from __future__ import annotations
@@ -506,8 +506,8 @@ class Tracker:
             holder = self._holder(vehicle, xy)
             if holder == ZONE:
                 return True
-            if holder is None or holder in seen:
-                return False
+            if holder is None or holder in seen or holder not in self.agvs:
+                return False  # free, a loop, or someone outside the mission: no fault
             other = self.agvs[holder]
             if self.t < other.down_until < INF:
                 return True
@@ -666,7 +666,9 @@ class Tracker:
             return None
         holder = self._holder(agv.vehicle, nxt)
         assert holder is not None, f"the store refused {nxt} and names no holder"
-        if holder == ZONE:  # closed: an empty AGV goes round, a loaded one waits
+        if holder == ZONE or holder not in self.agvs:
+            # closed, or held by someone outside the mission (a store others write to too):
+            # an empty AGV goes round, a loaded one waits
             if not agv.loaded and self._can_go_around(agv, nxt):
                 agv.blocked = frozenset({nxt})
                 self._replan(agv, "closed zone ahead")

@@ -148,19 +148,19 @@ class Requester:
         self.sender = sender
         self.timeout_s = timeout_s
         self.retry_s = retry_s
-        self.seq = 0  # of messages sent
-        self.ids = 0  # of request ids handed out
+        # next() is atomic: threads may share a requester, and an id handed out twice would
+        # get the store's answer to the other request (it answers a known id again)
+        self.seq = itertools.count(1)  # of messages sent
+        self.ids = itertools.count(1)  # of request ids handed out
         # Ids must not repeat across a restart of the sender: the store answers a known id
         # with its old reply (idempotent retries), and an agent a known task id likewise.
         self.incarnation = f"{time.time_ns():x}"
 
     def next_id(self) -> str:
-        self.ids += 1
-        return f"{self.sender}:{self.incarnation}:{self.ids}"
+        return f"{self.sender}:{self.incarnation}:{next(self.ids)}"
 
     def request(self, key: str, message: Message, sim_time: float = 0.0) -> Envelope:
-        self.seq += 1
-        payload = encode(message, self.sender, self.seq, sim_time)
+        payload = encode(message, self.sender, next(self.seq), sim_time)
         give_up = time.monotonic() + self.retry_s
         backoff = 0.1
         while True:
