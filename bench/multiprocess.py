@@ -11,15 +11,28 @@ import tempfile
 import time
 from collections.abc import Callable
 
+from fleet.errors import UserError
 
-def _wall(args: list[str]) -> tuple[float, str]:
-    # each run's recording, journal and logs go to a directory of its own, removed after
-    # (fleet run would otherwise keep them under runs/ in the current directory)
+
+def timed_run(args: list[str]) -> tuple[float, str]:
+    """`fleet run ARGS` as a fresh process: its wall time and what it printed. Its recording,
+    journal and logs go to a directory of its own, removed after (fleet run would otherwise
+    keep them under runs/ in the current directory). A run that fails stops the benchmark,
+    saying which and why."""
     with tempfile.TemporaryDirectory(prefix="fleet-bench-run-") as out_dir:
         start = time.perf_counter()
-        out = subprocess.run([sys.executable, "-m", "fleet", "run", *args, "--out", out_dir],
-                             capture_output=True, text=True, check=True).stdout
+        done = subprocess.run([sys.executable, "-m", "fleet", "run", *args, "--out", out_dir],
+                              capture_output=True, text=True)
         wall = time.perf_counter() - start  # not counting the removal of the directory
+    if done.returncode != 0:
+        said = "\n".join(done.stderr.strip().splitlines()[-5:]) or "(nothing on stderr)"
+        raise UserError(f"`fleet run {' '.join(args)}` failed (exit {done.returncode}):\n"
+                        f"{said}")
+    return wall, done.stdout
+
+
+def _wall(args: list[str]) -> tuple[float, str]:
+    wall, out = timed_run(args)
     digest = next(line.split()[-1] for line in out.splitlines() if "record digest" in line)
     return wall, digest
 

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import statistics
-import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -18,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bench.fleet_scale import _rss_mb
+from bench.multiprocess import timed_run
 from fleet.dispatching.decision import Strategy
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.runtime.local_run import RunSpec, run_processes
@@ -26,11 +25,8 @@ RSS_PERIOD_S = 2.0  # how often the agents' memory is sampled during the real-ti
 
 
 def _timed(args: list[str]) -> tuple[float, dict]:
-    with tempfile.TemporaryDirectory(prefix="fleet-bench-004-") as out_dir:
-        start = time.perf_counter()
-        out = subprocess.run([sys.executable, "-m", "fleet", "run", *args, "--json", "--out",
-                              out_dir], capture_output=True, text=True, check=True).stdout
-        return time.perf_counter() - start, json.loads(out)
+    wall, out = timed_run([*args, "--json"])
+    return wall, json.loads(out)
 
 
 def side_by_side(orders: int, vehicles: int, repeats: int,

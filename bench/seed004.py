@@ -4,6 +4,8 @@ docs/experiment-004.md), means over order seeds with identical orders in each co
 - `heat` (Table 5, E004-1): a history run with heat off on orders of seed s + 1000 counts the
   traffic (fleet/mission/heat004.py); its T_value is frozen; then seed s runs with heat off
   and on (w_heat 2);
+- `heat_weights`: the same with other weights of the heat cost (w_heat 1 and 4 beside the
+  seed's 2 by default), each against heat off: whether the seed's effect is a matter of weight;
 - `items` (Table 6, E004-2): a baseline without recall, turning cost or heap, and each item
   added alone; the heap changes only the time spent planning (the paths are the same), which
   is reported beside completion;
@@ -37,13 +39,15 @@ SEEDS = 10
 ORDERS = 500
 VEHICLES = 40
 FLEET_SIZES = (10, 20, 40, 60)
+HEAT_WEIGHTS = (1.0, 2.0, 4.0)
+SWEPT = ("completion_s", "head_on", "crossing", "replans", "path_length", "turns")
 ITEMS = ("baseline", "recall", "turn", "heap")
 
 
 @dataclass(frozen=True)
 class Job:
     experiment: str  # heat, items or sizes
-    variant: str  # heat: off / on; items: ITEMS; sizes: the fleet size
+    variant: str  # heat: off / on / w=W (another w_heat); items: ITEMS; sizes: the fleet size
     seed: int
     vehicles: int
     orders: int
@@ -82,9 +86,10 @@ def _config(job: Job, floor: Floor004) -> tuple[TrackingParams, WorkParams]:
             job.variant]
         return (TrackingParams(costs=Costs(turn=1.0 if "turn" in on else 0.0),
                                heap="heap" in on), WorkParams(recall="recall" in on))
-    if job.experiment == "heat" and job.variant == "on":
+    if job.experiment == "heat" and job.variant != "off":
         heat = history_heat(floor, job.vehicles, job.orders, job.seed)
-        return TrackingParams(costs=Costs(heat=W_HEAT, t_value=heat)), WorkParams()
+        weight = W_HEAT if job.variant == "on" else float(job.variant.removeprefix("w="))
+        return TrackingParams(costs=Costs(heat=weight, t_value=heat)), WorkParams()
     return TrackingParams(), WorkParams()
 
 
@@ -120,20 +125,28 @@ def judged_run(job: Job) -> Run | str:
                len(verdict.yield_breaches))
 
 
-def jobs(seeds: int, orders: int, vehicles: int, sizes: tuple[int, ...]) -> list[Job]:
-    out = [Job("heat", v, s, vehicles, orders) for s in range(seeds) for v in ("off", "on")]
+def heat_variant(weight: float) -> str:
+    return "on" if weight == W_HEAT else f"w={weight:g}"
+
+
+def jobs(seeds: int, orders: int, vehicles: int, sizes: tuple[int, ...],
+         weights: tuple[float, ...] = HEAT_WEIGHTS) -> list[Job]:
+    variants = dict.fromkeys(("off", "on", *map(heat_variant, weights)))
+    out = [Job("heat", v, s, vehicles, orders) for s in range(seeds) for v in variants]
     out += [Job("items", v, s, vehicles, orders) for s in range(seeds) for v in ITEMS]
     out += [Job("sizes", str(n), s, n, orders) for n in sizes for s in range(seeds)]
-    return sorted(out, key=lambda j: (j.variant != "on", j.vehicles))  # the longest first
+    return sorted(out, key=lambda j: (j.variant == "off" or j.experiment != "heat",
+                                      j.vehicles))  # the longest first
 
 
 def run(seeds: int = SEEDS, orders: int = ORDERS, vehicles: int = VEHICLES,
         sizes: tuple[int, ...] = FLEET_SIZES,
-        progress: Callable[[int, int], None] | None = None, workers: int | None = None) -> dict:
+        progress: Callable[[int, int], None] | None = None, workers: int | None = None,
+        weights: tuple[float, ...] = HEAT_WEIGHTS) -> dict:
     """Every experiment, its missions spread over `workers` processes (default: one a core);
     each mission is deterministic, so the result does not depend on how many (but for the
     measured planning time)."""
-    todo = jobs(seeds, orders, vehicles, sizes)
+    todo = jobs(seeds, orders, vehicles, sizes, weights)
     started = time.perf_counter()
     runs = run_all(todo, judged_run, progress, workers)
 
@@ -157,6 +170,14 @@ def run(seeds: int = SEEDS, orders: int = ORDERS, vehicles: int = VEHICLES,
                         if (variant, s) in by_seed and (base, s) in by_seed])
 
     heat = {v: mean_of("heat", v) for v in ("off", "on")}
+
+    def sweep(variant: str) -> dict:
+        """A weight's means and their change against heat off, seed for seed the same."""
+        on = mean_of("heat", variant)
+        return {**{k: on[k] for k in SWEPT},
+                "change": {k: _change(heat["off"][k], on[k]) for k in SWEPT},
+                "head_on_p": paired("heat", "off", variant, "head_on"),
+                "replans_p": paired("heat", "off", variant, "replans")}
     items = {v: mean_of("items", v) for v in ITEMS}
     result = {
         "floor": "paper004", "seeds": seeds, "orders": orders, "vehicles": vehicles,
@@ -174,6 +195,7 @@ def run(seeds: int = SEEDS, orders: int = ORDERS, vehicles: int = VEHICLES,
             "heap_planning": paired("items", "baseline", "heap", "planning_s"),
         },
         "turn_example": turn_example(paper004()),
+        "heat_weights": {f"{w:g}": sweep(heat_variant(w)) for w in weights},
         "fleet_sizes": {str(n): mean_of("sizes", str(n)) for n in sizes},
         "stuck": [r for r in runs.values() if isinstance(r, str)],
         "clashes": sum(r.clashes for r in judged),
@@ -296,6 +318,10 @@ def table(result: dict) -> str:
     for v in ("off", "on"):
         lines.append(f"{v:>9}" + "".join(f"{r['heat'][v][c]:>15.3g}" for c in cols))
     lines.append(f"{'change':>9}" + "".join(f"{r['heat_change'][c]:>15.1%}" for c in cols))
+    lines += ["", "the heat cost's weight: change against heat off",
+              f"{'w_heat':>9}" + "".join(f"{c:>15}" for c in SWEPT)]
+    for w, m in r["heat_weights"].items():
+        lines.append(f"{w:>9}" + "".join(f"{m['change'][c]:>15.1%}" for c in SWEPT))
     cols = ("completion_s", "path_length", "turns", "recalled", "planning_s")
     lines += ["", "Table 6: each optimisation item alone against the baseline",
               f"{'':>9}" + "".join(f"{c:>15}" for c in cols)]

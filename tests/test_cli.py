@@ -118,7 +118,8 @@ def test_bench_planner004_compares_heap_and_list_on_the_same_queries(capsys):
 
 def test_bench_seed004_sets_heat_items_turns_and_fleet_sizes_side_by_side(tmp_path, capsys):
     assert main(["bench", "seed004", "--seeds", "1", "--orders", "24", "--vehicles", "6",
-                 "--sizes", "3,6", "--jobs", "1", "--json", "--plots", str(tmp_path)]) == 0
+                 "--sizes", "3,6", "--heat-weights", "2,8", "--jobs", "1", "--json",
+                 "--plots", str(tmp_path)]) == 0
     out = capsys.readouterr()
     result = json.loads(out.out)
     assert f"wrote {tmp_path / 'heat.png'}" in out.err
@@ -133,8 +134,14 @@ def test_bench_seed004_sets_heat_items_turns_and_fleet_sizes_side_by_side(tmp_pa
     assert result["turn_example"]["length_off"] == result["turn_example"]["length_on"] == 26
     assert result["turn_example"]["turns_on"] < result["turn_example"]["turns_off"]
     assert set(result["fleet_sizes"]) == {"3", "6"}
+    # the seed's weight is Table 5's "on"; another weight is a run of its own against off
+    weights = result["heat_weights"]
+    assert set(weights) == {"2", "8"}
+    assert {k: weights["2"][k] for k in fields} == {k: result["heat"]["on"][k] for k in fields}
+    assert weights["8"]["change"]["turns"] == pytest.approx(
+        weights["8"]["turns"] / result["heat"]["off"]["turns"] - 1)
     assert result["clashes"] == result["bad_moves"] == result["rule_breaches"] == \
-        result["yield_breaches"] == 0 and result["runs"] == 8
+        result["yield_breaches"] == 0 and result["runs"] == 9
     assert all(isinstance(v, bool) for v in result["checks"].values())
 
 
@@ -161,6 +168,8 @@ def test_the_paired_sign_flip_test_is_exact():
 def test_bench_seed004_refuses_a_fleet_paper004_cannot_park(capsys):
     assert main(["bench", "seed004", "--vehicles", "500"]) == 2
     assert "paper004 parks 96 AGVs, not 500" in capsys.readouterr().err
+    assert main(["bench", "seed004", "--heat-weights", "1,-2"]) == 2
+    assert "'1,-2' must list positive numbers" in capsys.readouterr().err
 
 
 def parse_source(name: str) -> str:

@@ -20,6 +20,7 @@ from fleet.runtime.argtypes import (
     layout_arg,
     non_negative_int,
     positive_float,
+    positive_floats,
     positive_int,
     positive_ints,
     text_file,
@@ -107,6 +108,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                          help="AGVs in Tables 5 and 6 (default 40)")
     seed004.add_argument("--sizes", type=positive_ints, default=[10, 20, 40, 60],
                          metavar="N,N,...", help="fleet sizes compared (default 10,20,40,60)")
+    seed004.add_argument("--heat-weights", type=positive_floats, default=[1.0, 2.0, 4.0],
+                         metavar="W,W,...", help="w_heat values each run against heat off, "
+                         "beside Table 5's 2 (default 1,2,4)")
     seed004.add_argument("--jobs", type=positive_int, default=None, metavar="N",
                          help="missions run at once, each in a process of its own (default: "
                          "one a core); only the planning times depend on it")
@@ -363,7 +367,7 @@ def run_seed004(args: argparse.Namespace) -> int:
         bar.update(done)
 
     result = seed004.run(args.seeds, args.orders, args.vehicles, tuple(args.sizes), progress,
-                         args.jobs)
+                         args.jobs, tuple(args.heat_weights))
     bar.close()
     if not emitted_json(result, args.json):
         print(seed004.table(result))

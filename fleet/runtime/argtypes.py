@@ -95,6 +95,18 @@ def positive_ints(text: str) -> list[int]:
     return values
 
 
+def positive_floats(text: str) -> list[float]:
+    """Positive numbers, comma-separated: 1,2,4."""
+    values = []
+    for part in text.split(","):
+        try:
+            values.append(positive_float(part))
+        except argparse.ArgumentTypeError:
+            raise _refuse(text, "must list positive numbers, comma-separated, e.g. "
+                          "1,2,4") from None
+    return values
+
+
 def pose(text: str):
     """A pose 'col,row,H' (fleet.planning.trajectory.Pose)."""
     from fleet.planning.trajectory import Pose
