@@ -22,15 +22,17 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from fleet.planning.rules004 import (
+    ALL,
     STEP,
     XY,
     Direction,
     Grid004,
     Task,
-    allowed,
+    at_home,
     direction_code,
     perpendicular,
-    plannable,
+    planning_filter,
+    rules_for,
     value,
 )
 
@@ -132,31 +134,49 @@ def plan(grid: Grid004, task: Task, start: XY, goal: XY, heading: Direction | No
     order = itertools.count()
     g: dict[XY, float] = {start: 0.0}
     parent: dict[XY, XY] = {}
+    # whether each node was entered driving vertically (None: the start, heading unknown):
+    # a step is a quarter turn when it changes that (a reversal is none, `perpendicular`)
+    vertical: dict[XY, bool | None] = {
+        start: None if heading is None else heading in _VERTICAL}
     opened: dict[XY, int] = {start: next(order)}
     closed: set[XY] = set()
+    enterable: dict[XY, bool] = {goal: True}  # a cell's filter, read once a plan: values
+    # stand still while one plan is made
+    heat, turn = costs.heat, costs.turn
+    passable = planning_filter(task)
+    rules_at = None if relaxed and not task.loaded else rules_for(grid, task)
     open_list.push(start, (_h(start, goal), opened[start]))
     expansions = 0
     while (current := open_list.pop()) is not None:
         closed.add(current)
         expansions += 1
-        came = heading_of(parent[current], current) if current in parent else heading
-        rules = None if relaxed and not task.loaded else allowed(grid, task, current, home)
-        for d, (dx, dy) in STEP.items():
+        came = vertical[current]
+        rules = None if rules_at is None else \
+            ALL if at_home(grid, task, current, home) else rules_at[current]
+        for d, dx, dy, upright in _STEPS:
             n = (current[0] + dx, current[1] + dy)
             if n in closed or (rules is not None and d not in rules):
                 continue
-            if n != goal and not plannable(task, values(n)):
+            ok = enterable.get(n)
+            if ok is None:
+                ok = enterable[n] = values(n) in passable
+            if not ok:
                 continue
-            step = 1.0 + (costs.turn if came is not None and perpendicular(came, d) else 0.0)
-            step += costs.heat * costs.t_value.get(n, 0.0)
+            step = 1.0 + (turn if came is not None and came != upright else 0.0)
+            if heat:
+                step += heat * costs.t_value.get(n, 0.0)
             if n in g and g[current] + step >= g[n]:
                 continue
-            g[n], parent[n] = g[current] + step, current
+            g[n], parent[n], vertical[n] = g[current] + step, current, upright
             opened.setdefault(n, next(order))
             if n == goal:  # step 5: the goal has entered the open list
                 return Path(_trace(parent, start, goal), expansions)
             open_list.push(n, (g[n] + _h(n, goal), opened[n]))
     return None
+
+
+_VERTICAL = frozenset({Direction.UP, Direction.DOWN})
+_STEPS = tuple((d, dx, dy, d in _VERTICAL) for d, (dx, dy) in STEP.items())
 
 
 def _h(a: XY, b: XY) -> float:

@@ -10,6 +10,7 @@ states) gives the grid the seed's planner and tracker read.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum, IntEnum
@@ -116,7 +117,12 @@ def value(kind: Kind, occupancy: Occupancy = Occupancy.FREE) -> int:
 
 def plannable(task: Task, v: int) -> bool:
     """Whether the A* may expand into a cell of value v for this task (filters (3), (4))."""
-    return v in (LOADED_PLANNING if task.loaded else EMPTY_PLANNING)
+    return v in planning_filter(task)
+
+
+def planning_filter(task: Task) -> frozenset[int]:
+    """The values filter (3) or (4) lets the A* expand into for this task."""
+    return LOADED_PLANNING if task.loaded else EMPTY_PLANNING
 
 
 def row_rule(y: int) -> Direction:
@@ -137,6 +143,37 @@ def allowed(grid: Grid004, task: Task, xy: XY, home: XY | None = None) -> frozen
     """D_M(x, y): the directions an AGV on this task may leave `xy` in (Table 3 as the note
     reconstructs it, B.4.1). `home`: a loaded AGV's own slot, which it leaves or enters in
     any direction."""
+    if at_home(grid, task, xy, home):
+        return ALL
+    return rules_for(grid, task)[xy]
+
+
+def at_home(grid: Grid004, task: Task, xy: XY, home: XY | None) -> bool:
+    """Whether `xy` is the loaded AGV's own slot, left and entered in any direction."""
+    return home is not None and xy == home and task.loaded and 0 < xy[0] < grid.width - 1
+
+
+class _Rules(dict[XY, frozenset[Direction]]):
+    """One task's D_M on one grid, each cell's worked out when first asked."""
+
+    def __init__(self, grid: Grid004, task: Task) -> None:
+        super().__init__()
+        self.grid, self.task = grid, task
+
+    def __missing__(self, xy: XY) -> frozenset[Direction]:
+        rules = self[xy] = _allowed(self.grid, self.task, xy)
+        return rules
+
+
+@functools.cache
+def rules_for(grid: Grid004, task: Task) -> Mapping[XY, frozenset[Direction]]:
+    """`allowed` of every cell but a loaded AGV's own slot (`at_home`), kept: the planner
+    asks it of every cell it expands. It reads the grid's size and aisles only, which the
+    grid's hash and equality are made of."""
+    return _Rules(grid, task)
+
+
+def _allowed(grid: Grid004, task: Task, xy: XY) -> frozenset[Direction]:
     x, y = xy
     if x == 0:
         return frozenset({Direction.RIGHT})  # a pile column is only ever left, outward
@@ -147,8 +184,6 @@ def allowed(grid: Grid004, task: Task, xy: XY, home: XY | None = None) -> frozen
         horizontal = Direction.LEFT if x == 1 else Direction.RIGHT  # toward the piles
     if not task.loaded:
         return frozenset({horizontal, vertical})
-    if xy == home:
-        return ALL
     in_aisle_row = y in grid.aisle_rows
     in_aisle_column = x in grid.aisle_columns
     if y not in grid.shelf_rows or (in_aisle_row and in_aisle_column):
