@@ -7,6 +7,7 @@ import sys
 from collections import Counter
 from collections.abc import Sequence
 
+from fleet.commands.output import write_or_print
 from fleet.commands.progress import ProgressBar
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, positive_int, writable_file
@@ -252,14 +253,8 @@ def run_generate(args: argparse.Namespace) -> int:
         raise UserError(f"--aisles {args.aisles} --depth {args.depth} --lane-depth "
                         f"{args.lane_depth}: a map of {shape.cols} x {shape.rows} cells is "
                         f"more than a layout may have ({MAX_MAP_CELLS} cells)")
-    text = generate_toml(shape, args.name)
-    if args.out is None:
-        sys.stdout.write(text)
+    if not write_or_print(generate_toml(shape, args.name), args.out):
         return 0
-    try:
-        args.out.write_text(text)
-    except OSError as exc:  # a full disk, a device: say which file
-        raise UserError(f"--out {args.out}: {exc.strerror}") from None
     print(f"wrote {args.out}: {shape.cols} x {shape.rows} cells, "
           f"{4 * shape.aisles * shape.depth * shape.lane_depth} stacks, "
           f"{shape.vehicles} vehicles; check it with: fleet layout check {args.out}")

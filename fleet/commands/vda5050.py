@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
-from fleet.errors import UserError
+from fleet.commands.output import write_or_print
 from fleet.runtime.argtypes import layout_arg, writable_file
 from fleet.world.layout_file import load_layout
 
@@ -34,14 +33,8 @@ def run_map(args: argparse.Namespace) -> int:
     from vda5050.map import vda_map
 
     found = vda_map(load_layout(args.layout))
-    text = json.dumps(found, indent=1) + "\n"
-    if args.out is None:
-        sys.stdout.write(text)
+    if not write_or_print(json.dumps(found, indent=1) + "\n", args.out):
         return 0
-    try:
-        args.out.write_text(text)
-    except OSError as exc:  # a full disk, a device: say which file
-        raise UserError(f"--out {args.out}: {exc.strerror}") from None
     print(f"wrote {args.out}: map {found['mapId']}, {len(found['nodes'])} nodes, "
           f"{len(found['edges'])} edges")
     return 0
