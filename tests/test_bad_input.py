@@ -155,6 +155,10 @@ BAD = [
     ("train --out {DIR}", "argument --out: '{DIR}' is a directory; give a file name"),
     ("train --layout nosuch", "layout 'nosuch' is neither a built-in layout"),
     ("bench planner --queries 0", "argument --queries: '0' must be at least 1"),
+    ("bench seed004 --heat-weights 1,-2",
+     "argument --heat-weights: '1,-2' must list positive numbers, comma-separated"),
+    ("bench seed004 --heat-weights 2,many",
+     "argument --heat-weights: '2,many' must list positive numbers, comma-separated"),
     ("bench planner --layout small --queries 2", "layout small has 2 stations and 2 clusters; "
      "the planner benchmark needs at least 4 of each"),
     ("bench runtime --agents 3,2", "argument --agents: '3,2' must be in ascending order"),
