@@ -69,3 +69,49 @@ def test_the_command_writes_the_map_and_refuses_what_it_cannot(tmp_path, capsys)
     assert main(["vda5050", "map", "paper002"]) == 2
     err = capsys.readouterr().err
     assert "paper002 is not a forklift layout" in err and "Traceback" not in err
+
+
+def _order(layout: str) -> dict:
+    """A two-edge order on the layout's map: from the first park to a station to pick, then
+    to a stack to drop."""
+    nodes = {n["nodeId"]: n for n in vda_map(load_layout(layout))["nodes"]}
+    station = next(i for i in nodes if i.startswith("station-"))
+    stack = next(i for i in nodes if i.startswith("stack-"))
+    visits = [("park-1", []), (station, [{"actionType": "pick", "actionId": "a1",
+                                          "blockingType": "HARD"}]),
+              (stack, [{"actionType": "drop", "actionId": "a2", "blockingType": "HARD"}])]
+    return {
+        "headerId": 1, "timestamp": "2026-12-05T08:00:00.000Z", "version": "2.0.0",
+        "manufacturer": "fleet", "serialNumber": "forklift-1", "orderId": "o1",
+        "orderUpdateId": 0,
+        "nodes": [{"nodeId": i, "sequenceId": 2 * k, "released": True, "actions": actions,
+                   "nodePosition": nodes[i]["nodePosition"]}
+                  for k, (i, actions) in enumerate(visits)],
+        "edges": [{"edgeId": f"e{k}", "sequenceId": 2 * k + 1, "released": True,
+                   "startNodeId": visits[k][0], "endNodeId": visits[k + 1][0], "actions": []}
+                  for k in range(2)]}
+
+
+def test_check_puts_an_order_to_a_forklift_at_its_first_node(tmp_path, capsys):
+    path = tmp_path / "order.json"
+    path.write_text(json.dumps(_order("small")))
+    assert main(["vda5050", "check", "order", str(path), "--layout", "small"]) == 0
+    assert "accepts it: 2 edges released" in capsys.readouterr().out
+    unknown = _order("small")
+    unknown["nodes"][2]["nodeId"] = unknown["edges"][1]["endNodeId"] = "stack-nowhere"
+    path.write_text(json.dumps(unknown))
+    assert main(["vda5050", "check", "order", str(path), "--layout", "small"]) == 1
+    assert "rejects it: noRouteError: node stack-nowhere" in capsys.readouterr().out
+
+
+def test_check_names_what_is_wrong_with_a_message(tmp_path, capsys):
+    path = tmp_path / "order.json"
+    wrong = _order("small")
+    wrong["orderUpdateId"] = "zero"
+    path.write_text(json.dumps(wrong))
+    assert main(["vda5050", "check", "order", str(path)]) == 1
+    assert "at $.orderUpdateId: 'zero' is not of type 'integer'" in capsys.readouterr().out
+    path.write_text("{nodes: ")
+    assert main(["vda5050", "check", "order", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "not JSON" in err and "Traceback" not in err

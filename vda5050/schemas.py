@@ -28,10 +28,9 @@ from jsonschema.protocols import Validator
 from jsonschema.validators import validator_for
 
 from fleet.errors import UserError
+from vda5050 import TOPICS
 
 VERSION: Final = "2.0.0"
-# The topics in the order of the specification's chapter 6.
-TOPICS: Final = ("order", "instantActions", "state", "visualization", "connection", "factsheet")
 
 _RFC3339 = re.compile(r"\d{4}-\d\d-\d\d[Tt ]\d\d:\d\d:\d\d(\.\d+)?([Zz]|[+-]\d\d:\d\d)")
 _FORMATS = FormatChecker(formats=())

@@ -1,4 +1,4 @@
-"""`fleet vda5050 map`: the emulated fleet as VDA 5050 vehicles (docs/vda5050.md)."""
+"""`fleet vda5050 map|check`: the emulated fleet as VDA 5050 vehicles (docs/vda5050.md)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,10 @@ import argparse
 import json
 
 from fleet.commands.output import write_or_print
-from fleet.runtime.argtypes import layout_arg, writable_file
+from fleet.errors import UserError
+from fleet.runtime.argtypes import layout_arg, text_file, writable_file
 from fleet.world.layout_file import load_layout
+from vda5050 import TOPICS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +29,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     export.add_argument("--out", type=writable_file, metavar="FILE",
                         help="write here (default: print to stdout)")
     export.set_defaults(handler=run_map)
+    check = which.add_parser("check", help="check a VDA 5050 message against the official "
+                             "schema, and an order against a layout's map",
+                             description="Check a VDA 5050 2.0.0 message (a JSON file) against "
+                             "its topic's official schema, saying where it is wrong; with "
+                             "--layout, an order is also put to a forklift standing at its "
+                             "first node, which accepts it or rejects it with the error the "
+                             "spec names (unknown nodes, sequence ids, actions a forklift "
+                             "lacks, ...). Exit 1 if the message is invalid or rejected.")
+    check.add_argument("topic", choices=TOPICS, metavar="TOPIC",
+                       help=f"the message's topic: {', '.join(TOPICS)}")
+    check.add_argument("file", type=text_file, help="the message, a JSON file")
+    check.add_argument("--layout", type=layout_arg,
+                       help="for an order: the forklift layout whose map it is built on")
+    check.set_defaults(handler=run_check)
 
 
 def run_map(args: argparse.Namespace) -> int:
@@ -37,4 +53,38 @@ def run_map(args: argparse.Namespace) -> int:
         return 0
     print(f"wrote {args.out}: map {found['mapId']}, {len(found['nodes'])} nodes, "
           f"{len(found['edges'])} edges")
+    return 0
+
+
+def run_check(args: argparse.Namespace) -> int:
+    from vda5050.map import nodes
+    from vda5050.orders import OrderBook
+    from vda5050.schemas import InvalidMessage, validate
+
+    on_map = args.layout is not None and args.topic == "order"
+    known = {n.node_id: n for n in nodes(load_layout(args.layout))} if on_map else {}
+    try:
+        message = json.loads(args.file.read_text())
+    except json.JSONDecodeError as exc:
+        raise UserError(f"{args.file}: not JSON: {exc}") from None
+    if not isinstance(message, dict):
+        raise UserError(f"{args.file}: a VDA 5050 message is a JSON object, not "
+                        f"{type(message).__name__}")
+    try:
+        validate(args.topic, message)
+    except InvalidMessage as exc:
+        print(exc)
+        return 1
+    print(f"{args.file}: a valid {args.topic} message")
+    if not on_map:
+        return 0
+    first = min(message["nodes"], key=lambda n: n["sequenceId"])["nodeId"] \
+        if message["nodes"] else None
+    decision = OrderBook().receive(message, known, at=known.get(first or ""))
+    who = f"a forklift standing at {first}" if first else "a forklift"
+    if not decision.accepted:
+        error = decision.error or {}
+        print(f"{who} rejects it: {error.get('errorType')}: {error.get('errorDescription')}")
+        return 1
+    print(f"{who} accepts it: {len(decision.legs)} edges released to drive")
     return 0
