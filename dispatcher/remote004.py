@@ -66,22 +66,25 @@ class RemoteVehicles:
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
-        self.pending: dict[XY, Future[None]] = {}  # the cells asked about, not yet answered
+        # the store's cells asked about, not yet answered
+        self.pending: dict[Cell, Future[None]] = {}
         self.view = _SettledView(self)
 
     def take(self, vehicle: int, xy: XY, t: float) -> bool:
-        self.settle(xy)  # the cell's last holder has let it go first, as in process
-        if self.mirror.table.conflict(vehicle, self.floor.cell(xy), t, INF) is not None:
+        cell = self.floor.cell(xy)
+        self.settle(cell)  # the cell's last holder has let it go first, as in process
+        if self.mirror.table.conflict(vehicle, cell, t, INF) is not None:
             return False  # the store holds what the mirror holds: it would refuse
-        self.pending[xy] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
+        self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
         return True
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
         """Let the cell go without waiting for it: what a decision depends on is whether a
         cell is free when taken, so only a take of that cell, a read of it and a plan wait
         (`settle`), and each decision sees what it would see in process."""
-        self.settle(xy)  # its take is in first
-        self.pending[xy] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
+        cell = self.floor.cell(xy)
+        self.settle(cell)  # its take is in first
+        self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
 
     def _ask_cell(self, vehicle: int, xy: XY, t: float, take: bool) -> None:
         request = CellRequest(self.requester.next_id(), vehicle, xy, t, take)
@@ -93,11 +96,11 @@ class RemoteVehicles:
                                   f"{'free' if take else 'held by it'}: {reply.reason}")
         self._sync(reply.revision)
 
-    def settle(self, xy: XY | None = None) -> None:
-        """Wait until every request about the cell (None: every cell) is answered and its
-        change is in this mirror; a refusal or an agent's failure is raised here."""
-        for cell in [xy] if xy is not None else list(self.pending):
-            done = self.pending.pop(cell, None)
+    def settle(self, cell: Cell | None = None) -> None:
+        """Wait until every request about the store's cell (None: every cell) is answered
+        and its change is in this mirror; a refusal or an agent's failure is raised here."""
+        for asked in [cell] if cell is not None else list(self.pending):
+            done = self.pending.pop(asked, None)
             if done is not None:
                 done.result()
 
@@ -154,20 +157,14 @@ class _SettledView:
 
     def __init__(self, fleet: RemoteVehicles) -> None:
         self.fleet = fleet
-        self.xy_of = {fleet.floor.cell(xy): xy for xy in fleet.floor.kinds}
 
     def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None:
-        self._settle(cell)
+        self.fleet.settle(cell)
         return self.fleet.mirror.table.conflict(vehicle, cell, t0, t1)
 
     def parked_from(self, vehicle: int, cell: Cell) -> float:
-        self._settle(cell)
+        self.fleet.settle(cell)
         return self.fleet.mirror.table.parked_from(vehicle, cell)
-
-    def _settle(self, cell: Cell) -> None:
-        xy = self.xy_of.get(cell)
-        if xy is not None:  # a cell off the floor: nobody asks about it
-            self.fleet.settle(xy)
 
 
 class RealtimePace:
