@@ -15,9 +15,21 @@ from typing import TypeVar
 import zenoh
 
 from fleet.planning.geometry import Cell
-from fleet.planning.reservations import INF, Amendment, Interval, TimedRoute, WriteResult
+from fleet.planning.reservations import (
+    INF,
+    Amendment,
+    Interval,
+    ReservationTable,
+    TimedRoute,
+    WriteResult,
+)
 from fleet.runtime.bus import Requester, RequestFailed, received, wait_alive
-from fleet.wire.convert import amends_to_wire, intervals_to_wire, route_to_wire
+from fleet.wire.convert import (
+    amends_to_wire,
+    intervals_to_wire,
+    route_to_wire,
+    snapshot_from_wire,
+)
 from fleet.wire.protocol import (
     CommitRequest,
     Message,
@@ -102,11 +114,12 @@ class ReservationClient:
         mirror.load(self._ask(SnapshotRequest(mirror.revision if mirror.synced else -1),
                               WireSnapshot))
 
-    def load_after(self, mirror: TableMirror, t: float) -> None:
-        """Make the copy the table as a plan made at `t` reads it: the reservations that hold
-        after `t`, one query whose answer stays small however long the run (a copy that
-        catches up only to plan would otherwise read every change since its last plan)."""
-        mirror.load(self._ask(SnapshotRequest(held_after=t), WireSnapshot))
+    def table_after(self, t: float) -> ReservationTable:
+        """The table as a plan made at `t` reads it: the reservations that hold after `t`,
+        one query whose answer stays small however long the run (a copy that catches up only
+        to plan would otherwise read every change since its last plan)."""
+        return ReservationTable.from_snapshot(snapshot_from_wire(
+            self._ask(SnapshotRequest(held_after=t), WireSnapshot)))
 
     def _ask(self, request: Message, expected: type[Answer]) -> Answer:
         """The service's answer, of the type a request of this kind gets (RequestFailed if

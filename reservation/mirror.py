@@ -14,8 +14,8 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from fleet.planning.reservations import Reservation, ReservationTable, Snapshot
-from fleet.wire.convert import change_from_wire, route_from_wire
+from fleet.planning.reservations import ReservationTable
+from fleet.wire.convert import change_from_wire, snapshot_from_wire
 from fleet.wire.protocol import WireChange, WireSnapshot, build_message
 
 MAX_BUFFERED = 10_000
@@ -54,11 +54,7 @@ class TableMirror:
                     assert isinstance(change, WireChange)
                     self._pending.setdefault(change.revision, change)
             else:
-                self.table.load(Snapshot(
-                    snapshot.revision, tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1
-                                             in snapshot.reservations),
-                    tuple((v, route) for v, wire in snapshot.routes
-                          if (route := route_from_wire(wire)) is not None)))
+                self.table.load(snapshot_from_wire(snapshot))
             self.synced = True
             self._drain()
 

@@ -41,7 +41,6 @@ from fleet.wire.protocol import (
 from fleet.wire.topics import Keys, vehicle_sender
 from fleet.world.floor004 import Floor004
 from reservation.client import ReservationClient, wait_for_service
-from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.agent")
 
@@ -52,7 +51,6 @@ class LiftingAgent:
         self.session, self.keys, self.vehicle = session, keys, vehicle
         self.floor, self.params = floor, params or TrackingParams()
         self.sender = vehicle_sender(vehicle)
-        self.mirror = TableMirror()
         self.now = 0.0  # the instant of the request in hand (its envelopes carry it)
         self.reservations = ReservationClient(session, keys, Requester(session, self.sender),
                                               lambda: self.now)
@@ -127,15 +125,15 @@ class LiftingAgent:
 
     def _route(self, request: RouteRequest) -> RouteReply:
         self._on_floor(request.start, request.goal, request.home, *request.blocked)
-        self.reservations.load_after(self.mirror, request.t)
-        if self.mirror.revision < request.revision:  # the service is never behind its asker
+        table = self.reservations.table_after(request.t)
+        if table.revision < request.revision:  # the service is never behind its asker
             raise RequestFailed(f"the reservation service answered with revision "
-                                f"{self.mirror.revision}, older than {request.revision}")
+                                f"{table.revision}, older than {request.revision}")
         query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
                            request.goal, Direction(request.heading), request.home,
                            request.relaxed, frozenset(request.blocked),
                            frozenset(request.moving), frozenset(request.stagnant))
         started = time.perf_counter()
-        cells = route(self.floor, self.mirror.table, query, self.params.costs, self.params.heap)
+        cells = route(self.floor, table, query, self.params.costs, self.params.heap)
         spent = time.perf_counter() - started
         return RouteReply(request.request_id, cells is not None, list(cells or ()), spent)

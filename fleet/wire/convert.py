@@ -8,7 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from fleet.planning.reservations import Amendment, Change, Interval, TimedRoute
+from fleet.planning.reservations import (
+    Amendment,
+    Change,
+    Interval,
+    Reservation,
+    Snapshot,
+    TimedRoute,
+)
 from fleet.planning.trajectory import Pose, Step, Trajectory, step_manner
 from fleet.planning.velocity import Speed
 from fleet.wire.protocol import (
@@ -18,6 +25,7 @@ from fleet.wire.protocol import (
     WireInterval,
     WireLeg,
     WireRoute,
+    WireSnapshot,
     WireStep,
 )
 
@@ -67,6 +75,14 @@ def route_from_wire(wire: WireRoute | None) -> TimedRoute | None:
         return None
     cells, arrivals, dwells = wire
     return TimedRoute(tuple((c, r) for c, r in cells), tuple(arrivals), tuple(dwells))
+
+
+def snapshot_from_wire(wire: WireSnapshot) -> Snapshot:
+    """A whole table as the service sends it (not a diff: that is `changes`)."""
+    return Snapshot(wire.revision, tuple(Reservation(v, (c, r), t0, t1)
+                                         for v, c, r, t0, t1 in wire.reservations),
+                    tuple((v, route) for v, w in wire.routes
+                          if (route := route_from_wire(w)) is not None))
 
 
 def change_to_wire(change: Change) -> WireChange:
