@@ -41,7 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help=f"the message's topic: {', '.join(TOPICS)}")
     check.add_argument("file", type=text_file, help="the message, a JSON file")
     check.add_argument("--layout", type=layout_arg,
-                       help="for an order: the forklift layout whose map it is built on")
+                       help="for an order: the forklift layout whose map it is built on "
+                       "(default: none, the message is checked against the schema only)")
     check.set_defaults(handler=run_check)
 
 
