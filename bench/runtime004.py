@@ -85,6 +85,7 @@ def real_time(vehicles: int, orders: int, speed: float = 1.0,
            "end_time_s": outcome.done.record["end_time_s"], "wall_s": round(wall, 1),
            "instants": timing["instants"], "late_instants": timing["late"],
            "worst_late_s": round(timing["worst_late_s"], 3),
+           "worst_late_at_s": timing["worst_late_at_s"],
            "rss_per_agent_mb": round(statistics.mean(rss.values()), 1) if rss else None,
            "rss_max_agent_mb": round(max(rss.values()), 1) if rss else None,
            "keeps_real_time": timing["late"] == 0}

@@ -104,6 +104,10 @@ def fleet_limit(mission: Mission, layout: Layout) -> int:
 
 def serve(config: DispatcherConfig) -> int:
     layout = load_layout(config.mission.layout)
+    if config.dispatch == "external" and (config.clock is not ClockMode.REALTIME
+                                          or layout.vehicle_kind.name != "forklift"):
+        raise UserError("--dispatch external runs forklifts on the real-time clock: give "
+                        "--clock realtime and a forklift layout")
     options = engine_options(config.mission, layout, config.weights)  # bad weights: at once
     keys = Keys(config.bus.run)
     marker = config.restart_marker
@@ -216,12 +220,40 @@ def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
     return journal
 
 
+def dispatch_external(session: zenoh.Session, keys: Keys, setup: MissionSetup,
+                      liveness: Liveness) -> MissionDone:
+    """--dispatch external: no mission. Wait for the reservation service and the forklifts,
+    then run the real-time clock (the forklifts drive on it) until stopped; a master gives
+    the work through the VDA 5050 gateway. The result says how long it ran."""
+    config = setup.config
+    t0 = time.perf_counter()
+    try:
+        liveness.wait_for_service(config.startup_timeout_s)
+        liveness.wait_for(setup.vehicles, config.startup_timeout_s)
+        with closing(RealtimeClock(session, keys, config.speed, setup.vehicles,
+                                   liveness)) as clock:
+            log.info("%d forklifts up, the clock runs: waiting for a master's orders",
+                     len(setup.vehicles))
+            try:
+                threading.Event().wait()  # until a signal stops this process
+            except Stopped:
+                end = clock.now()
+        record = {"dispatch": "external", "end_time_s": round(end, 3)}
+        return MissionDone(True, record=record, digest=digest_of(record),
+                           wall_s=time.perf_counter() - t0)
+    except ParticipantLost as exc:
+        log.error("external dispatch failed: %s", exc)
+        return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)
+
+
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                      liveness: Liveness, publish: Publish, info: MissionInfo) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
     that could not finish: the error goes into the result). `info` is what the run is, as
     published."""
     config, vehicles = setup.config, setup.vehicles
+    if config.dispatch == "external":
+        return dispatch_external(session, keys, setup, liveness)
     if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
         faults = load_scenario(config.faults, setup.layout.name).faults if config.faults \
             else ()

@@ -179,6 +179,7 @@ class RealtimePace:
         self.zero = time.monotonic() + lead_wall_s
         self.instants = 0
         self.late: list[float] = []  # how late each late instant was (wall seconds)
+        self.worst_at = 0.0  # the sim time of the latest one
 
     def __call__(self, t: float) -> None:
         self.instants += 1
@@ -186,11 +187,13 @@ class RealtimePace:
         if wait > 0:
             time.sleep(wait)  # the clock itself: nothing is due before then
         elif -wait > LATE_S:
+            if -wait > max(self.late, default=0.0):
+                self.worst_at = t
             self.late.append(-wait)
 
     def summary(self) -> dict[str, float]:
         return {"speed": self.speed, "instants": self.instants, "late": len(self.late),
-                "worst_late_s": max(self.late, default=0.0)}
+                "worst_late_s": max(self.late, default=0.0), "worst_late_at_s": self.worst_at}
 
 
 def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, floor: Floor004,

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PROCESSES = ("dispatcher", "vehicle_agent", "reservation", "recorder")
+PROCESSES = ("dispatcher", "vehicle_agent", "reservation", "recorder", "vda5050")
 COMMAND_LINE = ("fleet.cli", "fleet.__main__", "fleet.commands")
 
 # Floors of fleet/, lowest first: a module may import its own wing and any wing on a lower floor.

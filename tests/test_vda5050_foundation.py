@@ -8,30 +8,25 @@ with vda5050.schemas.validate before it goes out, and that reads what the master
 from __future__ import annotations
 
 import json
-import os
 import queue
-import shutil
-import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from pathlib import Path
 from typing import Any
 
 import paho.mqtt.client as mqtt
 import pytest
-from mqtt_broker import mosquitto
+from master_controller import DEADLINE, Master, running_master
 
 from fleet.errors import UserError
+from fleet.runtime.mqtt_broker import mosquitto
 from vda5050.schemas import TOPICS, InvalidMessage, validate
 
 INTERFACE = "uagv"
 MANUFACTURER = "fleet-test"
 SERIAL = "forklift-1"
-MASTER_DIR = Path(__file__).parent / "vda5050_master"
-DEADLINE = 10.0  # s for any one awaited event; each comes within some 100 ms here
 
 Message = dict[str, Any]
 
@@ -177,56 +172,6 @@ def test_known_gap_of_the_2_0_0_schema_instant_actions_as_the_text_writes_them()
 
 
 @dataclass
-class Master:
-    """master.mjs as a child: commands in as JSON lines, its events out as JSON lines."""
-
-    process: subprocess.Popen[str]
-    stderr: Path
-    events: queue.Queue[Message | None] = field(default_factory=queue.Queue)
-    seen: list[Message] = field(default_factory=list)
-    reader: threading.Thread = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.reader = threading.Thread(target=self._read, daemon=True)
-        self.reader.start()
-
-    def _read(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            try:
-                self.events.put(json.loads(line))
-            except json.JSONDecodeError:
-                self.events.put({"event": "notJson", "line": line})
-        self.events.put(None)  # its stdout closed: it ended
-
-    def send(self, **command: Any) -> None:
-        assert self.process.stdin is not None
-        self.process.stdin.write(json.dumps(command) + "\n")
-        self.process.stdin.flush()
-
-    def expect(self, what: str, match: Callable[[Message], bool]) -> Message:
-        """The next event that `match`es, read within DEADLINE; the events before it are kept
-        in `seen`."""
-        deadline = time.monotonic() + DEADLINE
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                event = self.events.get(timeout=left)
-            except queue.Empty:
-                break
-            if event is None:
-                self.events.put(None)
-                break
-            self.seen.append(event)
-            if match(event):
-                return event
-        raise AssertionError(
-            f"the master did not report {what} within {DEADLINE} s; it reported:\n"
-            + "\n".join(json.dumps(e) for e in self.seen[-20:])
-            + f"\nits stderr: {self.stderr.read_text(errors='replace')[-2000:]}"
-        )
-
-
-@dataclass
 class FakeAgv:
     """A paho client under uagv/v2/MANUFACTURER/SERIAL: publishes what a test hands it (checked
     by the official schemas first) and collects what the master sends it."""
@@ -267,38 +212,8 @@ def broker(tmp_path) -> Iterator[str]:
 
 @pytest.fixture
 def master(broker, tmp_path) -> Iterator[Master]:
-    node = shutil.which("node")
-    if node is None:
-        pytest.fail("node is not installed: the VDA 5050 master controller runs on Node")
-    if not (MASTER_DIR / "node_modules" / "vda-5050-lib").is_dir():
-        pytest.fail(f"vda-5050-lib is not installed: run `npm ci` in {MASTER_DIR} "
-                    "(.ci/run does)")
-    port = broker.rsplit(":", 1)[1]
-    stderr = tmp_path / "master.stderr"
-    with stderr.open("w") as err:
-        process = subprocess.Popen(
-            [node, str(MASTER_DIR / "master.mjs"), "--host", "127.0.0.1", "--port", port,
-             "--interface", INTERFACE, "--manufacturer", MANUFACTURER],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err, text=True,
-            env={**os.environ, "NO_COLOR": "1"},
-        )
-    master = Master(process, stderr)
-    try:
-        master.expect("ready", lambda e: e["event"] in ("ready", "fatal"))
-        assert master.seen[-1]["event"] == "ready", master.seen[-1]
+    with running_master(broker, tmp_path, MANUFACTURER) as master:
         yield master
-    finally:
-        if process.poll() is None:
-            master.send(cmd="quit")
-            try:
-                process.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
-        master.reader.join(timeout=5)  # it reads to the end of stdout, then let go of the pipe
-        for pipe in (process.stdin, process.stdout):
-            if pipe is not None:
-                pipe.close()
 
 
 @pytest.fixture

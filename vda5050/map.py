@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fleet.errors import UserError
+from fleet.planning.geometry import Cell
 from fleet.planning.maneuvers import HEADINGS
 from fleet.planning.trajectory import Pose
 from fleet.world.layout import Layout
@@ -40,6 +41,7 @@ class Node:
     y: float
     theta: float
     of: str  # what it works: the station's name, the stack's cluster-index, or ""
+    cell: Cell | None = None  # a stack node's stack
 
 
 def nodes(layout: Layout) -> list[Node]:
@@ -49,19 +51,26 @@ def nodes(layout: Layout) -> list[Node]:
                         f"is not built yet (docs/vda5050.md)")
     kind, (ox, oy) = layout.vehicle_kind, layout.origin
 
-    def node(node_id: str, place: str, pose: Pose, of: str = "") -> Node:
+    def node(node_id: str, place: str, pose: Pose, of: str = "", cell: Cell | None = None
+             ) -> Node:
         at = kind.at_rest(pose)  # in the frame of cell (0, 0): moved to the layout's, as the
         # vehicles' states are (fleet/mission/driving.py)
         return Node(node_id, place, pose, round(at.x + ox, 6), round(at.y + oy, 6),
-                    round(math.remainder(at.theta, math.tau), 6), of)
+                    _theta(at.theta), of, cell)
 
     out = [node(f"park-{i}", PARK, pose) for i, pose in enumerate(layout.vehicle_starts, 1)]
     out += [node(f"station-{s.name}", STATION, s.dock, s.name) for s in layout.stations]
     for stack in layout.stacks:
         of = f"{stack.cluster}-{stack.index}"
-        out += [node(f"stack-{of}-{HEADINGS[pose.heading]}", STACK, pose, of)
+        out += [node(f"stack-{of}-{HEADINGS[pose.heading]}", STACK, pose, of, stack.cell)
                 for pose in layout.unload_poses(stack.cell)]
     return out
+
+
+def _theta(theta: float) -> float:
+    """In [-pi, pi] as the schema bounds it, rounded to 6 places (a rounded pi would pass
+    it by 3e-7)."""
+    return min(math.pi, max(-math.pi, round(math.remainder(theta, math.tau), 6)))
 
 
 def edges(found: list[Node]) -> list[tuple[str, str]]:

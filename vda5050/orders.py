@@ -36,6 +36,7 @@ ORDER_ERROR: Final = "orderError"
 ORDER_UPDATE_ERROR: Final = "orderUpdateError"
 NO_ROUTE_ERROR: Final = "noRouteError"
 NO_ORDER_TO_CANCEL: Final = "noOrderToCancel"
+INSTANT_ACTION_ERROR: Final = "instantActionError"  # not in the text: vda-5050-lib's name
 
 # The actions a forklift does in an order (6.8.1), and the map places it does them at: on
 # nodes only, its forks working a stack or a station while it stands still.
@@ -458,6 +459,8 @@ class OrderBook:
             raise ValueError("the vehicle may not drive: paused, or a node's action that "
                              "stops driving is under way (6.12)")
         self.on_node = False
+        self.errors = [e for e in self.errors if not (e.error_type == NO_ROUTE_ERROR and
+                                                      ("edgeId", edge.edge_id) in e.references)]
         return edge.actions
 
     def node_reached(self, node_id: str, sequence_id: int) -> tuple[Action, ...]:
@@ -561,6 +564,31 @@ class OrderBook:
         if action_id is not None:
             self.instant(action_id, "initPosition", FAILED if reason else FINISHED, reason)
         return not reason
+
+    def edge_blocked(self, sequence_id: int, why: str) -> None:
+        """The next released edge cannot be driven as the floor stands (goods close every way):
+        a noRouteError naming it, until it is driven (`edge_started`) or the order ends."""
+        edge = next(e for e in self.edges if e.sequence_id == sequence_id)
+        self._report(Error(NO_ROUTE_ERROR, why, (("orderId", self.order_id),
+                                                 ("edgeId", edge.edge_id),
+                                                 ("sequenceId", str(sequence_id))),
+                           lasts="order"))
+
+    def refuse_instant(self, action_id: str, action_type: str, why: str) -> None:
+        """An instant action the vehicle cannot do: FAILED, with an instantActionError naming
+        it (as vda-5050-lib's own AGV controller reports one)."""
+        self.instant(action_id, action_type, FAILED, why)
+        self._report(Error(INSTANT_ACTION_ERROR, why, (("topic", "instantActions"),
+                                                       ("actionId", action_id),
+                                                       ("actionType", action_type))))
+
+    def invalid(self, topic: str, why: str, header_id: object = None) -> None:
+        """A message on `topic` that is not JSON or not valid against its schema: a
+        validationError naming the topic (and its headerId, if it has one), until an order is
+        accepted; nothing else changes (6.6.4.1)."""
+        refs = (("topic", topic),) + ((("headerId", str(header_id)),)
+                                      if header_id is not None else ())
+        self._report(Error(VALIDATION_ERROR, why, refs))
 
     # --- inside ----------------------------------------------------------------------------
 

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from fleet.commands.analyze import stopped_lines
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.run004 import run004
+from fleet.commands.run_external import run_external
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
@@ -31,10 +32,18 @@ from fleet.recording.mission_record import recorded_standstill
 from fleet.recording.reader import Recording, read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.args import add_mission_args, engine_options, mission_from_args
-from fleet.runtime.argtypes import port, port_problem, positive_float, scenario_arg, writable_dir
+from fleet.runtime.argtypes import (
+    mqtt_url,
+    port,
+    port_problem,
+    positive_float,
+    scenario_arg,
+    writable_dir,
+)
 from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import strategies_epilog
 from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.runtime.process_configs import DISPATCH_MODES
 from fleet.vehicles import registry
 from fleet.wire.protocol import MissionDone
 from fleet.world.layout import Layout
@@ -80,6 +89,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", metavar="SCENARIO", type=scenario_arg,
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
                    "faults list) or a TOML file (docs/faults.md; default: no faults)")
+    p.add_argument("--dispatch", choices=DISPATCH_MODES, default="internal",
+                   help="internal: the dispatcher runs the mission (default); external: no "
+                   "mission, the forklifts park and take a VDA 5050 master's orders over MQTT "
+                   "through the gateway, on the real-time clock, until Ctrl-C "
+                   "(docs/vda5050.md)")
+    p.add_argument("--mqtt", type=mqtt_url, metavar="URL",
+                   help="--dispatch external: the MQTT broker, mqtt://HOST[:PORT] (default: "
+                   "a mosquitto started for the run on a free port of 127.0.0.1)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress: only the summary and errors")
     p.add_argument("--json", action="store_true",
@@ -192,6 +209,11 @@ def summary_json(report: Report, wall_s: float, digest: str,
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
     _check_run_flags(args)
+    if args.dispatch == "external":
+        return run_external(args, layout, command_line())
+    if args.mqtt is not None:
+        raise UserError("--mqtt is the broker of --dispatch external; the internal dispatcher "
+                        "speaks no MQTT")
     if layout.floor is not None:  # seed 004's lifting AGVs
         return run004(args, layout, command_line())
     mission = mission_from_args(args, layout)

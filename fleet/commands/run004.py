@@ -95,7 +95,8 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
         kept = [] if not timing else [
             f"  {'real time':<19}speed {timing['speed']:g}: {timing['late']} of "
             f"{timing['instants']} instants handled late (the latest by "
-            f"{timing['worst_late_s']:.2f} s)"]
+            f"{timing['worst_late_s']:.2f} s"
+            + (f", at {timing['worst_late_at_s']:g} s)" if timing["late"] else ")")]
         print("\n".join([*report_lines(report), *kept, f"  {'wall time':<19}{wall_s:.1f} s",
                          f"  {'record digest':<19}{done.digest[:16]}",
                          f"  {'recording':<19}{report.path}", *verdict_lines(report),

@@ -1,4 +1,4 @@
-"""`fleet vda5050 map|check`: the emulated fleet as VDA 5050 vehicles (docs/vda5050.md)."""
+"""`fleet vda5050 map|check|gateway`: the emulated fleet as VDA 5050 vehicles (docs/vda5050.md)."""
 
 from __future__ import annotations
 
@@ -8,13 +8,14 @@ import json
 from fleet.commands.output import write_or_print
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, text_file, writable_file
+from fleet.runtime.process_configs import GatewayConfig
 from fleet.world.layout_file import load_layout
 from vda5050 import TOPICS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("vda5050", help="the fleet as VDA 5050 vehicles: the map a master "
-                       "builds orders on",
+                       "builds orders on, the gateway that takes them",
                        description="The emulated forklifts as VDA 5050 2.0.0 vehicles "
                        "(docs/vda5050.md).")
     which = p.add_subparsers(dest="vda5050_command", required=True, metavar="ACTION")
@@ -44,6 +45,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="for an order: the forklift layout whose map it is built on "
                        "(default: none, the message is checked against the schema only)")
     check.set_defaults(handler=run_check)
+    gateway = which.add_parser("gateway", help=GatewayConfig.SUMMARY,
+                               description=GatewayConfig.DESCRIPTION)
+    GatewayConfig.add_arguments(gateway)
+    gateway.set_defaults(handler=run_gateway)
+
+
+def run_gateway(args: argparse.Namespace) -> int:
+    from fleet.runtime.lifecycle import setup_logging
+    from vda5050.gateway import serve
+
+    setup_logging()
+    return serve(GatewayConfig.from_args(args))
 
 
 def run_map(args: argparse.Namespace) -> int:

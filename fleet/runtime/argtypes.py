@@ -147,6 +147,43 @@ def endpoint(text: str) -> str:
     return text
 
 
+_MQTT_URL = re.compile(r"mqtt://(?P<host>[^:/\s]+|\[[0-9a-fA-F:.]+\])(?::(?P<port>\d+))?/?")
+MQTT_PORT = 1883
+
+
+def mqtt_url(text: str) -> str:
+    """An MQTT broker: mqtt://HOST[:PORT] (port 1883 if none)."""
+    match = _MQTT_URL.fullmatch(text)
+    if match is None:
+        raise _refuse(text, "is not an MQTT broker URL such as mqtt://127.0.0.1:1883")
+    if match["port"] is not None and not 1 <= int(match["port"]) <= 65535:
+        raise _refuse(text, f"names port {match['port']}, not 1 to 65535")
+    return text
+
+
+def mqtt_host_port(url: str) -> tuple[str, int]:
+    """The host and port of an URL `mqtt_url` took."""
+    match = _MQTT_URL.fullmatch(url)
+    assert match is not None, url
+    return match["host"].strip("[]"), int(match["port"] or MQTT_PORT)
+
+
+def topic_level(text: str) -> str:
+    """One level of an MQTT topic: not empty, no '/', '+', '#' (VDA 5050 6.1)."""
+    if not text or any(c in text for c in "/+#") or text != text.strip():
+        raise _refuse(text, "is not one MQTT topic level (no '/', '+', '#' or spaces)")
+    return text
+
+
+def state_interval(text: str) -> float:
+    """Seconds between states: VDA 5050 2.0.0 (6.10) wants one at least every 30 s."""
+    value = positive_float(text)
+    if value > 30:
+        raise _refuse(text, "is more than 30 s: a state is due at least every 30 s "
+                      "(VDA 5050 2.0.0, 6.10)")
+    return value
+
+
 def _path(text: str) -> Path:
     if "\0" in text:  # the OS refuses it; say so rather than fail inside pathlib
         raise _refuse(text, "is not a path (it holds a NUL character)")

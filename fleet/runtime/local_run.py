@@ -31,6 +31,7 @@ from fleet.runtime.access import (
     write_private,
 )
 from fleet.runtime.args import BusFlags
+from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.bus import (
     SLOW_CONNECT_S,
     BusConfig,
@@ -42,9 +43,12 @@ from fleet.runtime.bus import (
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
+from fleet.runtime.mqtt_broker import start_mosquitto
+from fleet.runtime.mqtt_broker import stop as stop_broker
 from fleet.runtime.process_configs import (
     AgentConfig,
     DispatcherConfig,
+    GatewayConfig,
     ProcessConfig,
     RecorderConfig,
     ReservationConfig,
@@ -88,6 +92,10 @@ class RunSpec:
     # run's dispatcher applies its faults itself)
     faults_source: str = ""
     secure: bool = False  # access control and a login per process (fleet/runtime/access.py)
+    # "external": no mission; the VDA 5050 gateway takes a master's orders from `mqtt`
+    dispatch: str = "internal"
+    mqtt: str = ""
+    own_broker: bool = False  # start a mosquitto on `mqtt`'s port of 127.0.0.1 for the run
 
     @property
     def recording(self) -> Path:
@@ -114,7 +122,8 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
                             faults=spec.faults_source or None,
                             recorded=spec.record, recover=recover,
                             journal=spec.run_dir / DISPATCHER_JOURNAL
-                            if spec.mission.kind is MissionKind.ORDERS else None)
+                            if spec.mission.kind is MissionKind.ORDERS else None,
+                            dispatch=spec.dispatch)
 
 
 class Secrets:
@@ -179,6 +188,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             return AgentConfig(bus(vehicle_sender(v), connect), v)
         if kind == "dispatcher":  # a restart picks the mission up where it was
             return dispatcher_config(spec, bus(DISPATCHER), recover=again)
+        if kind == "vda5050":
+            return GatewayConfig(bus("vda5050"), spec.mission.layout, spec.vehicles, spec.mqtt)
         raise RunFailed(f"cannot restart a {kind} process")
 
     def args_of(kind: str, again: bool = False) -> list[str]:
@@ -186,7 +197,10 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         config = config_of(kind, again)
         return [*config.argv(), *spec.extra.get(config.COMMAND, [])]
 
+    broker = None
     try:
+        if spec.own_broker:
+            broker = start_mosquitto(log_dir / "mosquitto", mqtt_host_port(spec.mqtt)[1])
         router = launcher.start("router", RouterConfig(
             (endpoint,), acl=secrets.acl if secrets else None,
             users=secrets.users if secrets else None).argv())
@@ -213,6 +227,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             injector = Injector(spec.faults, session, keys, launcher,
                                 lambda kind: args_of(kind, again=True), proxies)
         launcher.start("dispatcher", args_of("dispatcher"))
+        if spec.dispatch == "external":
+            launcher.start("vda5050", args_of("vda5050"))
         if on_ready is not None:
             on_ready(session, keys, launcher)
         done = _follow(inbox, on_progress, clock_started)
@@ -237,6 +253,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         launcher.stop_all()
         for proxy in proxies.values():
             proxy.close()
+        if broker is not None:  # after the gateway: its clean goodbye reaches the broker
+            stop_broker(broker)
 
 
 def _stop_dispatcher_first(launcher: Launcher, recorded: threading.Event) -> None:

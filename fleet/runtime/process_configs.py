@@ -25,14 +25,20 @@ from fleet.runtime.args import (
 from fleet.runtime.argtypes import (
     endpoint,
     layout_arg,
+    mqtt_url,
     port,
     pose,
     positive_float,
+    positive_int,
     scenario_arg,
+    state_interval,
+    topic_level,
     writable_dir,
     writable_file,
 )
 from fleet.runtime.helptext import strategies_epilog
+
+DISPATCH_MODES = ("internal", "external")
 
 
 class ProcessConfig:
@@ -250,11 +256,16 @@ class DispatcherConfig(ProcessConfig):
     gather_s: float = 5.0  # claims without a fleet size: start once no claim came this long
     restart_marker: Path | None = None
     journal: Path | None = None  # an order mission's book's inputs, for a restarted one
+    dispatch: str = "internal"  # "external": no mission, the clock only (a master drives)
 
     @classmethod
     def add_arguments(cls, p: argparse.ArgumentParser) -> None:
         add_bus_arguments(p)
         add_mission_args(p)
+        p.add_argument("--dispatch", choices=DISPATCH_MODES, default=cls.dispatch,
+                       help="internal: run the mission; external: run no mission, only the "
+                       "real-time clock, while a VDA 5050 master gives the forklifts their "
+                       "orders through the gateway (docs/vda5050.md; default internal)")
         p.add_argument("--clock", choices=[m.value for m in ClockMode], default=cls.clock.value,
                        help="fast: discrete events, deterministic; realtime: sim time = speed "
                        "x wall time (default fast)")
@@ -303,7 +314,7 @@ class DispatcherConfig(ProcessConfig):
         return cls(BusFlags.from_args(args), mission_from_args(args), args.weights,
                    ClockMode(args.clock), args.speed, args.startup_timeout, args.command,
                    args.faults, args.recorded, args.recover, args.exit_when_done, args.claims,
-                   args.gather, args.restart_marker, args.journal)
+                   args.gather, args.restart_marker, args.journal, args.dispatch)
 
     def argv(self) -> list[str]:
         d = DispatcherConfig
@@ -317,6 +328,7 @@ class DispatcherConfig(ProcessConfig):
                 *_flag("--gather", self.gather_s, d.gather_s),
                 *_flag("--restart-marker", self.restart_marker),
                 *_flag("--journal", self.journal),
+                *_flag("--dispatch", self.dispatch, d.dispatch),
                 *_flag("--exit-when-done", self.exit_when_done, False),
                 *_flag("--command", self.command, "")]
 
@@ -371,6 +383,69 @@ class RecorderConfig(ProcessConfig):
                 *_flag("--exit-when-done", self.exit_when_done, False),
                 *_flag("--foxglove", self.foxglove),
                 *_flag("--foxglove-host", self.foxglove_host, RecorderConfig.foxglove_host)]
+
+
+@dataclass(frozen=True)
+class GatewayConfig(ProcessConfig):
+    COMMAND = "vda5050"  # `fleet vda5050 gateway`
+    SUMMARY = "run the VDA 5050 gateway process"
+    DESCRIPTION = ("Run the VDA 5050 gateway: every forklift of the run as a VDA 5050 2.0.0 "
+                   "AGV on MQTT (its connection with a last will, factsheet, state and "
+                   "visualization), taking a master's orders and instant actions and having "
+                   "each released edge planned and committed by the forklift's agent "
+                   "(docs/vda5050.md).")
+
+    bus: BusFlags
+    layout: str
+    vehicles: int
+    mqtt: str = "mqtt://127.0.0.1:1883"
+    interface: str = "uagv"
+    manufacturer: str = "fleet-emulator"
+    state_interval_s: float = 10.0  # a state at least this often (the spec: at most 30 s)
+    visualization_interval_s: float = 0.5
+    startup_timeout_s: float = 120.0
+
+    @classmethod
+    def add_arguments(cls, p: argparse.ArgumentParser) -> None:
+        add_bus_arguments(p)
+        p.add_argument("--layout", type=layout_arg, required=True,
+                       help="the forklift layout the fleet runs on (its map: fleet vda5050 map)")
+        p.add_argument("--vehicles", type=positive_int, required=True,
+                       help="the forklifts 1..N of the run, each an AGV of its own")
+        p.add_argument("--mqtt", type=mqtt_url, default=cls.mqtt, metavar="URL",
+                       help=f"the MQTT broker, mqtt://HOST[:PORT] (default {cls.mqtt})")
+        p.add_argument("--interface", type=topic_level, default=cls.interface,
+                       help="interfaceName, the topics' first level (default uagv)")
+        p.add_argument("--manufacturer", type=topic_level, default=cls.manufacturer,
+                       help="the AGVs' manufacturer, the topics' third level (default "
+                       "fleet-emulator); each serial number is forklift-ID")
+        p.add_argument("--state-interval", type=state_interval, default=cls.state_interval_s,
+                       metavar="SECONDS", help="a state at least this often besides those "
+                       "events bring (at most 30, as the spec asks; default 10)")
+        p.add_argument("--visualization-interval", type=positive_float,
+                       default=cls.visualization_interval_s, metavar="SECONDS",
+                       help="a visualization message this often (default 0.5)")
+        p.add_argument("--startup-timeout", type=positive_float,
+                       default=cls.startup_timeout_s, metavar="SECONDS",
+                       help="seconds to wait for the reservation service, every agent and "
+                       "the clock (default 120)")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> GatewayConfig:
+        return cls(BusFlags.from_args(args), args.layout, args.vehicles, args.mqtt,
+                   args.interface, args.manufacturer, args.state_interval,
+                   args.visualization_interval, args.startup_timeout)
+
+    def argv(self) -> list[str]:
+        g = GatewayConfig
+        return [self.COMMAND, "gateway", *self.bus.argv(), "--layout", self.layout,
+                "--vehicles", str(self.vehicles), *_flag("--mqtt", self.mqtt, g.mqtt),
+                *_flag("--interface", self.interface, g.interface),
+                *_flag("--manufacturer", self.manufacturer, g.manufacturer),
+                *_flag("--state-interval", self.state_interval_s, g.state_interval_s),
+                *_flag("--visualization-interval", self.visualization_interval_s,
+                       g.visualization_interval_s),
+                *_flag("--startup-timeout", self.startup_timeout_s, g.startup_timeout_s)]
 
 
 KINDS: tuple[type[ProcessConfig], ...] = (RouterConfig, ReservationConfig, AgentConfig,

@@ -1,5 +1,6 @@
-"""A real MQTT broker for tests: Debian's mosquitto, started as a child process on a free port
-of 127.0.0.1 and stopped afterwards.
+"""A real MQTT broker: Debian's mosquitto, started as a child process on a free port of
+127.0.0.1 and stopped afterwards (by `fleet run --dispatch external` when no --mqtt is given,
+and by the tests).
 
     with mosquitto(tmp_path) as url:   # "mqtt://127.0.0.1:PORT"
         ...
@@ -17,12 +18,14 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from fleet.errors import UserError
+
 HOST = "127.0.0.1"
 START_TIMEOUT = 10.0  # s until the port answers: mosquitto takes some 10 ms here
 ATTEMPTS = 3  # fresh ports to try: another test may take a free port before mosquitto binds it
 
 
-class MosquittoMissing(RuntimeError):
+class MosquittoMissing(UserError):
     """mosquitto is not installed on this machine."""
 
 
@@ -45,8 +48,8 @@ def mosquitto_binary() -> str:
     found = shutil.which("mosquitto", path=path)
     if found is None:
         raise MosquittoMissing(
-            "mosquitto is not installed: the MQTT tests need a real broker "
-            "(Debian: apt-get install -y mosquitto; .ci/run installs it)"
+            "mosquitto is not installed: give a broker with --mqtt URL, or install one "
+            "(Debian: apt-get install -y mosquitto; deploy/install-test-deps does)"
         )
     return found
 
@@ -62,13 +65,14 @@ def mosquitto(directory: Path) -> Iterator[str]:
         stop(broker)
 
 
-def start_mosquitto(directory: Path) -> Broker:
-    """A mosquitto that accepts connections, or RuntimeError with its log."""
+def start_mosquitto(directory: Path, port: int | None = None) -> Broker:
+    """A mosquitto that accepts connections (on `port`, or a free one), or RuntimeError with
+    its log."""
     binary = mosquitto_binary()
     directory.mkdir(parents=True, exist_ok=True)
     failures = []
-    for attempt in range(ATTEMPTS):
-        port = _free_port()
+    for attempt in range(1 if port else ATTEMPTS):
+        port = port or _free_port()
         config = directory / f"mosquitto-{attempt}.conf"
         config.write_text(
             f"listener {port} {HOST}\n"

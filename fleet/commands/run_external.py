@@ -1,0 +1,63 @@
+"""`fleet run --dispatch external`: the fleet with no mission, for a VDA 5050 master. The
+forklifts park at their start poses and take the orders a master sends over MQTT through the
+gateway (docs/vda5050.md), on the real-time clock, until Ctrl-C; everything is recorded
+as in any run."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from fleet.errors import UserError
+from fleet.mission.spec import ClockMode
+from fleet.recording.rundir import choose
+from fleet.runtime.args import mission_from_args
+from fleet.runtime.bus import free_port
+from fleet.runtime.local_run import RunSpec, run_processes
+from fleet.runtime.mqtt_broker import mosquitto_binary
+from fleet.runtime.process_configs import GatewayConfig
+from fleet.world.layout import Layout
+from fleet.world.reachability import fleet_size
+
+
+def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
+    refused = [flag for flag, given in (
+        ("--inprocess", args.inprocess), ("--secure", args.secure),
+        ("--faults", args.faults is not None)) if given]
+    if refused:
+        raise UserError(f"--dispatch external takes no {' and no '.join(refused)} (not built "
+                        "yet: docs/vda5050.md)")
+    if layout.has_lanes or layout.floor is not None:
+        raise UserError(f"--dispatch external: layout {layout.name} is not a forklift layout; "
+                        "only forklifts speak VDA 5050 yet (docs/vda5050.md)")
+    mission = mission_from_args(args, layout)
+    n = fleet_size(layout, mission.vehicles)
+    say = (lambda line: None) if args.quiet or args.json else \
+        (lambda line: print(f"fleet run: {line}", file=sys.stderr, flush=True))
+    out = choose(args.out, args.force, layout.name, "external", say).path
+
+    def interrupted(*_) -> None:
+        raise KeyboardInterrupt  # SIGTERM ends the session like Ctrl-C
+
+    signal.signal(signal.SIGTERM, interrupted)
+    own_broker = args.mqtt is None
+    url = args.mqtt or f"mqtt://127.0.0.1:{free_port()}"
+    spec = RunSpec(mission, n, out, ClockMode.REALTIME, args.speed,
+                   port=args.port or free_port(), command=command, foxglove=args.foxglove,
+                   dispatch="external", mqtt=url, own_broker=own_broker)
+    if own_broker:
+        mosquitto_binary()  # not installed: said before anything starts
+    g = GatewayConfig
+    say(f"{n} forklifts as VDA 5050 2.0.0 AGVs on {url}, topics "
+        f"{g.interface}/v2/{g.manufacturer}/forklift-1 .. forklift-{n}; their map: "
+        f"fleet vda5050 map {layout.name}; Ctrl-C ends the session")
+    try:
+        outcome = run_processes(spec, on_ready=lambda *_: say(
+            "started the router, recorder, reservation service, agents, clock and gateway"))
+    except KeyboardInterrupt:
+        say(f"session ended; the recording and logs are in {out}")
+        return 0
+    # only a process that died ends a session by itself
+    print(f"fleet run: the session ended: {outcome.error}; logs in {out}", file=sys.stderr)
+    return 1

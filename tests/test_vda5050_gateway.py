@@ -1,0 +1,197 @@
+"""The emulated fleet driven by a VDA 5050 master nobody here wrote: `fleet run --dispatch
+external` on a real broker (mosquitto), the gateway process in it, and vda-5050-lib's
+MasterController (tests/master_controller.py) giving four forklifts their orders."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from master_controller import Master, running_master
+
+from fleet.runtime.mqtt_broker import mosquitto
+from fleet.world.layout_file import load_layout
+from vda5050.map import edge_id, node_position, nodes
+
+LAYOUT = "paper"
+VEHICLES = 4
+MANUFACTURER = "fleet-emulator"
+START_S = 90.0  # the run's processes up and every forklift ONLINE
+DRIVE_S = 120.0  # an order of a few legs driven in real time (a leg takes some 20 s)
+
+Message = dict[str, Any]
+NODES = {n.node_id: n for n in nodes(load_layout(LAYOUT))}
+
+
+def serial(vehicle: int) -> str:
+    return f"forklift-{vehicle}"
+
+
+def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: int = 0,
+          actions: dict[int, list[str]] | None = None, released: int | None = None) -> Message:
+    """An order along `path` (node ids); `actions` by the node's place in the path
+    (pick/drop, HARD), the first `released` nodes in the base (default all)."""
+    actions = actions or {}
+    ids = itertools.count()
+    released = len(path) if released is None else released
+
+    def node(k: int, node_id: str) -> Message:
+        return {"nodeId": node_id, "sequenceId": first_sequence + 2 * k,
+                "released": k < released,
+                "nodePosition": node_position(NODES[node_id], LAYOUT),
+                "actions": [{"actionId": f"{order_id}-{update}-{kind}-{next(ids)}",
+                             "actionType": kind, "blockingType": "HARD"}
+                            for kind in actions.get(k, [])]}
+
+    def edge(k: int, a: str, b: str) -> Message:
+        return {"edgeId": edge_id(a, b), "sequenceId": first_sequence + 2 * k + 1,
+                "released": k + 1 < released, "startNodeId": a, "endNodeId": b, "actions": []}
+
+    return {"orderId": order_id, "orderUpdateId": update,
+            "nodes": [node(k, n) for k, n in enumerate(path)],
+            "edges": [edge(k, a, b) for k, (a, b) in enumerate(itertools.pairwise(path))]}
+
+
+@dataclass
+class Session:
+    """A `fleet run --dispatch external` and the master that drives it."""
+
+    run: subprocess.Popen[bytes]
+    out: Path
+    master: Master
+
+    def send_order(self, vehicle: int, message: Message, tag: int) -> None:
+        self.master.send(cmd="order", serialNumber=serial(vehicle), order=message, id=tag)
+        sent = self.master.expect(f"order {tag} sent", lambda e: e.get("id") == tag)
+        assert sent["event"] == "orderAssigned", sent.get("message", sent)
+
+    def find(self, what: str, match: Callable[[Message], bool], within: float = DRIVE_S
+             ) -> Message:
+        """The first event of the master's that `match`es, seen already or still to come."""
+        for event in self.master.seen:
+            if match(event):
+                return event
+        return self.master.expect(what, match, within)
+
+    def processed(self, vehicle: int, order_id: str) -> Message:
+        return self.find(f"{serial(vehicle)} finishing {order_id}",
+                         lambda e: e["event"] == "orderProcessed"
+                         and e["serialNumber"] == serial(vehicle) and e["orderId"] == order_id)
+
+    def state_where(self, vehicle: int, what: str, match: Callable[[Message], bool]) -> Message:
+        """The first state of the vehicle that `match`es, seen already or still to come."""
+        return self.find(what, lambda e: e["event"] == "state" and
+                         e["serialNumber"] == serial(vehicle) and match(e["state"]))["state"]
+
+    def states(self, vehicle: int) -> list[Message]:
+        return [e["state"] for e in self.master.seen
+                if e["event"] == "state" and e["serialNumber"] == serial(vehicle)]
+
+
+@pytest.fixture
+def session(tmp_path) -> Iterator[Session]:
+    with mosquitto(tmp_path / "broker") as url, \
+            running_master(url, tmp_path, MANUFACTURER) as master:
+        out = tmp_path / "run"
+        log = (tmp_path / "fleet-run.log").open("wb")
+        run = subprocess.Popen([sys.executable, "-m", "fleet", "run", "--layout", LAYOUT,
+                                "--vehicles", str(VEHICLES), "--dispatch", "external",
+                                "--mqtt", url, "--out", str(out)],
+                               stdout=log, stderr=subprocess.STDOUT)
+        try:
+            online: set[str] = set()
+            while len(online) < VEHICLES:
+                seen = master.expect("every forklift online", lambda e: e["event"] ==
+                                     "connection" and e["connectionState"] == "ONLINE",
+                                     START_S)
+                online.add(seen["serialNumber"])
+            yield Session(run, out, master)
+        finally:
+            with (tmp_path / "master-events.jsonl").open("w") as seen:  # to read after a failure
+                seen.writelines(json.dumps(e) + "\n" for e in master.seen)
+            if run.poll() is None:
+                run.send_signal(signal.SIGINT)
+                run.wait(timeout=60)
+            log.close()
+
+
+def no_trouble(master: Master) -> list[Message]:
+    """What the master refused or broke on: states it dropped, errors in its handlers."""
+    return [e for e in master.seen if e["event"] in
+            ("dropped", "uncaught", "handlerError", "libraryError", "fatal")]
+
+
+def action_statuses(session: Session, vehicle: int) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for e in session.master.seen:
+        if e["event"] in ("actionStateChanged", "instantActionStateChanged") and \
+                e["serialNumber"] == serial(vehicle):
+            out.setdefault(e["actionType"], []).append(e["actionStatus"])
+    return out
+
+
+def test_four_forklifts_take_a_masters_orders(session):
+    """Four forklifts at once, each order of another kind: forklift 1 picks at its station
+    and drops at a stack; forklift 2 gets a base with a horizon, and the rest released by an
+    update stitched at the decision point once it stands there; forklift 3 is paused before
+    its order and goes on when the pause ends; forklift 4's order is cancelled while it
+    drives, and it stops on the node it drove to. The master sees every order accepted and
+    finished (the cancelled one by cancelation) and refuses no state it gets."""
+    session.send_order(1, order("o1", ["station-p1", "stack-s1-1-S", "station-p1"],
+                                actions={0: ["pick"], 1: ["drop"]}), 1)
+    session.send_order(2, order("o2", ["station-p2", "stack-s3-1-S", "station-p2"],
+                                actions={0: ["pick"], 1: ["drop"]},
+                                released=2), 2)
+    session.master.send(cmd="instantActions", serialNumber=serial(3), id=3, actions=[
+        {"actionId": "pause-3", "actionType": "startPause", "blockingType": "HARD"}])
+    session.master.expect("the pause sent", lambda e: e.get("id") == 3)
+    session.send_order(3, order("o3", ["station-p3", "stack-s4-1-E"]), 4)
+    session.send_order(4, order("o4", ["station-p4", "stack-s6-1-W", "station-p4"]), 5)
+
+    # forklift 4 is cancelled once it drives its first edge
+    session.find("forklift-4 driving", lambda e: e["event"] == "edgeTraversing"
+                 and e["serialNumber"] == serial(4))
+    session.master.send(cmd="instantActions", serialNumber=serial(4), id=6, actions=[
+        {"actionId": "cancel-4", "actionType": "cancelOrder", "blockingType": "HARD"}])
+    # forklift 3 stands paused with its order: then the pause ends
+    paused = session.state_where(3, "forklift-3 paused with its order",
+                                 lambda s: s["orderId"] == "o3" and s["paused"])
+    assert paused["lastNodeId"] == "station-p3" and not paused["driving"]
+    session.master.send(cmd="instantActions", serialNumber=serial(3), id=7, actions=[
+        {"actionId": "resume-3", "actionType": "stopPause", "blockingType": "HARD"}])
+    # forklift 2 reaches its decision point: the horizon is released by a stitched update
+    session.state_where(2, "forklift-2 at its decision point",
+                        lambda s: s["orderId"] == "o2" and s["lastNodeId"] == "stack-s3-1-S")
+    session.send_order(2, order("o2", ["stack-s3-1-S", "station-p2"], update=1,
+                                first_sequence=2), 8)
+
+    for vehicle, order_id in ((1, "o1"), (2, "o2"), (3, "o3")):
+        done = session.processed(vehicle, order_id)
+        assert done["error"] is None and not done["byCancelation"], done
+    cancelled = session.processed(4, "o4")
+    assert cancelled["byCancelation"], cancelled
+
+    assert action_statuses(session, 1) == {"pick": ["WAITING", "RUNNING", "FINISHED"],
+                                           "drop": ["WAITING", "RUNNING", "FINISHED"]}
+    assert action_statuses(session, 2) == {"pick": ["WAITING", "RUNNING", "FINISHED"],
+                                           "drop": ["WAITING", "RUNNING", "FINISHED"]}
+    assert action_statuses(session, 3)["startPause"][-1] == "FINISHED"
+    assert action_statuses(session, 3)["stopPause"][-1] == "FINISHED"
+    assert action_statuses(session, 4)["cancelOrder"][-1] == "FINISHED"
+    loads = session.state_where(1, "forklift-1's drop done", lambda s: any(
+        a["actionType"] == "drop" and a["actionStatus"] == "FINISHED" for a in s["actionStates"]))
+    assert loads["lastNodeId"] == "stack-s1-1-S" and loads["loads"] == []
+    assert session.states(2)[-1]["lastNodeId"] == "station-p2"
+    stopped = session.state_where(4, "forklift-4 stopped", lambda s: s["orderId"] == "o4" and
+                                  not s["nodeStates"] and not s["driving"])
+    assert stopped["lastNodeId"] == "stack-s6-1-W"  # the node it drove to when cancelled
+    assert all(any(s["driving"] for s in session.states(v)) for v in range(1, 5))
+    assert no_trouble(session.master) == []

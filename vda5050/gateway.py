@@ -1,0 +1,460 @@
+"""`fleet vda5050 gateway`: every forklift of a run as a VDA 5050 2.0.0 AGV on MQTT.
+
+For each forklift an MQTT client of its own under interfaceName/v2/manufacturer/forklift-ID/
+(its last will CONNECTIONBROKEN on `connection`, QoS 1, retained; ONLINE when connected,
+OFFLINE on a clean stop; the factsheet retained). It takes the master's `order` and
+`instantActions`, checks each against the official schema, and runs it through the
+forklift's `Execution` (vda5050/execution.py); it talks to the forklifts over zenoh like any
+other process: each released edge goes to the forklift's agent as a task (plan with its own
+planner against the reservation store, commit, drive), the forklift's states say where it
+is, and goods put on or taken off a stack are held in the store. A `state` goes out on every
+event that changes it and at least every --state-interval, a `visualization` every
+--visualization-interval. Every message sent is checked against its schema first.
+
+MQTT and zenoh callbacks only enqueue; one worker thread does the rest in arrival order, and
+the agents' tasks are asked from a few threads of their own, their answers enqueued too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import queue
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
+from dataclasses import dataclass
+from typing import Any
+
+import paho.mqtt.client as mqtt
+import zenoh
+
+from fleet.mission.spec import ClockMode
+from fleet.params import DispatchParams, ManeuverTimes
+from fleet.planning.reservations import Interval
+from fleet.planning.trajectory import FailureReason, Pose
+from fleet.runtime.argtypes import mqtt_host_port
+from fleet.runtime.bus import Requester, RequestFailed, open_session, wait_alive
+from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
+from fleet.runtime.process_configs import GatewayConfig
+from fleet.runtime.tasks import result_from_wire
+from fleet.wire.protocol import (
+    GOODS,
+    ClockTick,
+    ProtocolError,
+    TaskRequest,
+    TaskResult,
+    VehicleState,
+    decode,
+)
+from fleet.wire.topics import Keys, genuine
+from fleet.world.layout import Layout
+from fleet.world.layout_file import load_layout
+from fleet.world.site import planners_for
+from reservation.client import ReservationClient
+from vda5050 import messages
+from vda5050.execution import Execution, Handling, LegRequest
+from vda5050.map import nodes
+from vda5050.orders import Position
+from vda5050.schemas import InvalidMessage, validate
+from vehicle_agent.clock import SimClock, tick_problem
+
+log = logging.getLogger("fleet.vda5050")
+SENDER = "vda5050"  # the gateway's name on the bus
+TASK_TIMEOUT_S = 120.0  # as the dispatcher's: a search is capped far below this
+# Sim seconds between asking for a leg and its start: the agent's search and commit must fit
+# (a plan ready after its start is refused as late). It starts at FIRST_LEAD_S, doubles on a
+# late plan and follows twice the last search's wall time otherwise.
+FIRST_LEAD_S = 2.0
+MIN_LEAD_S, MAX_LEAD_S = 1.0, 30.0
+TASK_THREADS = 4
+WAKE_S = 0.05  # the worker looks at the clock this often when nothing arrives
+MAJOR = "v2"
+
+
+def main(argv=None) -> int:
+    return process_main(GatewayConfig, serve, "fleet vda5050 gateway", argv)
+
+
+@dataclass(frozen=True)
+class _Mqtt:
+    vehicle: int
+    topic: str  # order or instantActions
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class _Connected:
+    vehicle: int
+
+
+@dataclass(frozen=True)
+class _State:
+    vehicle: int
+    state: VehicleState
+    t: float
+
+
+@dataclass(frozen=True)
+class _Planned:
+    vehicle: int
+    leg: LegRequest
+    arrival: float | None
+    why: str
+    wall_s: float = 0.0  # how long the agent took
+    late: bool = False  # the plan was ready only after its start
+
+
+class VehicleLink:
+    """One forklift's MQTT client: its topics, its last will, what it publishes."""
+
+    def __init__(self, config: GatewayConfig, vehicle: int, inbox: queue.Queue) -> None:
+        self.serial = f"forklift-{vehicle}"
+        self.root = f"{config.interface}/{MAJOR}/{config.manufacturer}/{self.serial}"
+        self.headers = messages.Headers(config.manufacturer, self.serial)
+        self.lock = threading.Lock()  # headers count in one order, from the worker alone
+        client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2,
+                             client_id=f"{config.manufacturer}-{self.serial}-{id(self):x}")
+        will = {**self.headers.next("connection", time.time()),
+                "connectionState": "CONNECTIONBROKEN"}
+        client.will_set(f"{self.root}/connection", json.dumps(will), qos=1, retain=True)
+        client.reconnect_delay_set(0.1, 2)
+
+        def on_connect(client, userdata, flags, reason, properties) -> None:
+            if reason.is_failure:
+                log.warning("%s: the broker refused the connection: %s", self.serial, reason)
+                return
+            for topic in ("order", "instantActions"):
+                client.subscribe(f"{self.root}/{topic}", qos=1)
+            inbox.put(_Connected(vehicle))
+
+        def on_message(client, userdata, message) -> None:
+            inbox.put(_Mqtt(vehicle, message.topic.rsplit("/", 1)[-1], bytes(message.payload)))
+
+        client.on_connect, client.on_message = on_connect, on_message
+        host, port = mqtt_host_port(config.mqtt)
+        client.connect_async(host, port, keepalive=10)
+        client.loop_start()
+        self.client = client
+
+    def publish(self, topic: str, body: dict[str, Any], *, qos: int = 0,
+                retain: bool = False) -> mqtt.MQTTMessageInfo | None:
+        """Send a message (its header added); one that fails its schema is our bug: logged,
+        not sent."""
+        message = {**self.headers.next(topic, time.time()), **body}
+        try:
+            validate(topic, message)
+        except InvalidMessage as exc:
+            log.error("%s: not sending an invalid %s: %s", self.serial, topic, exc)
+            return None
+        return self.client.publish(f"{self.root}/{topic}", json.dumps(message), qos=qos,
+                                   retain=retain)
+
+    def close(self) -> None:
+        """OFFLINE, then a clean disconnect (the last will is not sent)."""
+        sent = self.publish("connection", {"connectionState": "OFFLINE"}, qos=1, retain=True)
+        if sent is not None and self.client.is_connected():
+            with contextlib.suppress(RuntimeError, ValueError):  # not connected after all:
+                sent.wait_for_publish(timeout=2.0)  # the will says it
+        self.client.disconnect()
+        self.client.loop_stop()
+
+
+class Gateway:
+    def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout,
+                 config: GatewayConfig) -> None:
+        self.session, self.keys, self.layout, self.config = session, keys, layout, config
+        self.map_id = layout.name
+        self.known = {n.node_id: n for n in nodes(layout)}
+        self.kind = layout.vehicle_kind
+        self.planners = planners_for(layout)
+        self.inbox: queue.Queue = queue.Queue()
+        self.clock = SimClock()
+        self.tasks = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
+        self.reservations = ReservationClient(session, keys, Requester(session, SENDER))
+        self.pool = ThreadPoolExecutor(TASK_THREADS, thread_name_prefix="vda5050-task")
+        self.stopping = threading.Event()
+        self.filled: set = set()  # the stacks holding goods, as the master's picks and drops
+        params = ManeuverTimes()
+        self.cell_mps = {0: 0.0, 1: layout.cell_size / params.T3, 2: layout.cell_size / params.T5}
+        self.vehicles = list(range(1, config.vehicles + 1))
+        if len(layout.vehicle_starts) < config.vehicles:
+            raise ValueError(f"layout {layout.name} parks {len(layout.vehicle_starts)} "
+                             f"forklifts, not {config.vehicles}")
+        dispatch = DispatchParams()
+        handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
+        self.executions: dict[int, Execution] = {}
+        self.motion: dict[int, messages.Motion] = {}
+        for v in self.vehicles:
+            start = layout.vehicle_starts[v - 1]
+            at = self.kind.at_rest(start)
+            ox, oy = layout.origin
+            position = Position(at.x + ox, at.y + oy, at.theta)
+            self.executions[v] = Execution(self.known, start, position, handling, self.filled,
+                                           self._drivable, self._escapes)
+            self.motion[v] = messages.Motion(position, False)
+        self.links: dict[int, VehicleLink] = {}
+        self.lead = dict.fromkeys(self.vehicles, FIRST_LEAD_S)
+        self.due_state = dict.fromkeys(self.vehicles, 0.0)  # monotonic time of the next one
+        self.due_visualization = dict.fromkeys(self.vehicles, 0.0)
+
+    # --- the process -----------------------------------------------------------------------
+
+    def run(self) -> None:
+        with ExitStack() as scope:
+            scope.enter_context(self.session.declare_subscriber(self.keys.clock,
+                                                                self._on_clock))
+            scope.enter_context(self.session.declare_subscriber(
+                self.keys.vehicle_state("*"), self._on_state))
+            self._wait_for_the_fleet()
+            for v in self.vehicles:
+                self.links[v] = VehicleLink(self.config, v, self.inbox)
+            scope.callback(self._close_links)
+            scope.callback(self.pool.shutdown, wait=False, cancel_futures=True)
+            log.info("%d forklifts on MQTT at %s under %s/%s/%s/", len(self.vehicles),
+                     self.config.mqtt, self.config.interface, MAJOR, self.config.manufacturer)
+            self._work()
+
+    def _wait_for_the_fleet(self) -> None:
+        timeout = self.config.startup_timeout_s
+        if not wait_alive(self.session, self.keys.reservation_alive, timeout):
+            raise Stopped(f"no reservation service within {timeout:g} s")
+        for v in self.vehicles:
+            if not wait_alive(self.session, self.keys.vehicle_alive(v), timeout):
+                raise Stopped(f"forklift {v}'s agent was not up within {timeout:g} s")
+        deadline = time.monotonic() + timeout
+        while not self.clock.realtime:
+            if time.monotonic() > deadline:
+                raise Stopped(f"no real-time clock within {timeout:g} s (the dispatcher runs "
+                              "it with --dispatch external --clock realtime)")
+            self.stopping.wait(WAKE_S)
+
+    def _close_links(self) -> None:
+        for link in self.links.values():
+            link.close()
+
+    def stop(self) -> None:
+        self.stopping.set()
+        raise Stopped("stopped by a signal")
+
+    def _work(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                event = self.inbox.get(timeout=WAKE_S)
+            except queue.Empty:
+                event = None
+            now = self.clock.now()
+            if event is not None:
+                self._handle(event, now)
+            for v in self.vehicles:
+                self._step(v, now)
+
+    def _handle(self, event: object, now: float) -> None:
+        match event:
+            case _Mqtt(vehicle, topic, payload):
+                self._from_master(vehicle, topic, payload, now)
+            case _Connected(vehicle):
+                link = self.links[vehicle]
+                link.publish("connection", {"connectionState": "ONLINE"}, qos=1, retain=True)
+                self._publish_factsheet(vehicle)
+                self._publish_state(vehicle)
+            case _State(vehicle, state, t):
+                self._observed(vehicle, state, t)
+            case _Planned(vehicle, leg, arrival, why, wall_s, late):
+                execution = self.executions[vehicle]
+                speed = self.clock.tick.speed if self.clock.tick else 1.0
+                self.lead[vehicle] = min(MAX_LEAD_S, 2 * self.lead[vehicle]) if late else \
+                    max(MIN_LEAD_S, min(MAX_LEAD_S, 2 * wall_s * speed))
+                if arrival is None and why != execution.waiting:
+                    log.info("forklift %d: edge %d to %s not now: %s", vehicle,
+                             leg.sequence_id, leg.goal, why)
+                for message, t in execution.planned(leg, arrival, why, now):
+                    self._instant_actions(vehicle, message, t)
+                self._publish_state(vehicle)
+
+    def _step(self, vehicle: int, now: float) -> None:
+        """What time brings: actions that end or start, the next leg, the periodic messages."""
+        execution = self.executions[vehicle]
+        changed, moved = execution.advance(now)
+        for goods in moved:
+            self._hold_goods(goods)
+        leg = execution.next_leg(now + self.lead[vehicle])
+        if leg is not None:
+            self.pool.submit(self._ask_for_leg, vehicle, leg)
+        wall = time.monotonic()
+        if changed or wall >= self.due_state[vehicle]:
+            self._publish_state(vehicle)
+        if wall >= self.due_visualization[vehicle] and vehicle in self.links:
+            self.due_visualization[vehicle] = wall + self.config.visualization_interval_s
+            self.links[vehicle].publish("visualization", messages.visualization(
+                self.motion[vehicle], self.map_id))
+
+    # --- the master's messages -------------------------------------------------------------
+
+    def _from_master(self, vehicle: int, topic: str, payload: bytes, now: float) -> None:
+        execution = self.executions[vehicle]
+        link = self.links[vehicle]
+        message: Any = None
+        try:
+            message = json.loads(payload)
+            if not isinstance(message, dict):
+                raise InvalidMessage(f"a {topic} message is a JSON object, not "
+                                     f"{type(message).__name__}")
+            validate(topic, message)
+            if message.get("version") != messages.VERSION:
+                raise InvalidMessage(f"version {message.get('version')!r}: this vehicle "
+                                     f"speaks VDA 5050 {messages.VERSION}")
+            if (message.get("manufacturer"), message.get("serialNumber")) != (
+                    self.config.manufacturer, link.serial):
+                raise InvalidMessage(f"addressed to {message.get('manufacturer')}/"
+                                     f"{message.get('serialNumber')}, sent to "
+                                     f"{self.config.manufacturer}/{link.serial}")
+        except (ValueError, InvalidMessage) as exc:  # JSONDecodeError is a ValueError
+            header = message.get("headerId") if isinstance(message, dict) else None
+            log.warning("%s: refused a %s message: %s", link.serial, topic, exc)
+            execution.book.invalid(topic, f"invalid {topic} message: {exc}", header)
+            self._publish_state(vehicle)
+            return
+        if topic == "order":
+            decision = execution.order(message)
+            log.info("%s: order %s/%s %s", link.serial, message["orderId"],
+                     message["orderUpdateId"], decision.outcome)
+            self._publish_state(vehicle)
+        else:
+            self._instant_actions(vehicle, message, now)
+
+    def _instant_actions(self, vehicle: int, message: dict, t: float) -> None:
+        extra = self.executions[vehicle].instant_actions(message, t)
+        if "factsheet" in extra:
+            self._publish_factsheet(vehicle)
+        self._publish_state(vehicle)
+
+    # --- the forklifts ---------------------------------------------------------------------
+
+    def _on_clock(self, sample: zenoh.Sample) -> None:
+        try:
+            envelope = decode(sample.payload.to_bytes())
+        except ProtocolError:
+            return
+        tick = envelope.message
+        if not genuine(str(sample.key_expr), envelope) or not isinstance(tick, ClockTick):
+            return
+        if tick_problem(tick, self.clock.tick) == "" and tick.mode == ClockMode.REALTIME:
+            self.clock.take(tick)
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        try:
+            envelope = decode(sample.payload.to_bytes())
+        except ProtocolError as exc:
+            log.warning("a malformed vehicle state on %s: %s", sample.key_expr, exc)
+            return
+        state = envelope.message
+        if genuine(str(sample.key_expr), envelope) and isinstance(state, VehicleState) and \
+                state.vehicle in self.executions:
+            self.inbox.put(_State(state.vehicle, state, envelope.sim_time))
+
+    def _observed(self, vehicle: int, state: VehicleState, t: float) -> None:
+        try:
+            pose = Pose.parse(state.pose)
+        except ValueError:
+            return
+        position = Position(state.x, state.y, state.theta)
+        driving = bool(state.maneuver) and not self.kind.is_wait(state.maneuver)
+        self.motion[vehicle] = messages.Motion(position, driving,
+                                               self.cell_mps.get(state.speed, 0.0),
+                                               state.battery)
+        execution = self.executions[vehicle]
+        was_driving = execution.moving
+        if execution.observed(pose, position, driving, t) or was_driving != driving:
+            self._publish_state(vehicle)
+
+    def _drivable(self, start: Pose, goal: Pose) -> bool:
+        """Whether a forklift can drive from one pose to another on today's static map (the
+        same part of the floor): the spec's noRouteError otherwise."""
+        planner = self.planners.get(frozenset(self.filled))
+        here, there = planner.component(start), planner.component(goal)
+        return here is not None and here == there
+
+    def _escapes(self, pose: Pose, filled: frozenset) -> bool:
+        """Whether a forklift at `pose` still reaches the stations with `filled` stacks full
+        (goods dropped from inside a cluster can wall the forklift in)."""
+        planner = self.planners.get(filled)
+        here = planner.component(pose)
+        return here is not None and here == planner.component(self.layout.stations[0].dock)
+
+    def _ask_for_leg(self, vehicle: int, leg: LegRequest) -> None:
+        """In a task thread: the agent plans and commits the leg; its answer is enqueued."""
+        request = TaskRequest(self.tasks.next_id(), vehicle, "return", str(leg.start),
+                              leg.t_i, [str(leg.goal)], sorted(self.filled), leg.loaded, 0)
+        started = time.monotonic()
+        try:
+            reply = self.tasks.request(self.keys.vehicle_task(vehicle), request, leg.t_i).message
+            if not isinstance(reply, TaskResult) or reply.task_id != request.task_id:
+                raise ProtocolError(f"forklift {vehicle} answered with {reply}")
+            result = result_from_wire(reply)
+        except (RequestFailed, ProtocolError) as exc:
+            self.inbox.put(_Planned(vehicle, leg, None, f"forklift {vehicle}: {exc}"))
+            return
+        except Exception as exc:  # a bug here must not leave the vehicle waiting forever
+            log.exception("forklift %d: asking for edge %d failed", vehicle, leg.sequence_id)
+            self.inbox.put(_Planned(vehicle, leg, None, f"internal error: {exc}"))
+            return
+        wall_s = time.monotonic() - started
+        if reply.ok:
+            log.info("forklift %d: edge %d to %s committed, arriving at t=%.2f", vehicle,
+                     leg.sequence_id, leg.goal, result.t_end)
+            self.inbox.put(_Planned(vehicle, leg, result.t_end, "", wall_s))
+        else:
+            self.inbox.put(_Planned(vehicle, leg, None, f"no way to {leg.goal} now: "
+                                    f"{reply.failure}: {reply.detail}", wall_s,
+                                    reply.failure == FailureReason.LATE.value))
+
+    def _hold_goods(self, goods) -> None:
+        """The store holds a stack's goods from the instant they are put there, so no plan
+        drives through them; taken off, the stack is free again from then on."""
+        try:
+            if goods.placed:
+                written = self.reservations.commit(GOODS, [Interval(goods.cell, goods.t,
+                                                                    math.inf)])
+            else:
+                written = self.reservations.release(GOODS, goods.t, [goods.cell])
+        except RequestFailed as exc:
+            log.error("the reservation service did not take the goods at %s: %s",
+                      goods.cell, exc)
+            return
+        if not written.ok:
+            log.error("the reservation service refused the goods at %s: %s", goods.cell,
+                      written.reason)
+
+    # --- what goes out ---------------------------------------------------------------------
+
+    def _publish_state(self, vehicle: int) -> None:
+        link = self.links.get(vehicle)
+        if link is None:
+            return
+        execution = self.executions[vehicle]
+        link.publish("state", messages.state(execution.book.state_fields(),
+                                             self.motion[vehicle], self.map_id,
+                                             execution.loaded, execution.information))
+        self.due_state[vehicle] = time.monotonic() + self.config.state_interval_s
+
+    def _publish_factsheet(self, vehicle: int) -> None:
+        self.links[vehicle].publish("factsheet", messages.factsheet(
+            self.kind, self.layout.cell_size, self.config.state_interval_s,
+            self.config.visualization_interval_s), qos=1, retain=True)
+
+
+def serve(config: GatewayConfig) -> int:
+    layout = load_layout(config.layout)
+    keys = Keys(config.bus.run)
+    with open_session(config.bus.config()) as session:
+        gateway = Gateway(session, keys, layout, config)
+        stop_on_signals(gateway.stop)
+        try:
+            gateway.run()
+        except Stopped as exc:
+            log.info("%s", exc)
+    return 0
