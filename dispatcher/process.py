@@ -36,7 +36,7 @@ from fleet.mission.order_work import order_fleet
 from fleet.mission.orders004 import fleet004
 from fleet.mission.record import MissionSummary, digest_of
 from fleet.mission.record004 import tracking_params
-from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.spec import EXTERNAL, ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
 from fleet.runtime.args import engine_options
@@ -140,6 +140,8 @@ def serve(config: DispatcherConfig) -> int:
         scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
         info = mission_info(mission, layout, len(setup.vehicles), config.clock.value,
                             config.speed, config.command)
+        if config.dispatch == "external":  # no mission of ours: a master's orders
+            info = dataclasses.replace(info, kind=EXTERNAL, strategy="vda5050")
         streams = _streams(scope, session, keys)
         scope.enter_context(session.declare_queryable(  # for a recorder that joins late
             keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0))))

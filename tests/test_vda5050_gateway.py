@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -14,10 +15,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import paho.mqtt.client as mqtt
 import pytest
 from master_controller import Master, running_master
 
-from fleet.runtime.mqtt_broker import mosquitto
+from fleet.analysis.analyze import analyze
+from fleet.analysis.report import Report
+from fleet.recording.reader import read_recording
+from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
 from fleet.world.layout_file import load_layout
 from vda5050.map import edge_id, node_position, nodes
 
@@ -46,7 +51,8 @@ def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: in
     def node(k: int, node_id: str) -> Message:
         return {"nodeId": node_id, "sequenceId": first_sequence + 2 * k,
                 "released": k < released,
-                "nodePosition": node_position(NODES[node_id], LAYOUT),
+                **({"nodePosition": node_position(NODES[node_id], LAYOUT)}
+                   if node_id in NODES else {}),
                 "actions": [{"actionId": f"{order_id}-{update}-{kind}-{next(ids)}",
                              "actionType": kind, "blockingType": "HARD"}
                             for kind in actions.get(k, [])]}
@@ -91,20 +97,34 @@ class Session:
         return self.find(what, lambda e: e["event"] == "state" and
                          e["serialNumber"] == serial(vehicle) and match(e["state"]))["state"]
 
+    def end(self) -> Report:
+        """Ctrl-C the session as a user would; the analysis of its recording."""
+        self.run.send_signal(signal.SIGINT)
+        assert self.run.wait(timeout=60) == 0
+        return analyze(read_recording(self.out))
+
     def states(self, vehicle: int) -> list[Message]:
         return [e["state"] for e in self.master.seen
                 if e["event"] == "state" and e["serialNumber"] == serial(vehicle)]
 
 
 @pytest.fixture
-def session(tmp_path) -> Iterator[Session]:
-    with mosquitto(tmp_path / "broker") as url, \
-            running_master(url, tmp_path, MANUFACTURER) as master:
+def broker(tmp_path) -> Iterator[Broker]:
+    broker = start_mosquitto(tmp_path / "broker")
+    try:
+        yield broker
+    finally:
+        stop(broker)
+
+
+@pytest.fixture
+def session(tmp_path, broker) -> Iterator[Session]:
+    with running_master(broker.url, tmp_path, MANUFACTURER) as master:
         out = tmp_path / "run"
         log = (tmp_path / "fleet-run.log").open("wb")
         run = subprocess.Popen([sys.executable, "-m", "fleet", "run", "--layout", LAYOUT,
                                 "--vehicles", str(VEHICLES), "--dispatch", "external",
-                                "--mqtt", url, "--out", str(out)],
+                                "--mqtt", broker.url, "--out", str(out)],
                                stdout=log, stderr=subprocess.STDOUT)
         try:
             online: set[str] = set()
@@ -195,3 +215,156 @@ def test_four_forklifts_take_a_masters_orders(session):
     assert stopped["lastNodeId"] == "stack-s6-1-W"  # the node it drove to when cancelled
     assert all(any(s["driving"] for s in session.states(v)) for v in range(1, 5))
     assert no_trouble(session.master) == []
+    report = session.end()
+    assert report.passed, "\n".join(report.verdict_lines())
+
+
+def test_two_forklifts_sent_to_one_node_take_turns(session):
+    """A master sends two forklifts to the same stack at once: one gets there first, the
+    other waits (its state says what for) and goes once the way is free; the recording shows
+    no two forklifts on one cell at any time."""
+    for vehicle in (1, 2):
+        station = f"station-p{vehicle}"
+        session.send_order(vehicle, order(f"o{vehicle}", [station, "stack-s3-1-S", station]),
+                           vehicle)
+    for vehicle in (1, 2):
+        assert session.processed(vehicle, f"o{vehicle}")["error"] is None
+    waited = [s for v in (1, 2) for s in session.states(v)
+              if any(i["infoType"] == "waitingForTraffic" for i in s.get("information", []))]
+    assert waited, "neither forklift waited"
+    report = session.end()
+    assert report.safe and report.passed, "\n".join(report.verdict_lines())
+
+
+def header(vehicle: int, header_id: int, version: str = "2.0.0") -> Message:
+    return {"headerId": header_id, "timestamp": "2026-12-05T10:00:00.000Z", "version": version,
+            "manufacturer": MANUFACTURER, "serialNumber": serial(vehicle)}
+
+
+@pytest.fixture
+def publisher(session, broker) -> Iterator[Callable[[int, str, bytes], None]]:
+    """A raw MQTT client of the test's own, for what no kept master would send."""
+    client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="raw-test-master")
+    client.connect("127.0.0.1", broker.port)
+    client.loop_start()
+
+    def publish(vehicle: int, topic: str, payload: bytes) -> None:
+        info = client.publish(f"uagv/v2/{MANUFACTURER}/{serial(vehicle)}/{topic}", payload,
+                              qos=1)
+        info.wait_for_publish(timeout=10)
+
+    try:
+        yield publish
+    finally:
+        client.disconnect()
+        client.loop_stop()
+
+
+def test_bad_input_on_every_topic_gets_the_specs_error_and_breaks_nothing(session, publisher):
+    """Each bad message is answered in the vehicle's state with the error the spec names,
+    referring to what was wrong; the order already accepted stays as it was, and afterwards
+    the same forklift, and meanwhile another, still drive their orders."""
+    headers = itertools.count(100)
+
+    def send(topic: str, body: Message | bytes, version: str = "2.0.0") -> None:
+        payload = body if isinstance(body, bytes) else json.dumps(
+            {**header(1, next(headers), version), **body}).encode()
+        publisher(1, topic, payload)
+
+    def error_seen(error_type: str, *refs: tuple[str, str]) -> Message:
+        def has(state: Message) -> bool:
+            return any(e["errorType"] == error_type and all(
+                {"referenceKey": k, "referenceValue": v} in e.get("errorReferences", [])
+                for k, v in refs) for e in state["errors"])
+        state = session.state_where(1, f"a {error_type} {refs}", has)
+        assert state["orderId"] in ("", "o5"), state  # nothing accepted was undone
+        return state
+
+    session.send_order(2, order("o2", ["station-p2", "stack-s4-1-E"]), 1)  # another drives
+
+    send("order", b"{not json")
+    error_seen("validationError", ("topic", "order"))
+    send("order", order("o5", ["station-p1"]), version="1.1.0")
+    error_seen("validationError", ("topic", "order"))
+    send("instantActions", b"[1, 2")
+    error_seen("validationError", ("topic", "instantActions"))
+    send("order", order("o5", ["station-p1", "stack-nowhere"]))
+    error_seen("noRouteError", ("nodeId", "stack-nowhere"))
+    lacking = order("o5", ["station-p1", "stack-s1-1-S"])
+    lacking["nodes"][1]["actions"] = [{"actionId": "a1", "actionType": "charge",
+                                       "blockingType": "HARD"}]
+    send("order", lacking)
+    error_seen("orderError", ("actionType", "charge"))
+
+    send("order", order("o5", ["station-p1"], update=5))  # accepted: nothing to drive
+    session.state_where(1, "o5/5 accepted", lambda s: (s["orderId"], s["orderUpdateId"],
+                                                       s["errors"]) == ("o5", 5, []))
+    send("order", order("o5", ["station-p1"], update=3))
+    error_seen("orderUpdateError", ("orderUpdateId", "3"))
+    other = order("o5", ["station-p1"], update=5)
+    other["nodes"][0]["nodeDescription"] = "something else"
+    send("order", other)
+    error_seen("orderUpdateError", ("orderUpdateId", "5"))
+    send("order", order("o5", ["station-p2", "stack-s1-1-S"], update=6, first_sequence=2))
+    error_seen("orderUpdateError", ("nodeId", "station-p2"))
+    send("instantActions", {"instantActions": [{"actionId": "i9", "actionType": "liftForks",
+                                                "blockingType": "HARD"}]})
+    error_seen("instantActionError", ("actionId", "i9"))
+
+    session.send_order(1, order("o6", ["station-p1", "stack-s3-1-S"]), 2)
+    assert session.processed(1, "o6")["error"] is None
+    assert session.processed(2, "o2")["error"] is None
+    assert no_trouble(session.master) == []
+
+
+def test_the_broker_going_away_and_back_loses_nothing_of_an_order(session, broker, tmp_path):
+    """The broker dies while forklift 1 drives its order and comes back on the same port:
+    every forklift is ONLINE again, and the order goes on to its end as if nothing happened."""
+    session.send_order(1, order("o7", ["station-p1", "stack-s3-1-S", "station-p1"],
+                                actions={0: ["pick"], 1: ["drop"]}), 1)
+    session.find("forklift-1 driving", lambda e: e["event"] == "edgeTraversing"
+                 and e["serialNumber"] == serial(1))
+    before = session.master.seen[-1]["t"]  # the master's own ISO times
+    stop(broker)
+    again = start_mosquitto(tmp_path / "broker-again", broker.port)
+    try:
+        online: set[str] = set()
+        while len(online) < VEHICLES:
+            seen = session.master.expect("every forklift online again", lambda e: e["event"] ==
+                                         "connection" and e["connectionState"] == "ONLINE"
+                                         and e["t"] > before, START_S)
+            online.add(seen["serialNumber"])
+        done = session.master.expect("forklift-1 finishing o7", lambda e: e["event"] ==
+                                     "orderProcessed" and e["orderId"] == "o7", DRIVE_S)
+        assert done["error"] is None, done
+        assert session.state_where(1, "forklift-1 back", lambda s: s["orderId"] == "o7" and
+                                   not s["nodeStates"])["lastNodeId"] == "station-p1"
+    finally:
+        stop(again)
+
+
+def test_a_gateway_that_dies_leaves_its_last_will(session):
+    """The gateway killed outright: the broker sends every forklift's last will,
+    CONNECTIONBROKEN, which the master sees."""
+    gateway = next(pid for pid in children(session.run.pid)
+                   if b"\0vda5050\0gateway\0" in Path(f"/proc/{pid}/cmdline").read_bytes())
+    os.kill(gateway, signal.SIGKILL)
+    broken: set[str] = set()
+    while len(broken) < VEHICLES:
+        seen = session.master.expect("every forklift's last will", lambda e: e["event"] ==
+                                     "connection" and e["connectionState"] ==
+                                     "CONNECTIONBROKEN", START_S)
+        broken.add(seen["serialNumber"])
+
+
+def children(pid: int) -> list[int]:
+    """The processes whose parent is `pid` (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found

@@ -79,7 +79,7 @@ from fleet.analysis.windows import (
 )
 from fleet.mission.driving import state_period
 from fleet.mission.record import MissionSummary, SubtaskRecord
-from fleet.mission.spec import ClockMode, MissionKind
+from fleet.mission.spec import EXTERNAL, ClockMode, MissionKind
 from fleet.params import DispatchParams
 from fleet.recording.format import NS
 from fleet.recording.mission_record import (
@@ -158,7 +158,7 @@ def analyze(recording: Recording) -> Report:
     clusters: dict[str, list[int]] = {}
     for s in layout.stacks:
         clusters.setdefault(s.cluster, []).append(s.index)
-    expected = set(cells)
+    expected = set() if info.kind == EXTERNAL else set(cells)  # a master's, not ours
     fill = info.kind == MissionKind.FILL.value
     params = DispatchParams()  # seed 000's Table 3: the parameters every mission runs with
     where = [Standing(m.vehicle, t, grid_pose(body, m.x, m.y, m.theta)

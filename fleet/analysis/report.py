@@ -19,6 +19,7 @@ from fleet.analysis.shelves import OrdersVerdict
 from fleet.analysis.streams import Gap
 from fleet.analysis.time_use import VehicleStats
 from fleet.analysis.windows import SILENT, NotRecorded, RecorderDown, SegmentRead, Unverified
+from fleet.mission.spec import EXTERNAL
 from fleet.wire.protocol import GOODS
 
 
@@ -188,6 +189,10 @@ class Report:
                 f"{len(self.battery.faults)} faults (bounds, rates, the "
                 f"{self.mission.get('charge_below', 20):g} % rule)"]),
             self._orders_line(mark) if self.orders is not None else
+            f"work               {mark(self.work_done)}: no mission of ours, a VDA 5050 "
+            f"master gave the orders; {len(self.impossible_states)} impossible states"
+            + ("" if self.finished else "; the session did not end cleanly")
+            if self.mission.get("kind") == EXTERNAL else
             f"work               {mark(self.work_done)}: {self.stacks_done} of "
             f"{self.stacks_expected} stacks served"
             + (f" ({self.stacks_announced} announced)"

@@ -9,6 +9,10 @@ from enum import Enum, StrEnum
 from fleet.dispatching.decision import Strategy
 from fleet.planning.trajectory import Pose
 
+# The kind a recording names for a run with no mission of ours (fleet run --dispatch
+# external): a VDA 5050 master gave the orders (docs/vda5050.md).
+EXTERNAL = "external"
+
 
 class MissionKind(Enum):
     FILL = "fill"  # goods picked at stations, delivered to stacks in fill order
