@@ -1,8 +1,9 @@
 """Seed 004 as processes: what one agent process per lifting AGV costs against the in-process
 run, side by side (the same `fleet run` command line with and without --inprocess,
 alternated, each a fresh process, records compared by digest), and whether a large fleet
-keeps real time at speed 1 (no instant of the tracker handled more than 0.3 s after it
-came), with the memory each agent process holds.
+keeps real time at speed 1 (fleet bench runtime's measure: the p99 of how late the
+tracker's instants were handled within 0.1 s; instants more than 0.3 s late are counted
+too), with the memory each agent process holds.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from bench.fleet_scale import _rss_mb
+from bench.fleet_scale import MAX_P99_LATE_S, _rss_mb
 from bench.multiprocess import timed_run
 from fleet.dispatching.decision import Strategy
 from fleet.mission.spec import ClockMode, Mission, MissionKind
@@ -86,9 +87,12 @@ def real_time(vehicles: int, orders: int, speed: float = 1.0,
            "instants": timing["instants"], "late_instants": timing["late"],
            "worst_late_s": round(timing["worst_late_s"], 3),
            "worst_late_at_s": timing["worst_late_at_s"],
+           "lateness_p50_s": timing["lateness_p50_s"],
+           "lateness_p99_s": timing["lateness_p99_s"],
            "rss_per_agent_mb": round(statistics.mean(rss.values()), 1) if rss else None,
            "rss_max_agent_mb": round(max(rss.values()), 1) if rss else None,
-           "keeps_real_time": timing["late"] == 0}
+           # fleet bench runtime's measure: the p99 lateness within 0.1 s
+           "keeps_real_time": timing["lateness_p99_s"] <= MAX_P99_LATE_S}
     if progress:
         progress(f"{vehicles} AGVs at speed {speed:g}: {row}")
     return row

@@ -14,6 +14,7 @@ fleet/recording/rundir.py), so a restarted recorder's segments are of the same r
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import re
@@ -27,6 +28,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.errors import UserError
+from fleet.recording.format import VDA5050_PREFIX
 from fleet.recording.reader import Recorded
 from fleet.recording.rundir import claim_new
 from fleet.recording.segments import RUN_FILE, next_segment
@@ -35,9 +37,12 @@ from fleet.runtime.argtypes import port_problem
 from fleet.runtime.bus import Stream, open_session
 from fleet.runtime.lifecycle import process_main, stop_on_signals
 from fleet.runtime.process_configs import RecorderConfig
+from fleet.vda5050 import TOPICS as VDA_TOPICS
+from fleet.vda5050.schemas import schema_text
 from fleet.wire.protocol import (
     MissionDone,
     MissionInfo,
+    MqttTraffic,
     ProtocolError,
     RecorderStatus,
     decode,
@@ -140,6 +145,8 @@ class Recorder:
         try:
             if isinstance(message, MissionInfo) and not self.writer.described:
                 self._describe(message, log_ns)
+            if isinstance(message, MqttTraffic):
+                self._mqtt_view(message, log_ns, sim_time)
             if isinstance(message, MissionDone):
                 with self.lock:
                     self.done_seen = True
@@ -151,6 +158,21 @@ class Recorder:
                 self._show(self.views.on_message(key, message, sim_time))
         except Exception:  # a view or description failing must not lose the recording
             log.exception("could not show the message on %s", key)
+
+    def _mqtt_view(self, traffic: MqttTraffic, log_ns: int, sim_time: float) -> None:
+        """A VDA 5050 message also as JSON on /vda5050/forklift-N/TOPIC with the official
+        schema, for Foxglove (one that is not a JSON object stays on its raw channel only)."""
+        if traffic.topic not in VDA_TOPICS:
+            return
+        try:
+            if not isinstance(json.loads(traffic.payload), dict):
+                return
+        except ValueError:
+            return
+        with self.lock:
+            self.writer.write_json(f"{VDA5050_PREFIX}forklift-{traffic.vehicle}/{traffic.topic}",
+                                   traffic.payload, f"vda5050.{traffic.topic}",
+                                   schema_text(traffic.topic), log_ns, sim_time)
 
     def _announce(self) -> None:
         """Publish how far the recording is (fleet run waits for the mission's result)."""

@@ -24,7 +24,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("fleet.planning",),
     ("fleet.vehicles",),
     ("fleet.world", "fleet.wire"),
-    ("fleet.dispatching",),
+    ("fleet.dispatching", "fleet.vda5050"),
     ("fleet.mission",),
     ("fleet.views",),
     ("fleet.recording",),

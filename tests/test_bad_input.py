@@ -200,6 +200,18 @@ BAD = [
     ("table --connect quack/host:7447", "the protocol must be one of tcp, udp"),
     ("table --connect-timeout nan", "argument --connect-timeout: 'nan' is not a finite"),
     ("service nosuch", "argument name: invalid choice: 'nosuch'"),
+    # VDA 5050: the external session and the gateway
+    ("run --mqtt tcp://host:1883", "argument --mqtt: 'tcp://host:1883' is not an MQTT broker"),
+    ("run --dispatch external --layout paper004", "--dispatch external: layout paper004 is "
+     "not a forklift layout"),
+    ("run --dispatch external --inprocess", "--dispatch external takes no --inprocess"),
+    ("run --mqtt mqtt://127.0.0.1:1883", "--mqtt is the broker of --dispatch external"),
+    ("vda5050 gateway --layout paper --vehicles 2 --state-interval 31",
+     "argument --state-interval: '31' is more than 30 s"),
+    ("vda5050 gateway --layout paper --vehicles 2 --interface a/b",
+     "argument --interface: 'a/b' is not one MQTT topic level"),
+    ("vda5050 gateway --layout paper --vehicles 9", "layout paper parks 4 forklifts, not 9"),
+    ("bench vda5050 --vehicles 0", "argument --vehicles: '0' must be at least 1"),
     # the compose deployment (refused before docker is asked anything)
     ("compose secrets --out {FILE}", "argument --out: '{FILE}' is a file, not a directory"),
     ("compose up --vehicles 0", "argument --vehicles: '0' must be at least 1"),

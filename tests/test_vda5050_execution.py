@@ -9,10 +9,10 @@ from typing import Any
 
 import pytest
 
+from fleet.vda5050.execution import BLOCKED_RETRY_S, RETRY_S, Execution, GoodsMoved, Handling
+from fleet.vda5050.map import edge_id, nodes
+from fleet.vda5050.orders import Position
 from fleet.world.layout_file import load_layout
-from vda5050.execution import BLOCKED_RETRY_S, RETRY_S, Execution, GoodsMoved, Handling
-from vda5050.map import edge_id, nodes
-from vda5050.orders import Position
 
 NODES = {n.node_id: n for n in nodes(load_layout("paper"))}
 PICK_S, DROP_S = 5.0, 4.0

@@ -22,7 +22,7 @@ from master_controller import DEADLINE, Master, running_master
 
 from fleet.errors import UserError
 from fleet.runtime.mqtt_broker import mosquitto
-from vda5050.schemas import TOPICS, InvalidMessage, validate
+from fleet.vda5050.schemas import TOPICS, InvalidMessage, validate
 
 INTERFACE = "uagv"
 MANUFACTURER = "fleet-test"

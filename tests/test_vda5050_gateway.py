@@ -18,13 +18,14 @@ from typing import Any
 import paho.mqtt.client as mqtt
 import pytest
 from master_controller import Master, running_master
+from mcap.reader import make_reader
 
 from fleet.analysis.analyze import analyze
 from fleet.analysis.report import Report
 from fleet.recording.reader import read_recording
 from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
+from fleet.vda5050.map import edge_id, node_position, nodes
 from fleet.world.layout_file import load_layout
-from vda5050.map import edge_id, node_position, nodes
 
 LAYOUT = "paper"
 VEHICLES = 4
@@ -217,6 +218,18 @@ def test_four_forklifts_take_a_masters_orders(session):
     assert no_trouble(session.master) == []
     report = session.end()
     assert report.passed, "\n".join(report.verdict_lines())
+    assert (report.protocol.orders, report.protocol.received) == (4, 8)  # 5 orders, 3 instant
+    # the MQTT traffic is in the recording as JSON with the official schemas, for Foxglove
+    with open(session.out / "run.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    channels = {c.topic: c for c in summary.channels.values()}
+    for topic in ("state", "order", "instantActions", "connection", "factsheet",
+                  "visualization"):
+        channel = channels[f"/vda5050/forklift-{3 if topic == 'instantActions' else 1}/{topic}"]
+        schema = summary.schemas[channel.schema_id]
+        assert (channel.message_encoding, schema.name, schema.encoding) == (
+            "json", f"vda5050.{topic}", "jsonschema")
+        assert json.loads(schema.data)["title"] == topic
 
 
 def test_two_forklifts_sent_to_one_node_take_turns(session):
@@ -315,6 +328,9 @@ def test_bad_input_on_every_topic_gets_the_specs_error_and_breaks_nothing(sessio
     assert session.processed(1, "o6")["error"] is None
     assert session.processed(2, "o2")["error"] is None
     assert no_trouble(session.master) == []
+    report = session.end()
+    assert report.passed, "\n".join(report.verdict_lines())
+    assert report.protocol.received_refused >= 2  # the two messages that were not JSON
 
 
 def test_the_broker_going_away_and_back_loses_nothing_of_an_order(session, broker, tmp_path):

@@ -8,8 +8,8 @@ import math
 import pytest
 
 from fleet.cli import main
+from fleet.vda5050.map import vda_map
 from fleet.world.layout_file import load_layout
-from vda5050.map import vda_map
 
 
 @pytest.mark.parametrize("name", ["small", "paper"])

@@ -11,9 +11,8 @@ from typing import Any
 
 import pytest
 
-from fleet.world.layout_file import load_layout
-from vda5050.map import STACK, edge_id, nodes, vda_map
-from vda5050.orders import (
+from fleet.vda5050.map import STACK, edge_id, nodes, vda_map
+from fleet.vda5050.orders import (
     FAILED,
     FINISHED,
     INITIALIZING,
@@ -29,7 +28,8 @@ from vda5050.orders import (
     OrderBook,
     Position,
 )
-from vda5050.schemas import validate
+from fleet.vda5050.schemas import validate
+from fleet.world.layout_file import load_layout
 
 Message = dict[str, Any]
 

@@ -18,12 +18,14 @@ the agents' tasks are asked from a few threads of their own, their answers enque
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import math
 import queue
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -32,45 +34,47 @@ from typing import Any
 import paho.mqtt.client as mqtt
 import zenoh
 
+from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
 from fleet.params import DispatchParams, ManeuverTimes
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, Pose
 from fleet.runtime.argtypes import mqtt_host_port
-from fleet.runtime.bus import Requester, RequestFailed, open_session, wait_alive
+from fleet.runtime.bus import Requester, RequestFailed, Stream, open_session, wait_alive
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
 from fleet.runtime.process_configs import GatewayConfig
 from fleet.runtime.tasks import result_from_wire
+from fleet.vda5050 import messages
+from fleet.vda5050.execution import Execution, Handling, LegRequest
+from fleet.vda5050.map import nodes
+from fleet.vda5050.orders import Position
+from fleet.vda5050.schemas import InvalidMessage, validate
 from fleet.wire.protocol import (
     GOODS,
     ClockTick,
+    MqttTraffic,
     ProtocolError,
     TaskRequest,
     TaskResult,
     VehicleState,
     decode,
 )
-from fleet.wire.topics import Keys, genuine
+from fleet.wire.topics import GATEWAY, Keys, genuine
 from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.site import planners_for
 from reservation.client import ReservationClient
-from vda5050 import messages
-from vda5050.execution import Execution, Handling, LegRequest
-from vda5050.map import nodes
-from vda5050.orders import Position
-from vda5050.schemas import InvalidMessage, validate
 from vehicle_agent.clock import SimClock, tick_problem
 
 log = logging.getLogger("fleet.vda5050")
-SENDER = "vda5050"  # the gateway's name on the bus
+SENDER = GATEWAY  # the gateway's name on the bus
 TASK_TIMEOUT_S = 120.0  # as the dispatcher's: a search is capped far below this
 # Sim seconds between asking for a leg and its start: the agent's search and commit must fit
 # (a plan ready after its start is refused as late). It starts at FIRST_LEAD_S, doubles on a
 # late plan and follows twice the last search's wall time otherwise.
 FIRST_LEAD_S = 2.0
 MIN_LEAD_S, MAX_LEAD_S = 1.0, 30.0
-TASK_THREADS = 4
+TASK_THREADS = 16  # agents plan in their own processes: these threads only wait
 WAKE_S = 0.05  # the worker looks at the clock this often when nothing arrives
 MAJOR = "v2"
 
@@ -111,8 +115,10 @@ class _Planned:
 class VehicleLink:
     """One forklift's MQTT client: its topics, its last will, what it publishes."""
 
-    def __init__(self, config: GatewayConfig, vehicle: int, inbox: queue.Queue) -> None:
+    def __init__(self, config: GatewayConfig, vehicle: int, inbox: queue.Queue,
+                 record: Callable[[str, bool, str], None]) -> None:
         self.serial = f"forklift-{vehicle}"
+        self.record = record  # (topic, received, text): the recording's copy
         self.root = f"{config.interface}/{MAJOR}/{config.manufacturer}/{self.serial}"
         self.headers = messages.Headers(config.manufacturer, self.serial)
         self.lock = threading.Lock()  # headers count in one order, from the worker alone
@@ -150,8 +156,9 @@ class VehicleLink:
         except InvalidMessage as exc:
             log.error("%s: not sending an invalid %s: %s", self.serial, topic, exc)
             return None
-        return self.client.publish(f"{self.root}/{topic}", json.dumps(message), qos=qos,
-                                   retain=retain)
+        text = json.dumps(message)
+        self.record(topic, False, text)
+        return self.client.publish(f"{self.root}/{topic}", text, qos=qos, retain=retain)
 
     def close(self) -> None:
         """OFFLINE, then a clean disconnect (the last will is not sent)."""
@@ -181,9 +188,6 @@ class Gateway:
         params = ManeuverTimes()
         self.cell_mps = {0: 0.0, 1: layout.cell_size / params.T3, 2: layout.cell_size / params.T5}
         self.vehicles = list(range(1, config.vehicles + 1))
-        if len(layout.vehicle_starts) < config.vehicles:
-            raise ValueError(f"layout {layout.name} parks {len(layout.vehicle_starts)} "
-                             f"forklifts, not {config.vehicles}")
         dispatch = DispatchParams()
         handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
         self.executions: dict[int, Execution] = {}
@@ -211,7 +215,10 @@ class Gateway:
                 self.keys.vehicle_state("*"), self._on_state))
             self._wait_for_the_fleet()
             for v in self.vehicles:
-                self.links[v] = VehicleLink(self.config, v, self.inbox)
+                stream = scope.enter_context(Stream(self.session, self.keys.vda5050_mqtt(v),
+                                                    SENDER, reliable=True))
+                self.links[v] = VehicleLink(self.config, v, self.inbox,
+                                            functools.partial(self._record, stream, v))
             scope.callback(self._close_links)
             scope.callback(self.pool.shutdown, wait=False, cancel_futures=True)
             log.info("%d forklifts on MQTT at %s under %s/%s/%s/", len(self.vehicles),
@@ -231,6 +238,10 @@ class Gateway:
                 raise Stopped(f"no real-time clock within {timeout:g} s (the dispatcher runs "
                               "it with --dispatch external --clock realtime)")
             self.stopping.wait(WAKE_S)
+
+    def _record(self, stream: Stream, vehicle: int, topic: str, received: bool,
+                text: str) -> None:
+        stream.put(MqttTraffic(vehicle, topic, received, text), self.clock.now())
 
     def _close_links(self) -> None:
         for link in self.links.values():
@@ -297,6 +308,7 @@ class Gateway:
     def _from_master(self, vehicle: int, topic: str, payload: bytes, now: float) -> None:
         execution = self.executions[vehicle]
         link = self.links[vehicle]
+        link.record(topic, True, payload.decode("utf-8", "replace"))
         message: Any = None
         try:
             message = json.loads(payload)
@@ -449,6 +461,10 @@ class Gateway:
 
 def serve(config: GatewayConfig) -> int:
     layout = load_layout(config.layout)
+    nodes(layout)  # a layout without a VDA 5050 map is refused by name, before connecting
+    if len(layout.vehicle_starts) < config.vehicles:
+        raise UserError(f"layout {layout.name} parks {len(layout.vehicle_starts)} forklifts, "
+                        f"not {config.vehicles}")
     keys = Keys(config.bus.run)
     with open_session(config.bus.config()) as session:
         gateway = Gateway(session, keys, layout, config)

@@ -38,6 +38,7 @@ from fleet.analysis.lane_traffic import (
     tracks,
 )
 from fleet.analysis.motion import at_rest, grid_pose, impossible_states
+from fleet.analysis.protocol5050 import protocol_verdict
 from fleet.analysis.report import Report
 from fleet.analysis.safety import (
     Body,
@@ -94,6 +95,7 @@ from fleet.wire.protocol import (
     Halt,
     MissionDone,
     MissionInfo,
+    MqttTraffic,
     Resume,
     StackDone,
     StackReopened,
@@ -237,6 +239,8 @@ def analyze(recording: Recording) -> Report:
         lane_breaches=breaches,
         meetings=met,
         battery=_battery(info, layout, usable),
+        protocol=protocol_verdict(m for _, m in recording.of(MqttTraffic))
+        if info.kind == EXTERNAL else None,
     )
 
 

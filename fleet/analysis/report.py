@@ -14,6 +14,7 @@ from fleet.analysis.battery import BatteryVerdict
 from fleet.analysis.failure_count import FailureCount
 from fleet.analysis.lane_traffic import ExecutedViolation, Meeting
 from fleet.analysis.motion import Impossible
+from fleet.analysis.protocol5050 import ProtocolVerdict
 from fleet.analysis.served import NotServed, OutOfOrder
 from fleet.analysis.shelves import OrdersVerdict
 from fleet.analysis.streams import Gap
@@ -98,6 +99,7 @@ class Report:
     # Seed 002's batteries, from the states' charge (fleet/analysis/battery.py); None: the
     # states carry none.
     battery: BatteryVerdict | None = None
+    protocol: ProtocolVerdict | None = None  # an external session's VDA 5050 traffic
 
     @property
     def safe(self) -> bool:
@@ -132,7 +134,7 @@ class Report:
     @property
     def passed(self) -> bool:
         return (self.safe and self.lanes_kept and self.work_done and self.batteries_kept
-                and self.messages_whole)
+                and self.messages_whole and (self.protocol is None or self.protocol.passed))
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
@@ -151,6 +153,9 @@ class Report:
             faults = self.battery.faults
             data["battery"]["faults"] = len(faults)
             data["battery"]["faults_first"] = [_jsonable(asdict(f)) for f in faults[:20]]
+        if self.protocol is not None:
+            data["protocol"] = {**_jsonable(asdict(self.protocol)),
+                                "passed": self.protocol.passed}
         data.update(safe=self.safe, lanes_kept=self.lanes_kept, work_done=self.work_done,
                     batteries_kept=self.batteries_kept,
                     messages_whole=self.messages_whole, passed=self.passed)
@@ -209,6 +214,8 @@ class Report:
             + ("" if self.finished else "; the mission did not finish"
                + (f" ({self.mission_error})" if self.mission_error
                   else " (no result recorded)")),
+            *([] if self.protocol is None else [
+                self.protocol.line(mark(self.protocol.passed))]),
             f"messages           {mark(self.messages_whole)}: "
             f"{sum(self.messages.values())} recorded, {self.messages_lost} lost, "
             + (f"{self.messages_cut_off} sent while cut off, " if self.messages_cut_off

@@ -93,10 +93,11 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     else:
         timing = done.timing
         kept = [] if not timing else [
-            f"  {'real time':<19}speed {timing['speed']:g}: {timing['late']} of "
-            f"{timing['instants']} instants handled late (the latest by "
-            f"{timing['worst_late_s']:.2f} s"
-            + (f", at {timing['worst_late_at_s']:g} s)" if timing["late"] else ")")]
+            f"  {'real time':<19}speed {timing['speed']:g}: instants handled late by "
+            f"{timing['lateness_p99_s']:.3f} s at p99; {timing['late']} of "
+            f"{timing['instants']} over 0.3 s late"
+            + (f" (the latest by {timing['worst_late_s']:.2f} s, at "
+               f"{timing['worst_late_at_s']:g} s)" if timing["late"] else "")]
         print("\n".join([*report_lines(report), *kept, f"  {'wall time':<19}{wall_s:.1f} s",
                          f"  {'record digest':<19}{done.digest[:16]}",
                          f"  {'recording':<19}{report.path}", *verdict_lines(report),

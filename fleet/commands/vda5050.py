@@ -9,8 +9,8 @@ from fleet.commands.output import write_or_print
 from fleet.errors import UserError
 from fleet.runtime.argtypes import layout_arg, text_file, writable_file
 from fleet.runtime.process_configs import GatewayConfig
+from fleet.vda5050 import TOPICS
 from fleet.world.layout_file import load_layout
-from vda5050 import TOPICS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,7 +60,7 @@ def run_gateway(args: argparse.Namespace) -> int:
 
 
 def run_map(args: argparse.Namespace) -> int:
-    from vda5050.map import vda_map
+    from fleet.vda5050.map import vda_map
 
     found = vda_map(load_layout(args.layout))
     if not write_or_print(json.dumps(found, indent=1) + "\n", args.out):
@@ -71,9 +71,9 @@ def run_map(args: argparse.Namespace) -> int:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from vda5050.map import nodes
-    from vda5050.orders import OrderBook
-    from vda5050.schemas import InvalidMessage, validate
+    from fleet.vda5050.map import nodes
+    from fleet.vda5050.orders import OrderBook
+    from fleet.vda5050.schemas import InvalidMessage, validate
 
     on_map = args.layout is not None and args.topic == "order"
     known = {n.node_id: n for n in nodes(load_layout(args.layout))} if on_map else {}

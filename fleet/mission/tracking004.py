@@ -754,7 +754,7 @@ class Tracker:
                 return
             if around:
                 agv.blocked = frozenset({nxt})
-                if self._replan(agv, "head-on"):
+                if self._replan(agv, Conflict.HEAD_ON.value):
                     return
             if not self._step_aside(agv, other) and not (
                     other.busy_until <= t and (agv.loaded or not other.loaded)

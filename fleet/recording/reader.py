@@ -31,7 +31,7 @@ from fleet.recording.format import (
     NS,
     RUN_METADATA,
     SEGMENT_METADATA,
-    VIEW_PREFIX,
+    VIEW_PREFIXES,
 )
 from fleet.recording.rundir import MARKER, run_id_of
 from fleet.recording.segments import RUN_FILE, run_dir_of, segment_paths
@@ -408,7 +408,7 @@ def _add_message(recording: Recording, channels: dict[int, Channel],
     channel = channels.get(record.channel_id)
     if channel is None:
         return False  # a message whose channel was lost with a torn chunk
-    if channel.topic.startswith(VIEW_PREFIX):
+    if channel.topic.startswith(VIEW_PREFIXES):
         recording.views[channel.topic] = recording.views.get(channel.topic, 0) + 1
         schema = schemas.get(channel.schema_id)
         recording.view_schemas[channel.topic] = schema.name if schema else ""

@@ -149,6 +149,15 @@ class RecordingWriter:
         self._writer.add_message(channel, log_time=log_ns, data=message.encode(),
                                  publish_time=log_ns)
 
+    def write_json(self, topic: str, text: str, schema_name: str, schema: str,
+                   log_ns: int, sim_time: float) -> None:
+        """A JSON message on a channel of its own with its JSON schema (a VDA 5050 message,
+        so Foxglove shows it)."""
+        channel = self._channel(topic, "json", lambda: self._schema(
+            schema_name, "jsonschema", lambda: schema.encode()))
+        self._writer.add_message(channel, log_time=log_ns, data=text.encode(),
+                                 publish_time=_ns(sim_time))
+
     def describe(self, info: MissionInfo) -> None:
         """The run's metadata and its layout attachment, once."""
         if self.described:

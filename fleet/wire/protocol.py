@@ -655,6 +655,19 @@ class AgvEvent(Message):
 
 
 @dataclass(frozen=True)
+class MqttTraffic(Message):
+    """One VDA 5050 message the gateway sent (`received` False) or took from the broker
+    (True) on a forklift's MQTT topic, as it was: the recording's copy of the MQTT traffic
+    (docs/vda5050.md). `payload` is the message's text (bytes that are not UTF-8 replaced)."""
+
+    TYPE: ClassVar[str] = "vda5050.mqtt"
+    vehicle: int
+    topic: str  # order, instantActions, state, visualization, connection, factsheet
+    received: bool
+    payload: str
+
+
+@dataclass(frozen=True)
 class Envelope:
     message: Message
     sender: str
@@ -671,7 +684,7 @@ TYPES: dict[str, type[Message]] = {
                               ResumeRequest, Halt, Resume, StackReopened, ZoneClosed,
                               VehicleFault, InjectFault, StatusRequest, VehicleStatus,
                               VehicleClaim, ClaimReply, CellRequest, CellReply, RouteRequest,
-                              RouteReply, AgvEvent)
+                              RouteReply, AgvEvent, MqttTraffic)
 }
 
 

@@ -36,6 +36,7 @@ from fleet.wire.protocol import (
     MissionDone,
     MissionInfo,
     MissionStopped,
+    MqttTraffic,
     Progress,
     RecorderStatus,
     ReleaseRequest,
@@ -62,6 +63,7 @@ RECORDER = "recorder"
 CLOCK = "clock"  # the dispatcher's clock
 INJECTOR = "injector"  # the fault injector of `fleet run --faults`
 VEHICLE = "vehicle-{vehicle}"  # forklift N's agent, on the keys of forklift N
+GATEWAY = "vda5050"  # the VDA 5050 gateway (fleet run --dispatch external)
 PRINCIPAL = "{principal}"  # whoever the key names (a request key names who asks)
 
 # What a placeholder in a pattern (or a sender) stands for in a concrete key.
@@ -189,6 +191,8 @@ class Keys:
     dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
     dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)
+    # The VDA 5050 gateway: each forklift's MQTT traffic, for the recording.
+    vda5050_mqtt = Topic("vda5050/{vehicle}/mqtt", TopicKind.PUBLICATION, (MqttTraffic,), GATEWAY)
     # The recorder.
     recorder_status = Topic("recorder/status", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
                             (RecorderStatus,), RECORDER)

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any, Final, Literal, Protocol
 
-from vda5050.map import STACK, STATION
-from vda5050.map import Node as MapNode
+from fleet.vda5050.map import STACK, STATION
+from fleet.vda5050.map import Node as MapNode
 
 Message = Mapping[str, Any]
 

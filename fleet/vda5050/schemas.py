@@ -28,7 +28,7 @@ from jsonschema.protocols import Validator
 from jsonschema.validators import validator_for
 
 from fleet.errors import UserError
-from vda5050 import TOPICS
+from fleet.vda5050 import TOPICS
 
 VERSION: Final = "2.0.0"
 
@@ -58,7 +58,7 @@ class InvalidMessage(UserError):
 def schema_text(topic: str) -> str:
     """The schema of `topic` as shipped (for a recording that carries its schemas)."""
     _check_topic(topic)
-    return (files("vda5050") / "schemas" / VERSION / f"{topic}.json").read_text("utf-8")
+    return (files("fleet.vda5050") / "schemas" / VERSION / f"{topic}.json").read_text("utf-8")
 
 
 def validate(topic: str, message: dict[str, Any]) -> None:

@@ -18,9 +18,9 @@ from typing import Any
 
 from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose
-from vda5050.map import STACK
-from vda5050.map import Node as MapNode
-from vda5050.orders import FAILED, FINISHED, RUNNING, Action, Decision, OrderBook, Position
+from fleet.vda5050.map import STACK
+from fleet.vda5050.map import Node as MapNode
+from fleet.vda5050.orders import FAILED, FINISHED, RUNNING, Action, Decision, OrderBook, Position
 
 RETRY_S = 1.0  # sim seconds before a leg the agent could not plan is asked for again
 BLOCKED_RETRY_S = 5.0  # ... when the static map has no way: until goods are taken away

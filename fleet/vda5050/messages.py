@@ -11,8 +11,8 @@ from datetime import UTC, datetime
 from typing import Any
 
 from fleet.params import ManeuverTimes
+from fleet.vda5050.orders import INSTANT_ACTIONS, Position
 from fleet.vehicles.kind import VehicleKind
-from vda5050.orders import INSTANT_ACTIONS, Position
 
 VERSION = "2.0.0"
 
