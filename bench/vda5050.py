@@ -9,8 +9,9 @@ every state:
   `driving` true (the gateway's check, the agent's plan and commit, the first step), p50 and
   p99 over the fleet;
 - states per second held: every state received while the fleet works its orders, over that
-  window;
-- messages lost: the gaps in each forklift's state headerIds (they count up by one).
+  window (states go out on events and every 10 s), and the visualizations (every 0.5 s);
+- messages lost: the gaps in each forklift's state and visualization headerIds (they count
+  up by one).
 """
 
 from __future__ import annotations
@@ -48,10 +49,11 @@ class _Listener:
         self.lock = threading.Lock()
         self.online: set[str] = set()
         self.states: dict[str, list[tuple[float, dict]]] = {}
+        self.visualizations: dict[str, list[tuple[float, int]]] = {}  # (when, headerId)
         self.client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-master")
         root = f"uagv/v2/{manufacturer}/+"
-        self.client.on_connect = lambda c, *_: c.subscribe([(f"{root}/state", 0),
-                                                             (f"{root}/connection", 1)])
+        self.client.on_connect = lambda c, *_: c.subscribe([
+            (f"{root}/state", 0), (f"{root}/visualization", 0), (f"{root}/connection", 1)])
         self.client.on_message = self._on_message
         self.client.connect("127.0.0.1", port)
         self.client.loop_start()
@@ -65,16 +67,22 @@ class _Listener:
                 self.online.add(serial)
             elif topic == "state":
                 self.states.setdefault(serial, []).append((now, body))
+            elif topic == "visualization":
+                self.visualizations.setdefault(serial, []).append((now, body["headerId"]))
 
-    def wait(self, what: str, until: Callable[[], bool], timeout_s: float) -> None:
+    def wait(self, what: str, until: Callable[[], bool], timeout_s: float,
+             fleet: subprocess.Popen, log: Path) -> None:
         deadline = time.monotonic() + timeout_s
         while True:
             with self.lock:
                 if until():
                     return
+            if fleet.poll() is not None:
+                said = log.read_text(errors="replace").strip().splitlines()[-3:]
+                raise UserError(f"waiting for {what}, the fleet run ended (exit "
+                                f"{fleet.returncode}): " + " / ".join(said))
             if time.monotonic() > deadline:
-                raise UserError(f"fleet bench vda5050: {what} within {timeout_s:g} s did not "
-                                "happen")
+                raise UserError(f"{what} did not happen within {timeout_s:g} s")
             time.sleep(0.2)  # a poll of what the MQTT thread collected, not a synchronisation
 
     def close(self) -> None:
@@ -122,7 +130,8 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
         orders = _orders(layout_path, vehicles)
         broker = start_mosquitto(folder / "broker")
         listener = _Listener(broker.port, manufacturer)
-        log = (folder / "fleet-run.log").open("wb")
+        log_path = folder / "fleet-run.log"
+        log = log_path.open("wb")
         fleet = subprocess.Popen([sys.executable, "-m", "fleet", "run", "--layout",
                                   str(layout_path), "--vehicles", str(vehicles), "--dispatch",
                                   "external", "--mqtt", broker.url, "--out",
@@ -132,7 +141,8 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
             say(f"starting {vehicles} forklifts and the gateway")
             started = time.monotonic()
             listener.wait(f"{vehicles} forklifts online",
-                          lambda: len(listener.online) >= vehicles, ONLINE_TIMEOUT_S)
+                          lambda: len(listener.online) >= vehicles, ONLINE_TIMEOUT_S, fleet,
+                          log_path)
             up_s = time.monotonic() - started
             say(f"all online after {up_s:.0f} s; sending {vehicles} orders at once")
             sent: dict[str, float] = {}
@@ -151,7 +161,7 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
                            for _, s in listener.states.get(serial, []))
 
             listener.wait("every order driven", lambda: all(finished(s) for s in sent),
-                          DONE_TIMEOUT_S)
+                          DONE_TIMEOUT_S, fleet, log_path)
             t1 = time.monotonic()
             say(f"every order driven in {t1 - t0:.0f} s")
         finally:
@@ -166,6 +176,7 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
             log.close()
         with listener.lock:
             states = {k: list(v) for k, v in listener.states.items()}
+            shown = {k: list(v) for k, v in listener.visualizations.items()}
     latencies = []
     for serial, t_sent in sent.items():
         first = next((t for t, s in states.get(serial, []) if t >= t_sent and s["driving"]),
@@ -176,13 +187,18 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
     lost = sum(max(0, b["headerId"] - a["headerId"] - 1)
                for series in states.values()
                for (_, a), (_, b) in itertools.pairwise(series))
+    shown_window = [t for series in shown.values() for t, _ in series if t0 <= t <= t1]
+    shown_lost = sum(max(0, b - a - 1) for series in shown.values()
+                     for (_, a), (_, b) in itertools.pairwise(series))
     return {"vehicles": vehicles, "layout": f"generated {shape.cols} x {shape.rows} cells",
             "startup_s": round(up_s, 1), "orders": len(sent), "moved": len(latencies),
             "latency_p50_s": round(statistics.median(latencies), 3) if latencies else None,
             "latency_p99_s": round(_percentile(latencies, 0.99), 3) if latencies else None,
             "window_s": round(t1 - t0, 1), "states": len(window),
             "states_per_s": round(len(window) / (t1 - t0), 1),
-            "states_lost": lost}
+            "states_lost": lost,
+            "visualizations_per_s": round(len(shown_window) / (t1 - t0), 1),
+            "visualizations_lost": shown_lost}
 
 
 def _now() -> str:

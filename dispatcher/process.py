@@ -84,7 +84,7 @@ class MissionSetup:
     config: DispatcherConfig
     mission: Mission
     layout: Layout
-    options: EngineOptions
+    options: EngineOptions | None  # None: --dispatch external runs no engine
     recover: bool
 
     @property
@@ -108,7 +108,9 @@ def serve(config: DispatcherConfig) -> int:
                                           or layout.vehicle_kind.name != "forklift"):
         raise UserError("--dispatch external runs forklifts on the real-time clock: give "
                         "--clock realtime and a forklift layout")
-    options = engine_options(config.mission, layout, config.weights)  # bad weights: at once
+    # bad weights: at once (an external session runs no engine: it needs none)
+    options = engine_options(config.mission, layout, config.weights) \
+        if config.dispatch == "internal" else None
     keys = Keys(config.bus.run)
     marker = config.restart_marker
     restarted = marker is not None and marker.exists()

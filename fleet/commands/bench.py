@@ -442,8 +442,9 @@ def run_vda5050(args: argparse.Namespace) -> int:
         return 0
     print(f"{r['vehicles']} forklifts as VDA 5050 AGVs ({r['layout']}), {r['orders']} orders "
           f"at once: order-to-motion latency p50 {r['latency_p50_s']} s, p99 "
-          f"{r['latency_p99_s']} s ({r['moved']} moved); {r['states_per_s']} states/s held "
-          f"over {r['window_s']} s, {r['states_lost']} lost")
+          f"{r['latency_p99_s']} s ({r['moved']} moved); over {r['window_s']} s "
+          f"{r['states_per_s']} states/s ({r['states_lost']} lost) and "
+          f"{r['visualizations_per_s']} visualizations/s ({r['visualizations_lost']} lost)")
     return 0
 
 
