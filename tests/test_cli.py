@@ -126,6 +126,9 @@ def test_bench_seed004_sets_heat_items_turns_and_fleet_sizes_side_by_side(tmp_pa
     assert (tmp_path / "heat.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     fields = {"completion_s", "head_on", "crossing", "replans", "path_length", "turns"}
     assert fields <= result["heat"]["off"].keys() and fields <= result["heat"]["on"].keys()
+    for variant in ("off", "on"):  # the head-on conflicts' replans are some of the replans
+        assert 0 <= result["heat"][variant]["replans_head_on"] <= \
+            result["heat"][variant]["replans"]
     assert result["heat"]["off"] != result["heat"]["on"]  # the heat cost changed the routes
     assert set(result["items"]) == {"baseline", "recall", "turn", "heap"}
     # The heap finds the same paths as the list: only the time spent planning differs.
@@ -154,7 +157,8 @@ def test_bench_runtime004_compares_processes_with_in_process_and_paces_real_time
     assert side["ratio"] > 0 and side["processes_ms_per_cell"] > 0
     (rt,) = result["real_time"]
     assert rt["vehicles"] == 3 and rt["instants"] > 0 and rt["rss_per_agent_mb"] > 10
-    assert rt["keeps_real_time"] == (rt["late_instants"] == 0)
+    assert 0 <= rt["lateness_p50_s"] <= rt["lateness_p99_s"]
+    assert rt["keeps_real_time"] == (rt["lateness_p99_s"] <= 0.1)  # fleet bench runtime's
 
 
 def test_the_paired_sign_flip_test_is_exact():

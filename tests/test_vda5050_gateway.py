@@ -22,6 +22,7 @@ from mcap.reader import make_reader
 
 from fleet.analysis.analyze import analyze
 from fleet.analysis.report import Report
+from fleet.cli import main
 from fleet.recording.reader import read_recording
 from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
 from fleet.vda5050.map import edge_id, node_position, nodes
@@ -384,3 +385,14 @@ def children(pid: int) -> list[int]:
         if int(fields[1]) == pid:
             found.append(int(stat.parent.name))
     return found
+
+
+def test_bench_vda5050_measures_latency_states_and_losses(capsys):
+    """`fleet bench vda5050` on a small fleet: every forklift moved, the latencies ordered,
+    states and visualizations counted, none lost."""
+    assert main(["bench", "vda5050", "--vehicles", "2", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["orders"] == r["moved"] == 2
+    assert 0 < r["latency_p50_s"] <= r["latency_p99_s"] < DRIVE_S
+    assert r["states"] > 0 and r["visualizations_per_s"] > 0
+    assert r["states_lost"] == r["visualizations_lost"] == 0

@@ -75,7 +75,7 @@ TASK_TIMEOUT_S = 120.0  # as the dispatcher's: a search is capped far below this
 FIRST_LEAD_S = 2.0
 MIN_LEAD_S, MAX_LEAD_S = 1.0, 30.0
 TASK_THREADS = 16  # agents plan in their own processes: these threads only wait
-WAKE_S = 0.05  # the worker looks at the clock this often when nothing arrives
+WAKE_S = 0.05  # every vehicle is looked at this often (actions end, legs fall due)
 MAJOR = "v2"
 
 
@@ -252,18 +252,24 @@ class Gateway:
         raise Stopped("stopped by a signal")
 
     def _work(self) -> None:
+        """Events as they come, each stepping its own vehicle at once; every vehicle stepped
+        at least every WAKE_S (actions end and legs are due with time alone)."""
+        sweep = time.monotonic()
         while not self.stopping.is_set():
             try:
-                event = self.inbox.get(timeout=WAKE_S)
+                event = self.inbox.get(timeout=max(0.0, sweep - time.monotonic()))
             except queue.Empty:
                 event = None
             now = self.clock.now()
             if event is not None:
-                self._handle(event, now)
-            for v in self.vehicles:
-                self._step(v, now)
+                self._step(self._handle(event, now), now)
+            if time.monotonic() >= sweep:
+                for v in self.vehicles:
+                    self._step(v, now)
+                sweep = time.monotonic() + WAKE_S
 
-    def _handle(self, event: object, now: float) -> None:
+    def _handle(self, event: _Mqtt | _Connected | _State | _Planned, now: float) -> int:
+        """Take one event; the vehicle it concerns."""
         match event:
             case _Mqtt(vehicle, topic, payload):
                 self._from_master(vehicle, topic, payload, now)
@@ -285,6 +291,7 @@ class Gateway:
                 for message, t in execution.planned(leg, arrival, why, now):
                     self._instant_actions(vehicle, message, t)
                 self._publish_state(vehicle)
+        return event.vehicle
 
     def _step(self, vehicle: int, now: float) -> None:
         """What time brings: actions that end or start, the next leg, the periodic messages."""

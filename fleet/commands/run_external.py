@@ -6,11 +6,15 @@ as in any run."""
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
+from pathlib import Path
 
+from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
+from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.args import mission_from_args
 from fleet.runtime.bus import free_port
@@ -56,8 +60,24 @@ def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
         outcome = run_processes(spec, on_ready=lambda *_: say(
             "started the router, recorder, reservation service, agents, clock and gateway"))
     except KeyboardInterrupt:
-        say(f"session ended; the recording and logs are in {out}")
-        return 0
+        return _session_summary(out, args.json)
     # only a process that died ends a session by itself
     print(f"fleet run: the session ended: {outcome.error}; logs in {out}", file=sys.stderr)
     return 1
+
+
+def _session_summary(out: Path, as_json: bool) -> int:
+    """What the session's recording says (safety, the VDA 5050 verdict, messages), kept for
+    `fleet runs`; exit 1 if a verdict failed."""
+    from fleet.analysis.analyze import analyze
+
+    report = analyze(read_recording(out))
+    write_summary(out, report)
+    if as_json:
+        print(json.dumps({"dispatch": "external", "out": str(out), **report.to_json()}))
+    else:
+        print("\n".join([f"session on {report.mission['layout']} with "
+                         f"{report.mission['vehicles']} forklifts, ended at "
+                         f"{report.recovered_sim_s:.1f} s of sim time; recording and logs in "
+                         f"{out}", *report.verdict_lines()]))
+    return 0 if report.passed else 1
