@@ -121,7 +121,7 @@ def _percentile(values: list[float], q: float) -> float:
 def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> dict:
     say = progress or (lambda line: None)
     manufacturer = "fleet-emulator"
-    aisles = max(1, math.ceil(vehicles / 8))
+    aisles = max(1, math.ceil(vehicles / 6))  # six parks an aisle at depth 8
     shape = Shape(aisles=aisles, depth=8, lane_depth=5, vehicles=vehicles)
     with tempfile.TemporaryDirectory(prefix="fleet-bench-vda5050-") as tmp:
         folder = Path(tmp)
