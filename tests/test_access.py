@@ -197,7 +197,7 @@ def fleet(tmp_path_factory):
 def test_credentials_and_acl_shape(tmp_path):
     credentials = generate_credentials("r", 2)
     assert set(credentials.logins) == {"dispatcher", "reservation", "recorder", "operator",
-                                       "vehicle-1", "vehicle-2"}
+                                       "vda5050", "vehicle-1", "vehicle-2"}
     passwords = [login.password for login in credentials.logins.values()]
     assert len(set(passwords)) == len(passwords)
     assert all(len(p) >= 32 and ":" not in p for p in passwords)

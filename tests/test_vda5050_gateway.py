@@ -26,6 +26,7 @@ from fleet.cli import main
 from fleet.recording.reader import read_recording
 from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
 from fleet.vda5050.map import edge_id, node_position, nodes
+from fleet.vda5050.schemas import schema_text
 from fleet.world.layout_file import load_layout
 
 LAYOUT = "paper"
@@ -230,7 +231,7 @@ def test_four_forklifts_take_a_masters_orders(session):
         schema = summary.schemas[channel.schema_id]
         assert (channel.message_encoding, schema.name, schema.encoding) == (
             "json", f"vda5050.{topic}", "jsonschema")
-        assert json.loads(schema.data)["title"] == topic
+        assert schema.data.decode() == schema_text(topic)
 
 
 def test_two_forklifts_sent_to_one_node_take_turns(session):

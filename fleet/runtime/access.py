@@ -49,12 +49,12 @@ from pathlib import Path
 import zenoh
 
 from fleet.errors import UserError
-from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_sender
+from fleet.wire.topics import DISPATCHER, GATEWAY, RECORDER, RESERVATION, vehicle_sender
 
 # The principals log in under their sender names (fleet.wire.topics); the operator is the
 # one without a stream of its own name (its fault injector sends as the injector).
 OPERATOR = "operator"
-SERVICES = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
+SERVICES = (DISPATCHER, RESERVATION, RECORDER, OPERATOR, GATEWAY)
 
 # zenoh's names for the messages a rule can govern (`access_control/rules/*/messages`).
 PUBLISH = ("put",)
@@ -156,6 +156,11 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (ASK, [f"{root}/dispatch/mission"]),
             (PUBLISH + SERVE, [f"{root}/recorder/status"]),
             (TOKEN + WATCH, [f"{root}/recorder/alive"])],
+        GATEWAY: [  # the VDA 5050 gateway: a master's orders as tasks, its MQTT traffic
+            (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{GATEWAY}"]),
+            (PUBLISH, [f"{root}/vda5050/**"]),
+            (SUBSCRIBE, [f"{root}/clock", f"{root}/vehicle/*/state"]),
+            (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/*/alive"])],
         OPERATOR: [
             (ASK, [f"{root}/vehicle/*/inject"]),
             (PUBLISH, [f"{root}/clock/ack/injector"]),
