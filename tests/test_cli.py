@@ -216,7 +216,8 @@ def test_train_writes_weights_the_run_can_use(tmp_path, capsys):
     assert main(["train", "--layout", "small", "--cycles", "1", "--lm-steps", "5",
                  "--out", str(weights)]) == 0
     assert "comprehensive" in capsys.readouterr().out
-    assert main(["run", "--layout", "small", "--weights", str(weights)]) == 0
+    assert main(["run", "--layout", "small", "--weights", str(weights),
+                 "--out", str(tmp_path / "run")]) == 0  # not under the repository's runs/
     assert "strategy ann" in capsys.readouterr().out
 
 
