@@ -27,7 +27,6 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from datetime import UTC, datetime
 from pathlib import Path
 
 import paho.mqtt.client as mqtt
@@ -35,6 +34,7 @@ import paho.mqtt.client as mqtt
 from fleet.errors import UserError
 from fleet.runtime.mqtt_broker import start_mosquitto, stop
 from fleet.vda5050.map import STACK, edge_id, node_position, nodes
+from fleet.vda5050.messages import timestamp
 from fleet.world.generator import Shape, generate_toml
 from fleet.world.layout_file import load_layout
 
@@ -148,7 +148,8 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
             sent: dict[str, float] = {}
             for header, (v, order) in enumerate(orders.items()):
                 serial = f"forklift-{v}"
-                message = {"headerId": header, "timestamp": _now(), "version": "2.0.0",
+                message = {"headerId": header, "timestamp": timestamp(time.time()),
+                           "version": "2.0.0",
                            "manufacturer": manufacturer, "serialNumber": serial, **order}
                 sent[serial] = time.monotonic()
                 listener.client.publish(f"uagv/v2/{manufacturer}/{serial}/order",
@@ -199,7 +200,3 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
             "states_lost": lost,
             "visualizations_per_s": round(len(shown_window) / (t1 - t0), 1),
             "visualizations_lost": shown_lost}
-
-
-def _now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")

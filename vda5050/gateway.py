@@ -52,6 +52,7 @@ from fleet.vda5050.schemas import InvalidMessage, validate
 from fleet.wire.protocol import (
     GOODS,
     ClockTick,
+    Envelope,
     MqttTraffic,
     ProtocolError,
     TaskRequest,
@@ -193,12 +194,10 @@ class Gateway:
         self.executions: dict[int, Execution] = {}
         self.motion: dict[int, messages.Motion] = {}
         for v in self.vehicles:
-            start = layout.vehicle_starts[v - 1]
-            at = self.kind.at_rest(start)
-            ox, oy = layout.origin
-            position = Position(at.x + ox, at.y + oy, at.theta)
-            self.executions[v] = Execution(self.known, start, position, handling, self.filled,
-                                           self._drivable, self._escapes)
+            park = self.known[f"park-{v}"]  # where forklift v starts, as the map has it
+            position = Position(park.x, park.y, park.theta)
+            self.executions[v] = Execution(self.known, park.pose, position, handling,
+                                           self.filled, self._drivable, self._escapes)
             self.motion[v] = messages.Motion(position, False)
         self.links: dict[int, VehicleLink] = {}
         self.lead = dict.fromkeys(self.vehicles, FIRST_LEAD_S)
@@ -354,25 +353,16 @@ class Gateway:
     # --- the forklifts ---------------------------------------------------------------------
 
     def _on_clock(self, sample: zenoh.Sample) -> None:
-        try:
-            envelope = decode(sample.payload.to_bytes())
-        except ProtocolError:
-            return
-        tick = envelope.message
-        if not genuine(str(sample.key_expr), envelope) or not isinstance(tick, ClockTick):
-            return
-        if tick_problem(tick, self.clock.tick) == "" and tick.mode == ClockMode.REALTIME:
+        envelope = _believed(sample, ClockTick)
+        tick = envelope.message if envelope is not None else None
+        if tick is not None and tick.mode == ClockMode.REALTIME and \
+                tick_problem(tick, self.clock.tick) == "":
             self.clock.take(tick)
 
     def _on_state(self, sample: zenoh.Sample) -> None:
-        try:
-            envelope = decode(sample.payload.to_bytes())
-        except ProtocolError as exc:
-            log.warning("a malformed vehicle state on %s: %s", sample.key_expr, exc)
-            return
-        state = envelope.message
-        if genuine(str(sample.key_expr), envelope) and isinstance(state, VehicleState) and \
-                state.vehicle in self.executions:
+        envelope = _believed(sample, VehicleState)
+        if envelope is not None and envelope.message.vehicle in self.executions:
+            state = envelope.message
             self.inbox.put(_State(state.vehicle, state, envelope.sim_time))
 
     def _observed(self, vehicle: int, state: VehicleState, t: float) -> None:
@@ -464,6 +454,19 @@ class Gateway:
         self.links[vehicle].publish("factsheet", messages.factsheet(
             self.kind, self.layout.cell_size, self.config.state_interval_s,
             self.config.visualization_interval_s), qos=1, retain=True)
+
+
+def _believed(sample: zenoh.Sample, expected: type) -> Envelope | None:
+    """The sample's envelope if it carries an `expected` message from its key's own sender
+    (anyone could put a forged one); None otherwise, a malformed one logged."""
+    try:
+        envelope = decode(sample.payload.to_bytes())
+    except ProtocolError as exc:
+        log.warning("a malformed message on %s: %s", sample.key_expr, exc)
+        return None
+    if isinstance(envelope.message, expected) and genuine(str(sample.key_expr), envelope):
+        return envelope
+    return None
 
 
 def serve(config: GatewayConfig) -> int:

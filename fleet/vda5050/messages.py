@@ -91,16 +91,21 @@ def agv_position(position: Position, map_id: str) -> dict[str, Any]:
             "positionInitialized": True}
 
 
+def velocity(motion: Motion) -> dict[str, float]:
+    """Along the heading, at the speed level's speed (a forklift does not slide)."""
+    theta = motion.position.theta
+    return {"vx": round(motion.speed_mps * math.cos(theta), 3),
+            "vy": round(motion.speed_mps * math.sin(theta), 3), "omega": 0.0}
+
+
 def state(order_fields: dict[str, Any], motion: Motion, map_id: str,
           loaded: bool, information: list[dict[str, Any]]) -> dict[str, Any]:
     """6.10: the order book's fields and the vehicle's motion, load, battery and safety.
     Always AUTOMATIC, no emergency stop (faults are the emulator's, not the master's)."""
-    theta = motion.position.theta
     out = {
         **order_fields,
         "agvPosition": agv_position(motion.position, map_id),
-        "velocity": {"vx": round(motion.speed_mps * math.cos(theta), 3),
-                     "vy": round(motion.speed_mps * math.sin(theta), 3), "omega": 0.0},
+        "velocity": velocity(motion),
         "driving": motion.driving,
         "loads": [{"loadPosition": "forks"}] if loaded else [],
         "batteryState": {"batteryCharge": 100.0 if motion.battery is None else motion.battery,
@@ -113,7 +118,5 @@ def state(order_fields: dict[str, Any], motion: Motion, map_id: str,
 
 
 def visualization(motion: Motion, map_id: str) -> dict[str, Any]:
-    theta = motion.position.theta
     return {"agvPosition": agv_position(motion.position, map_id),
-            "velocity": {"vx": round(motion.speed_mps * math.cos(theta), 3),
-                         "vy": round(motion.speed_mps * math.sin(theta), 3), "omega": 0.0}}
+            "velocity": velocity(motion)}
