@@ -64,6 +64,8 @@ RUN set -eu; mkdir /dist; \
     fi
 
 # --- the image ---------------------------------------------------------------------------------
+# mosquitto, the broker of a VDA 5050 session, comes with deploy/build-images' base and is
+# installed here on any other.
 # User fleet (uid 1000) owns /data and the mount points of compose.yaml's named volumes: a new
 # named volume takes the owner of its mount point in the image, and root's where the image has
 # none, which the user could not write to.
@@ -79,7 +81,11 @@ RUN set -eu; \
         echo "fleet:x:$UID:" >> /etc/group; \
         mkdir -p /home/fleet; chown "$UID:$UID" /home/fleet; \
     fi; \
-    mkdir -p /data/journal /data/recordings; chown -R "$UID:$UID" /data
+    mkdir -p /data/journal /data/recordings; chown -R "$UID:$UID" /data; \
+    if ! [ -x /usr/sbin/mosquitto ]; then \
+        apt-get update && apt-get install -y --no-install-recommends mosquitto \
+        && rm -rf /var/lib/apt/lists/*; \
+    fi
 COPY --from=deps /opt/fleet /opt/fleet
 COPY --from=project /dist /tmp/dist
 RUN /opt/fleet/bin/pip install --no-cache-dir --disable-pip-version-check --no-index --no-deps \

@@ -9,6 +9,8 @@ commands and reports what it sees as JSON lines.
 
 from __future__ import annotations
 
+import functools
+import itertools
 import json
 import os
 import queue
@@ -24,10 +26,51 @@ from typing import Any
 
 import pytest
 
+from fleet.vda5050.map import Node, edge_id, node_position, nodes
+from fleet.world.layout_file import load_layout
+
 MASTER_DIR = Path(__file__).parent / "vda5050_master"
 DEADLINE = 10.0  # s for any one awaited event; each comes within some 100 ms here
 
 Message = dict[str, Any]
+
+
+@functools.cache
+def map_nodes(layout: str) -> dict[str, Node]:
+    return {n.node_id: n for n in nodes(load_layout(layout))}
+
+
+def serial(vehicle: int) -> str:
+    return f"forklift-{vehicle}"
+
+
+def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: int = 0,
+          actions: dict[int, list[str]] | None = None, released: int | None = None,
+          layout: str = "paper") -> Message:
+    """An order along `path` (node ids of `layout`'s map; an unknown id goes without a
+    position); `actions` by the node's place in the path (pick/drop, HARD), the first
+    `released` nodes in the base (default all)."""
+    known = map_nodes(layout)
+    actions = actions or {}
+    ids = itertools.count()
+    released = len(path) if released is None else released
+
+    def node(k: int, node_id: str) -> Message:
+        return {"nodeId": node_id, "sequenceId": first_sequence + 2 * k,
+                "released": k < released,
+                **({"nodePosition": node_position(known[node_id], layout)}
+                   if node_id in known else {}),
+                "actions": [{"actionId": f"{order_id}-{update}-{kind}-{next(ids)}",
+                             "actionType": kind, "blockingType": "HARD"}
+                            for kind in actions.get(k, [])]}
+
+    def edge(k: int, a: str, b: str) -> Message:
+        return {"edgeId": edge_id(a, b), "sequenceId": first_sequence + 2 * k + 1,
+                "released": k + 1 < released, "startNodeId": a, "endNodeId": b, "actions": []}
+
+    return {"orderId": order_id, "orderUpdateId": update,
+            "nodes": [node(k, n) for k, n in enumerate(path)],
+            "edges": [edge(k, a, b) for k, (a, b) in enumerate(itertools.pairwise(path))]}
 
 
 @dataclass
@@ -79,6 +122,14 @@ class Master:
             + "\n".join(json.dumps(e) for e in self.seen[-20:])
             + f"\nits stderr: {self.stderr.read_text(errors='replace')[-2000:]}"
         )
+
+    def find(self, what: str, match: Callable[[Message], bool], within: float = DEADLINE
+             ) -> Message:
+        """The first event that `match`es, seen already or still to come."""
+        for event in self.seen:
+            if match(event):
+                return event
+        return self.expect(what, match, within)
 
 
 @contextmanager

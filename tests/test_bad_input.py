@@ -206,15 +206,15 @@ BAD = [
      "not a forklift layout"),
     ("run --dispatch external --inprocess", "--dispatch external takes no --inprocess"),
     ("run --mqtt mqtt://127.0.0.1:1883", "--mqtt is the broker of --dispatch external"),
-    ("vda5050 gateway --layout paper --vehicles 2 --state-interval 31",
+    ("vda5050 gateway --state-interval 31",
      "argument --state-interval: '31' is more than 30 s"),
-    ("vda5050 gateway --layout paper --vehicles 2 --interface a/b",
+    ("vda5050 gateway --interface a/b",
      "argument --interface: 'a/b' is not one MQTT topic level"),
-    ("vda5050 gateway --layout paper --vehicles 9", "layout paper parks 4 forklifts, not 9"),
     ("bench vda5050 --vehicles 0", "argument --vehicles: '0' must be at least 1"),
     # the compose deployment (refused before docker is asked anything)
     ("compose secrets --out {FILE}", "argument --out: '{FILE}' is a file, not a directory"),
     ("compose up --vehicles 0", "argument --vehicles: '0' must be at least 1"),
+    ("compose up --dispatch external --orders 3", "--dispatch external takes no --orders"),
     ("compose collect {FILE}", "argument dest: '{FILE}' is a file, not a directory"),
     # commands that are not there
     ("nosuch", "argument COMMAND: invalid choice: 'nosuch'"),

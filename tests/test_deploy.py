@@ -57,7 +57,11 @@ def test_every_setting_comes_from_its_variable():
     ({"FLEET_SEED": "x"}, "FLEET_SEED"), ({"FLEET_SPEED": "-1"}, "FLEET_SPEED"),
     ({"FLEET_SPEED": "nan"}, "FLEET_SPEED"), ({"FLEET_CLOCK": "slow"}, "FLEET_CLOCK"),
     ({"FLEET_STRATEGY": "best"}, "FLEET_STRATEGY"), ({"FLEET_VEHICLES": "0"}, "FLEET_VEHICLES"),
-    ({"FLEET_VEHICLES": "many"}, "FLEET_VEHICLES"), ({"FLEET_MISSION": "x"}, "FLEET_MISSION")])
+    ({"FLEET_VEHICLES": "many"}, "FLEET_VEHICLES"), ({"FLEET_MISSION": "x"}, "FLEET_MISSION"),
+    ({"FLEET_DISPATCH": "vda"}, "FLEET_DISPATCH"), ({"FLEET_MANUFACTURER": "a/b"},
+                                                    "FLEET_MANUFACTURER"),
+    ({"FLEET_DISPATCH": "external", "FLEET_CLOCK": "fast"}, "FLEET_CLOCK=fast"),
+    ({"FLEET_DISPATCH": "external", "FLEET_SECURE": "1"}, "FLEET_SECURE")])
 def test_a_bad_setting_is_an_error_naming_the_variable(env, named):
     with pytest.raises(UserError, match=named):
         config_from_env(env)
@@ -65,7 +69,7 @@ def test_a_bad_setting_is_an_error_naming_the_variable(env, named):
 
 def test_every_service_command_line_parses_as_the_cli_defines_it():
     parser = build_parser()
-    for service in ("router", "reservation", "dispatcher", "vehicle", "recorder"):
+    for service in ("router", "reservation", "dispatcher", "vehicle", "recorder", "gateway"):
         args = parser.parse_args(service_config(service, DeployConfig()).argv())
         assert args.handler is not None
     dispatcher = parser.parse_args(service_config("dispatcher", DeployConfig()).argv())
@@ -75,6 +79,22 @@ def test_every_service_command_line_parses_as_the_cli_defines_it():
     assert vehicle.id is None and vehicle.exit_when_done
     with pytest.raises(UserError, match="unknown service"):
         service_config("forklift", DeployConfig())
+
+
+def test_an_external_session_runs_the_clock_at_speed_1_and_the_gateway_on_the_broker():
+    """FLEET_DISPATCH=external: the dispatcher runs no mission, on the real-time clock at
+    the forklifts' own speed unless told otherwise; the gateway speaks on the broker service
+    under the topics' names the settings give."""
+    config = config_from_env({"FLEET_DISPATCH": "external", "FLEET_MANUFACTURER": "acme",
+                              "FLEET_INTERFACE": "agv"})
+    parser = build_parser()
+    dispatcher = parser.parse_args(service_config("dispatcher", config).argv())
+    assert (dispatcher.dispatch, dispatcher.clock, dispatcher.speed) == (
+        "external", "realtime", 1.0)
+    gateway = parser.parse_args(service_config("gateway", config).argv())
+    assert (gateway.mqtt, gateway.manufacturer, gateway.interface) == (
+        "mqtt://broker:1883", "acme", "agv")
+    assert config_from_env({"FLEET_DISPATCH": "external", "FLEET_SPEED": "5"}).speed == 5.0
 
 
 def test_the_roster_hands_out_the_lowest_free_id_and_the_same_one_again():

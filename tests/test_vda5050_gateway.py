@@ -17,7 +17,7 @@ from typing import Any
 
 import paho.mqtt.client as mqtt
 import pytest
-from master_controller import Master, running_master
+from master_controller import Master, order, running_master, serial
 from mcap.reader import make_reader
 
 from fleet.analysis.analyze import analyze
@@ -25,9 +25,7 @@ from fleet.analysis.report import Report
 from fleet.cli import main
 from fleet.recording.reader import read_recording
 from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
-from fleet.vda5050.map import edge_id, node_position, nodes
 from fleet.vda5050.schemas import schema_text
-from fleet.world.layout_file import load_layout
 
 LAYOUT = "paper"
 VEHICLES = 4
@@ -36,37 +34,6 @@ START_S = 90.0  # the run's processes up and every forklift ONLINE
 DRIVE_S = 120.0  # an order of a few legs driven in real time (a leg takes some 20 s)
 
 Message = dict[str, Any]
-NODES = {n.node_id: n for n in nodes(load_layout(LAYOUT))}
-
-
-def serial(vehicle: int) -> str:
-    return f"forklift-{vehicle}"
-
-
-def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: int = 0,
-          actions: dict[int, list[str]] | None = None, released: int | None = None) -> Message:
-    """An order along `path` (node ids); `actions` by the node's place in the path
-    (pick/drop, HARD), the first `released` nodes in the base (default all)."""
-    actions = actions or {}
-    ids = itertools.count()
-    released = len(path) if released is None else released
-
-    def node(k: int, node_id: str) -> Message:
-        return {"nodeId": node_id, "sequenceId": first_sequence + 2 * k,
-                "released": k < released,
-                **({"nodePosition": node_position(NODES[node_id], LAYOUT)}
-                   if node_id in NODES else {}),
-                "actions": [{"actionId": f"{order_id}-{update}-{kind}-{next(ids)}",
-                             "actionType": kind, "blockingType": "HARD"}
-                            for kind in actions.get(k, [])]}
-
-    def edge(k: int, a: str, b: str) -> Message:
-        return {"edgeId": edge_id(a, b), "sequenceId": first_sequence + 2 * k + 1,
-                "released": k + 1 < released, "startNodeId": a, "endNodeId": b, "actions": []}
-
-    return {"orderId": order_id, "orderUpdateId": update,
-            "nodes": [node(k, n) for k, n in enumerate(path)],
-            "edges": [edge(k, a, b) for k, (a, b) in enumerate(itertools.pairwise(path))]}
 
 
 @dataclass
@@ -84,11 +51,7 @@ class Session:
 
     def find(self, what: str, match: Callable[[Message], bool], within: float = DRIVE_S
              ) -> Message:
-        """The first event of the master's that `match`es, seen already or still to come."""
-        for event in self.master.seen:
-            if match(event):
-                return event
-        return self.master.expect(what, match, within)
+        return self.master.find(what, match, within)
 
     def processed(self, vehicle: int, order_id: str) -> Message:
         return self.find(f"{serial(vehicle)} finishing {order_id}",

@@ -5,7 +5,8 @@ For each forklift an MQTT client of its own under interfaceName/v2/manufacturer/
 OFFLINE on a clean stop; the factsheet retained). It takes the master's `order` and
 `instantActions`, checks each against the official schema, and runs it through the
 forklift's `Execution` (vda5050/execution.py); it talks to the forklifts over zenoh like any
-other process: each released edge goes to the forklift's agent as a task (plan with its own
+other process, and takes the layout and the fleet from the run's dispatcher (which must run
+`--dispatch external`): each released edge goes to the forklift's agent as a task (plan with its own
 planner against the reservation store, commit, drive), the forklift's states say where it
 is, and goods put on or taken off a stack are held in the store. A `state` goes out on every
 event that changes it and at least every --state-interval, a `visualization` every
@@ -35,13 +36,14 @@ import paho.mqtt.client as mqtt
 import zenoh
 
 from fleet.errors import UserError
-from fleet.mission.spec import ClockMode
+from fleet.mission.spec import EXTERNAL, ClockMode
 from fleet.params import DispatchParams, ManeuverTimes
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, Pose
 from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.bus import Requester, RequestFailed, Stream, open_session, wait_alive
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
+from fleet.runtime.mission_info import mission_layout
 from fleet.runtime.process_configs import GatewayConfig
 from fleet.runtime.tasks import result_from_wire
 from fleet.vda5050 import messages
@@ -62,7 +64,6 @@ from fleet.wire.protocol import (
 )
 from fleet.wire.topics import GATEWAY, Keys, genuine
 from fleet.world.layout import Layout
-from fleet.world.layout_file import load_layout
 from fleet.world.site import planners_for
 from reservation.client import ReservationClient
 from vehicle_agent.clock import SimClock, tick_problem
@@ -172,7 +173,7 @@ class VehicleLink:
 
 
 class Gateway:
-    def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout,
+    def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout, vehicles: int,
                  config: GatewayConfig) -> None:
         self.session, self.keys, self.layout, self.config = session, keys, layout, config
         self.map_id = layout.name
@@ -188,7 +189,7 @@ class Gateway:
         self.filled: set = set()  # the stacks holding goods, as the master's picks and drops
         params = ManeuverTimes()
         self.cell_mps = {0: 0.0, 1: layout.cell_size / params.T3, 2: layout.cell_size / params.T5}
-        self.vehicles = list(range(1, config.vehicles + 1))
+        self.vehicles = list(range(1, vehicles + 1))
         dispatch = DispatchParams()
         handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
         self.executions: dict[int, Execution] = {}
@@ -220,6 +221,9 @@ class Gateway:
                                             functools.partial(self._record, stream, v))
             scope.callback(self._close_links)
             scope.callback(self.pool.shutdown, wait=False, cancel_futures=True)
+            # up: a compose health check, and anyone else, can see it
+            scope.enter_context(self.session.liveliness().declare_token(
+                self.keys.vda5050_alive))
             log.info("%d forklifts on MQTT at %s under %s/%s/%s/", len(self.vehicles),
                      self.config.mqtt, self.config.interface, MAJOR, self.config.manufacturer)
             self._work()
@@ -470,14 +474,14 @@ def _believed(sample: zenoh.Sample, expected: type) -> Envelope | None:
 
 
 def serve(config: GatewayConfig) -> int:
-    layout = load_layout(config.layout)
-    nodes(layout)  # a layout without a VDA 5050 map is refused by name, before connecting
-    if len(layout.vehicle_starts) < config.vehicles:
-        raise UserError(f"layout {layout.name} parks {len(layout.vehicle_starts)} forklifts, "
-                        f"not {config.vehicles}")
     keys = Keys(config.bus.run)
     with open_session(config.bus.config()) as session:
-        gateway = Gateway(session, keys, layout, config)
+        info, layout, _ = mission_layout(session, keys, config.startup_timeout_s)
+        if info.kind != EXTERNAL:
+            raise UserError(f"the run's dispatcher runs a {info.kind} mission itself: a master "
+                            "drives a fleet started with --dispatch external")
+        nodes(layout)  # a layout without a VDA 5050 map is refused by name
+        gateway = Gateway(session, keys, layout, info.vehicles, config)
         stop_on_signals(gateway.stop)
         try:
             gateway.run()

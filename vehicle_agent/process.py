@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import time
 from collections.abc import Sequence
 from contextlib import suppress
 
@@ -13,22 +12,18 @@ import zenoh
 from fleet.errors import UserError
 from fleet.mission.battery import battery_of
 from fleet.mission.record004 import tracking_params
-from fleet.planning.trajectory import Pose
 from fleet.runtime.access import read_dictionary
 from fleet.runtime.bus import Requester, RequestFailed, open_session
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
+from fleet.runtime.mission_info import mission_layout
 from fleet.runtime.process_configs import AgentConfig
-from fleet.wire.protocol import ClaimReply, MissionInfo, ProtocolError, VehicleClaim, decode
-from fleet.wire.topics import Keys, genuine, vehicle_sender
-from fleet.world.layout import Layout
-from fleet.world.layout_file import load_layout, parse_layout
+from fleet.wire.protocol import ClaimReply, VehicleClaim
+from fleet.wire.topics import Keys, vehicle_sender
+from fleet.world.layout_file import load_layout
 from vehicle_agent.agent import Agent
 from vehicle_agent.lifting import LiftingAgent
 
 log = logging.getLogger("fleet.agent")
-MISSION_WAIT_S = 120.0  # for the dispatcher to say what the mission is (as it waits for us)
-ASK_TIMEOUT_S = 5.0
-ASK_PERIOD_S = 0.5
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -82,49 +77,6 @@ def serve(config: AgentConfig) -> int:
         with suppress(Stopped):  # a clean stop: the session is closed on the way out
             agent.run(exit_when_done=config.exit_when_done)
     return 0
-
-
-def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSION_WAIT_S
-                   ) -> tuple[MissionInfo, Layout, tuple[Pose, ...]]:
-    """What the dispatcher says the run is (dispatch/mission, as a recorder learns it), the
-    layout its mission runs on and its vehicles' start poses, so every process plans on the
-    very map the dispatcher decides on; asked until it answers."""
-    deadline = time.monotonic() + timeout_s
-    said = False
-    while True:
-        for reply in session.get(keys.dispatch_mission, timeout=ASK_TIMEOUT_S):
-            info = _mission_info(reply)
-            if info is not None:
-                try:
-                    starts = tuple(Pose.parse(p) for p in info.starts)
-                    return info, parse_layout(info.layout_toml, f"the mission's layout "
-                                              f"{info.layout}"), starts
-                except ValueError as exc:  # a LayoutError too
-                    raise UserError(f"the dispatcher's mission: {exc}") from None
-        if time.monotonic() > deadline:
-            raise UserError(f"no dispatcher said what the mission is (on "
-                            f"{keys.dispatch_mission}) within {timeout_s:g} s")
-        if not said:
-            log.info("waiting for the dispatcher to say what the mission is")
-            said = True
-        time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
-
-
-def _mission_info(reply: zenoh.Reply) -> MissionInfo | None:
-    """The run's description in a reply, believed only from the dispatcher."""
-    if reply.ok is None:
-        return None
-    try:
-        envelope = decode(reply.ok.payload.to_bytes())
-    except ProtocolError as exc:
-        log.warning("rejected a reply on %s: %s", reply.ok.key_expr, exc)
-        return None
-    if not (isinstance(envelope.message, MissionInfo) and
-            genuine(str(reply.ok.key_expr), envelope)):
-        log.warning("ignored a %s from %r on %s: only the dispatcher says what the mission "
-                    "is", envelope.message.TYPE, envelope.sender, reply.ok.key_expr)
-        return None
-    return envelope.message
 
 
 def claim(session: zenoh.Session, keys: Keys, name: str, timeout_s: float) -> int:

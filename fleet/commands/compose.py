@@ -47,6 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     up.add_argument("--orders", type=positive_int, metavar="N",
                     help="FLEET_ORDERS: an order mission of N orders (default: $FLEET_ORDERS, "
                     "else 100)")
+    up.add_argument("--dispatch", choices=("internal", "external"), default="internal",
+                    help="external: no mission of ours, the forklifts take a VDA 5050 "
+                    "master's orders on the broker at mqtt://127.0.0.1:1883 (profile vda5050, "
+                    "FLEET_DISPATCH=external) until Ctrl-C (default internal)")
     up.add_argument("--build", action="store_true", help="build the image first")
     up.add_argument("--secure", action="store_true", help="behind the router's access "
                     "control (compose.secure.yaml), with the logins of `fleet compose secrets` "
@@ -110,6 +114,11 @@ def run_up(args: argparse.Namespace) -> int:
         if not (folder / "users").exists():
             write_secrets(folder, force=False)
         files += ["-f", str(args.file.with_name("compose.secure.yaml"))]
+    if args.dispatch == "external":
+        if args.secure or args.orders:
+            raise UserError(f"--dispatch external takes no "
+                            f"{'--secure' if args.secure else '--orders'} (docs/vda5050.md)")
+        files += ["--profile", "vda5050"]
     up = [*compose_command(), "-p", args.project, *files, "up", "--scale",
           f"vehicle={args.vehicles}", *(["--build"] if args.build else [])]
     settings = {"FLEET_VEHICLES": str(args.vehicles)}  # start once all of them claimed
@@ -117,6 +126,8 @@ def run_up(args: argparse.Namespace) -> int:
         settings["FLEET_LAYOUT"] = args.layout
     if args.orders:
         settings["FLEET_ORDERS"] = str(args.orders)
+    if args.dispatch == "external":
+        settings["FLEET_DISPATCH"] = "external"
     print("$ " + " ".join([*(f"{k}={v}" for k, v in settings.items()), *up]), file=sys.stderr)
     # In the foreground: every container's log shows how far it is; the mission's processes
     # exit when it ends, the router last, and `up` returns then.

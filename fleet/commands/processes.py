@@ -16,6 +16,7 @@ from fleet.runtime.process_configs import (
     KINDS,
     AgentConfig,
     DispatcherConfig,
+    GatewayConfig,
     ProcessConfig,
     RecorderConfig,
     ReservationConfig,
@@ -50,12 +51,13 @@ def serve(config: ProcessConfig) -> int:
     from fleet.runtime import router
     from recorder import process as recorder_process
     from reservation import service
+    from vda5050 import gateway
     from vehicle_agent import process as agent_process
 
     servers: dict[type[ProcessConfig], Callable[[Any], int]] = {
         RouterConfig: router.serve, ReservationConfig: service.serve,
         AgentConfig: agent_process.serve, DispatcherConfig: dispatcher_process.serve,
-        RecorderConfig: recorder_process.serve}
+        RecorderConfig: recorder_process.serve, GatewayConfig: gateway.serve}
     setup_logging()
     return servers[type(config)](config)
 

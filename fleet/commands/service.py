@@ -15,6 +15,8 @@ from fleet.commands.processes import serve
 from fleet.runtime.deploy import (
     ACL_FILE,
     MAX_VEHICLES,
+    MOSQUITTO_CONFIG,
+    MQTT_PORT,
     ROUTER_PORT,
     SECRETS,
     SERVICES,
@@ -23,6 +25,7 @@ from fleet.runtime.deploy import (
     password_file,
     service_config,
 )
+from fleet.runtime.mqtt_broker import mosquitto_binary, mosquitto_config
 
 HEALTH_TIMEOUT_S = 3.0
 
@@ -34,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "the service's process, set up from FLEET_* environment variables "
                        "(fleet/runtime/deploy.py, docs/deployment.md); --health is the container's "
                        "health check.")
-    p.add_argument("name", choices=SERVICES, help="the service")
+    p.add_argument("name", choices=SERVICES, help="the service (broker: the MQTT broker of a "
+                   "VDA 5050 session, mosquitto)")
     p.add_argument("--health", action="store_true",
                    help="check that the service is up (exit 0) instead of running it")
     p.add_argument("--print", action="store_true",
@@ -44,6 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_service(args: argparse.Namespace) -> int:
     config = config_from_env(os.environ)
+    if args.name == "broker":
+        return run_broker(args)
     process = service_config(args.name, config)
     if args.print:
         print(shlex.join(["fleet", *process.argv()]))
@@ -61,15 +67,33 @@ def run_service(args: argparse.Namespace) -> int:
     return serve(process)
 
 
+def run_broker(args: argparse.Namespace) -> int:
+    """mosquitto on every interface of the container, in place of this process (so the
+    container's init signals it directly)."""
+    command = [mosquitto_binary(), "-c", MOSQUITTO_CONFIG]
+    if args.print:
+        print(shlex.join(command))
+        return 0
+    if args.health:
+        return 0 if _listening(MQTT_PORT) else 1
+    Path(MOSQUITTO_CONFIG).parent.mkdir(parents=True, exist_ok=True)
+    Path(MOSQUITTO_CONFIG).write_text(mosquitto_config(MQTT_PORT, "0.0.0.0"))
+    os.execv(command[0], command)
+
+
+def _listening(port: int) -> bool:
+    try:
+        with socket.create_connection(("127.0.0.1", port), HEALTH_TIMEOUT_S):
+            return True
+    except OSError:
+        return False
+
+
 def healthy(name: str, config) -> bool:
     """The router takes connections; any other service's liveliness token is on the bus (a
     forklift's once it has claimed its id)."""
     if name == "router":
-        try:
-            with socket.create_connection(("127.0.0.1", ROUTER_PORT), HEALTH_TIMEOUT_S):
-                return True
-        except OSError:
-            return False
+        return _listening(ROUTER_PORT)
     from fleet.runtime.access import read_dictionary
     from fleet.runtime.bus import BusConfig, open_session, wait_alive
     from fleet.wire.topics import Keys, vehicle_sender
@@ -87,7 +111,7 @@ def healthy(name: str, config) -> bool:
             password = read_dictionary(Path(SECRETS / "fleet_vehicle_logins"))[user]
     else:
         token = {"reservation": keys.reservation_alive, "dispatcher": keys.dispatcher_alive,
-                 "recorder": keys.recorder_alive}[name]
+                 "recorder": keys.recorder_alive, "gateway": keys.vda5050_alive}[name]
         if config.secure:
             user, password = name, Path(password_file(name)).read_text().strip()
     try:

@@ -52,10 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_gateway(args: argparse.Namespace) -> int:
-    from fleet.runtime.lifecycle import setup_logging
-    from vda5050.gateway import serve
+    from fleet.commands.processes import serve
 
-    setup_logging()
     return serve(GatewayConfig.from_args(args))
 
 

@@ -157,8 +157,10 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (PUBLISH + SERVE, [f"{root}/recorder/status"]),
             (TOKEN + WATCH, [f"{root}/recorder/alive"])],
         GATEWAY: [  # the VDA 5050 gateway: a master's orders as tasks, its MQTT traffic
-            (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{GATEWAY}"]),
+            (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{GATEWAY}",
+                   f"{root}/dispatch/mission"]),
             (PUBLISH, [f"{root}/vda5050/**"]),
+            (TOKEN, [f"{root}/vda5050/alive"]),
             (SUBSCRIBE, [f"{root}/clock", f"{root}/vehicle/*/state"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/*/alive"])],
         OPERATOR: [

@@ -6,6 +6,7 @@ its layout, reads the layout (a lane layout's runs order missions)."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 from collections.abc import Mapping
@@ -18,9 +19,12 @@ from fleet.mission.order_work import DEFAULT_ORDERS
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
 from fleet.runtime.args import BusFlags
+from fleet.runtime.argtypes import topic_level
 from fleet.runtime.process_configs import (
+    DISPATCH_MODES,
     AgentConfig,
     DispatcherConfig,
+    GatewayConfig,
     ProcessConfig,
     RecorderConfig,
     ReservationConfig,
@@ -29,10 +33,14 @@ from fleet.runtime.process_configs import (
 from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
 from fleet.world.layout_file import load_layout
 
-SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder")
+# The processes of the emulator, then the MQTT broker of an external session (mosquitto)
+FLEET_SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder", "gateway")
+SERVICES = (*FLEET_SERVICES, "broker")
 SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
 ROUTER_PORT = 7447
 FOXGLOVE_PORT = 8765
+MQTT_PORT = 1883
+MOSQUITTO_CONFIG = "/tmp/fleet/mosquitto.conf"
 
 
 @dataclass(frozen=True)
@@ -50,10 +58,20 @@ class DeployConfig:
     gather_s: float = 5.0  # "auto" fleets: start once no forklift has claimed for this long
     router: str = "router"  # the router's host name (its compose service)
     secure: bool = False  # access control; the logins come from compose secrets
+    # VDA 5050 (docs/vda5050.md): "external" runs no mission of ours, the forklifts take a
+    # master's orders through the gateway (the compose profile vda5050 adds it and the broker)
+    dispatch: str = "internal"
+    broker: str = "broker"  # the MQTT broker's host name (its compose service)
+    interface: str = GatewayConfig.interface
+    manufacturer: str = GatewayConfig.manufacturer
 
     @property
     def endpoint(self) -> str:
         return f"tcp/{self.router}:{ROUTER_PORT}"
+
+    @property
+    def mqtt(self) -> str:
+        return f"mqtt://{self.broker}:{MQTT_PORT}"
 
 
 ENV = {f.name: "FLEET_" + f.name.upper() for f in dataclasses.fields(DeployConfig)}
@@ -78,6 +96,9 @@ def config_from_env(env: Mapping[str, str]) -> DeployConfig:
         if not text:
             continue
         values[f.name] = _parse(f.name, text, f.default)
+    if values.get("dispatch") == "external":  # a master's forklifts drive in real time,
+        values.setdefault("clock", ClockMode.REALTIME.value)  # at their own speed
+        values.setdefault("speed", 1.0)
     config = DeployConfig(**values)
     _check(config)
     return config
@@ -106,7 +127,7 @@ def _parse(name: str, text: str, default: object) -> object:
 
 
 def _check(config: DeployConfig) -> None:
-    choices = {"mission": [k.value for k in MissionKind],
+    choices = {"mission": [k.value for k in MissionKind], "dispatch": list(DISPATCH_MODES),
                "strategy": [s.value for s in Strategy], "clock": [m.value for m in ClockMode]}
     for name, allowed in choices.items():
         if name in ("mission", "strategy") and getattr(config, name) == "":
@@ -119,12 +140,23 @@ def _check(config: DeployConfig) -> None:
         raise UserError(f"FLEET_VEHICLES={config.vehicles!r}: 'auto' or a fleet size")
     if config.orders < 0:
         raise UserError(f"FLEET_ORDERS={config.orders}: a number of orders, 1 or more")
+    if config.dispatch == "external" and config.clock != ClockMode.REALTIME.value:
+        raise UserError(f"FLEET_CLOCK={config.clock}: FLEET_DISPATCH=external drives the "
+                        "forklifts on the real-time clock (leave FLEET_CLOCK unset)")
+    if config.dispatch == "external" and config.secure:
+        raise UserError("FLEET_DISPATCH=external does not run behind access control yet "
+                        "(FLEET_SECURE; docs/vda5050.md)")
+    for name in ("interface", "manufacturer"):
+        try:
+            topic_level(getattr(config, name))
+        except argparse.ArgumentTypeError as exc:
+            raise UserError(f"{ENV[name]}: {exc}") from None
 
 
 def service_config(service: str, config: DeployConfig) -> ProcessConfig:
     """The config of one service's process."""
-    if service not in SERVICES:
-        raise UserError(f"unknown service {service!r}: one of {', '.join(SERVICES)}")
+    if service not in FLEET_SERVICES:
+        raise UserError(f"unknown service {service!r}: one of {', '.join(FLEET_SERVICES)}")
     if service == "router":
         secure = {"acl": Path(ACL_FILE), "users": Path(SECRETS / "fleet_users")} \
             if config.secure else {}
@@ -139,13 +171,18 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
         return RecorderConfig(_bus(config, service), out_dir=Path(RECORDINGS),
                               exit_when_done=True, foxglove=FOXGLOVE_PORT,
                               foxglove_host="0.0.0.0")
+    if service == "gateway":
+        return GatewayConfig(_bus(config, ""), config.mqtt, config.interface,
+                             config.manufacturer)
     mission = dispatcher_mission(config)
     return DispatcherConfig(
         _bus(config, service), mission, clock=ClockMode(config.clock), speed=config.speed,
         command=f"docker compose (FLEET_LAYOUT={config.layout} "
         f"FLEET_STRATEGY={mission.strategy.value} FLEET_SEED={config.seed}"
-        + (f" FLEET_ORDERS={mission.orders}" if mission.orders else "") + ")",
+        + (f" FLEET_ORDERS={mission.orders}" if mission.orders else "")
+        + (" FLEET_DISPATCH=external" if config.dispatch == "external" else "") + ")",
         recorded=True, exit_when_done=True, claims=True, gather_s=config.gather_s,
+        dispatch=config.dispatch,
         restart_marker=Path(RESTART_MARKER),
         journal=Path(WORK_JOURNAL) if mission.kind is MissionKind.ORDERS else None)
 

@@ -189,7 +189,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         if kind == "dispatcher":  # a restart picks the mission up where it was
             return dispatcher_config(spec, bus(DISPATCHER), recover=again)
         if kind == "vda5050":
-            return GatewayConfig(bus("vda5050"), spec.mission.layout, spec.vehicles, spec.mqtt)
+            return GatewayConfig(bus("vda5050"), spec.mqtt)
         raise RunFailed(f"cannot restart a {kind} process")
 
     def args_of(kind: str, again: bool = False) -> list[str]:

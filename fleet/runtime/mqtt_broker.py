@@ -1,6 +1,7 @@
 """A real MQTT broker: Debian's mosquitto, started as a child process on a free port of
 127.0.0.1 and stopped afterwards (by `fleet run --dispatch external` when no --mqtt is given,
-and by the tests).
+and by the tests); the compose deployment's broker service runs it with the same settings
+(`mosquitto_config`).
 
     with mosquitto(tmp_path) as url:   # "mqtt://127.0.0.1:PORT"
         ...
@@ -74,14 +75,7 @@ def start_mosquitto(directory: Path, port: int | None = None) -> Broker:
     for attempt in range(1 if port else ATTEMPTS):
         port = port or _free_port()
         config = directory / f"mosquitto-{attempt}.conf"
-        config.write_text(
-            f"listener {port} {HOST}\n"
-            "allow_anonymous true\n"
-            "persistence false\n"
-            # to stderr, which is our file: mosquitto may drop root to its own user
-            "log_dest stderr\n"
-            "log_type error\nlog_type warning\nlog_type notice\nlog_type information\n"
-        )
+        config.write_text(mosquitto_config(port, HOST))
         log = directory / f"mosquitto-{attempt}.log"
         with log.open("wb") as out:
             process = subprocess.Popen(
@@ -94,6 +88,17 @@ def start_mosquitto(directory: Path, port: int | None = None) -> Broker:
         stop(broker)
         failures.append(f"port {port}: {log.read_text(errors='replace').strip() or 'no log'}")
     raise RuntimeError(f"mosquitto did not start ({binary}):\n" + "\n".join(failures))
+
+
+def mosquitto_config(port: int, host: str) -> str:
+    """Anonymous, no persistence (a session's retained messages live as long as its broker),
+    the log on stderr (a file of ours, or the container's log: mosquitto may drop root to
+    its own user and could not open one)."""
+    return (f"listener {port} {host}\n"
+            "allow_anonymous true\n"
+            "persistence false\n"
+            "log_dest stderr\n"
+            "log_type error\nlog_type warning\nlog_type notice\nlog_type information\n")
 
 
 def stop(broker: Broker) -> None:

@@ -29,7 +29,6 @@ from fleet.runtime.argtypes import (
     port,
     pose,
     positive_float,
-    positive_int,
     scenario_arg,
     state_interval,
     topic_level,
@@ -392,12 +391,11 @@ class GatewayConfig(ProcessConfig):
     DESCRIPTION = ("Run the VDA 5050 gateway: every forklift of the run as a VDA 5050 2.0.0 "
                    "AGV on MQTT (its connection with a last will, factsheet, state and "
                    "visualization), taking a master's orders and instant actions and having "
-                   "each released edge planned and committed by the forklift's agent "
-                   "(docs/vda5050.md).")
+                   "each released edge planned and committed by the forklift's agent; the "
+                   "layout and the fleet are those of the run's dispatcher, started with "
+                   "--dispatch external (docs/vda5050.md).")
 
-    bus: BusFlags
-    layout: str
-    vehicles: int
+    bus: BusFlags  # the layout and the fleet: the run's dispatcher says (dispatch/mission)
     mqtt: str = "mqtt://127.0.0.1:1883"
     interface: str = "uagv"
     manufacturer: str = "fleet-emulator"
@@ -408,10 +406,6 @@ class GatewayConfig(ProcessConfig):
     @classmethod
     def add_arguments(cls, p: argparse.ArgumentParser) -> None:
         add_bus_arguments(p)
-        p.add_argument("--layout", type=layout_arg, required=True,
-                       help="the forklift layout the fleet runs on (its map: fleet vda5050 map)")
-        p.add_argument("--vehicles", type=positive_int, required=True,
-                       help="the forklifts 1..N of the run, each an AGV of its own")
         p.add_argument("--mqtt", type=mqtt_url, default=cls.mqtt, metavar="URL",
                        help=f"the MQTT broker, mqtt://HOST[:PORT] (default {cls.mqtt})")
         p.add_argument("--interface", type=topic_level, default=cls.interface,
@@ -432,14 +426,13 @@ class GatewayConfig(ProcessConfig):
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> GatewayConfig:
-        return cls(BusFlags.from_args(args), args.layout, args.vehicles, args.mqtt,
+        return cls(BusFlags.from_args(args), args.mqtt,
                    args.interface, args.manufacturer, args.state_interval,
                    args.visualization_interval, args.startup_timeout)
 
     def argv(self) -> list[str]:
         g = GatewayConfig
-        return [self.COMMAND, "gateway", *self.bus.argv(), "--layout", self.layout,
-                "--vehicles", str(self.vehicles), *_flag("--mqtt", self.mqtt, g.mqtt),
+        return [self.COMMAND, "gateway", *self.bus.argv(), *_flag("--mqtt", self.mqtt, g.mqtt),
                 *_flag("--interface", self.interface, g.interface),
                 *_flag("--manufacturer", self.manufacturer, g.manufacturer),
                 *_flag("--state-interval", self.state_interval_s, g.state_interval_s),
