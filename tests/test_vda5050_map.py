@@ -71,6 +71,38 @@ def test_the_command_writes_the_map_and_refuses_what_it_cannot(tmp_path, capsys)
     assert "paper002 is not a forklift layout" in err and "Traceback" not in err
 
 
+def test_the_map_as_a_lif_file_reads_back_with_every_node_edge_and_work_place(tmp_path, capsys):
+    """`--lif`: one LIF layout named after the layout, read back by the LIF library's own
+    parser: the map's nodes at their positions and headings (pick and drop where forklifts
+    work), its edges, a station for each station and each stack with its sides as
+    interaction nodes."""
+    from vdma_lif.parser import LIFParser
+
+    out = tmp_path / "small.lif.json"
+    assert main(["vda5050", "map", "small", "--lif", "--out", str(out)]) == 0
+    assert "LIF 1.0.0 layout small, 70 nodes" in capsys.readouterr().out
+    (layout,) = LIFParser.from_file(str(out)).layouts
+    found = vda_map(load_layout("small"))
+    assert layout.layout_id == "small"
+    by_id = {n.node_id: n for n in layout.nodes}
+    assert by_id.keys() == {n["nodeId"] for n in found["nodes"]}
+    for n in found["nodes"]:
+        lif = by_id[n["nodeId"]]
+        (props,) = lif.vehicle_type_node_properties
+        position = n["nodePosition"]
+        assert (lif.node_position.x, lif.node_position.y, props.theta, lif.map_id) == (
+            position["x"], position["y"], position["theta"], "small")
+        assert [a.action_type for a in props.actions or []] == (
+            [] if n["place"] == "park" else ["pick", "drop"])
+    assert {(e.edge_id, e.start_node_id, e.end_node_id) for e in layout.edges} == {
+        (e["edgeId"], e["startNodeId"], e["endNodeId"]) for e in found["edges"]}
+    sides = {}
+    for n in found["nodes"]:
+        if n["place"] != "park":
+            sides.setdefault(f"{n['place']}-{n['of']}", set()).add(n["nodeId"])
+    assert {s.station_id: set(s.interaction_node_ids) for s in layout.stations} == sides
+
+
 def _order(layout: str) -> dict:
     """A two-edge order on the layout's map: from the first park to a station to pick, then
     to a stack to drop."""

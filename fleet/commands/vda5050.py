@@ -29,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     export.add_argument("layout", type=layout_arg, help="built-in layout name or TOML file")
     export.add_argument("--out", type=writable_file, metavar="FILE",
                         help="write here (default: print to stdout)")
+    export.add_argument("--lif", action="store_true",
+                        help="as a VDMA LIF file (Layout Interchange Format) instead, for a "
+                        "master control that imports layouts")
     export.set_defaults(handler=run_map)
     check = which.add_parser("check", help="check a VDA 5050 message against the official "
                              "schema, and an order against a layout's map",
@@ -60,11 +63,28 @@ def run_gateway(args: argparse.Namespace) -> int:
 def run_map(args: argparse.Namespace) -> int:
     from fleet.vda5050.map import vda_map
 
+    if args.lif:
+        return run_lif(args)
     found = vda_map(load_layout(args.layout))
     if not write_or_print(json.dumps(found, indent=1) + "\n", args.out):
         return 0
     print(f"wrote {args.out}: map {found['mapId']}, {len(found['nodes'])} nodes, "
           f"{len(found['edges'])} edges")
+    return 0
+
+
+def run_lif(args: argparse.Namespace) -> int:
+    from vdma_lif.parser import LIFParser
+
+    from fleet.vda5050.lif import lif_collection
+
+    collection = lif_collection(load_layout(args.layout))
+    if not write_or_print(LIFParser.to_json(collection, indent=1) + "\n", args.out):
+        return 0
+    (layout,) = collection.layouts
+    print(f"wrote {args.out}: LIF {collection.meta_information.lif_version} layout "
+          f"{layout.layout_id}, {len(layout.nodes)} nodes, {len(layout.edges)} edges, "
+          f"{len(layout.stations)} stations")
     return 0
 
 
