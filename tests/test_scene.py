@@ -25,7 +25,7 @@ from fleet.recording.writer import RecordingWriter
 from fleet.views.palette import GOODS_COLOR, forklift_color
 from fleet.views.plots import gantt, snapshot
 from fleet.views.scene import FRAME, HORIZON_S, SceneViews
-from fleet.wire.protocol import Progress, StackDone, VehicleState, WireChange
+from fleet.wire.protocol import GOODS, Progress, StackDone, VehicleState, WireChange
 from fleet.world.layout_file import load_layout
 from recorder.live import LiveView
 
@@ -138,6 +138,23 @@ def test_stack_done_puts_goods_on_the_stack_or_takes_them(paper):
     assert fill.on_message("k", StackDone("nowhere", 1, 2, 1.0), 1.0) == []
     with pytest.raises(ValueError, match="kind"):
         SceneViews(paper, BASE, kind="refill")
+
+
+def test_an_outside_masters_goods_are_those_the_store_holds(paper):
+    """A session of an outside master's (kind external) has no StackDone: its goods are the
+    store's GOODS, put down by a drop's commit and taken by a pick's release; a mission's
+    goods reservations (made ahead, when a delivery is decided) draw nothing."""
+    a, b = paper.stacks[3].cell, paper.stacks[8].cell
+    session = SceneViews(paper, BASE, kind="external")
+    assert cells_of(paper, entity(session.start(), "/view/goods")) == set()
+    put = WireChange(1, "commit", GOODS, [(*a, 20.0, math.inf)])
+    views = session.on_message("k", put, 20.0)
+    assert [ns for _, _, ns in views] == [BASE + 20_000_000_000]
+    assert cells_of(paper, entity(views, "/view/goods")) == {a}
+    session.on_message("k", WireChange(2, "commit", GOODS, [(*b, 30.0, math.inf)]), 30.0)
+    taken = WireChange(3, "release", GOODS, release_from=40.0, release_cells=[a])
+    assert cells_of(paper, entity(session.on_message("k", taken, 40.0), "/view/goods")) == {b}
+    assert SceneViews(paper, BASE, kind="fill").on_message("k", put, 20.0) == []
 
 
 def test_other_messages_give_nothing(paper):

@@ -41,6 +41,7 @@ from foxglove.messages import (
     Vector3,
 )
 
+from fleet.mission.spec import EXTERNAL
 from fleet.planning.geometry import Cell
 from fleet.views.palette import (
     GOODS_COLOR,
@@ -148,8 +149,9 @@ class SceneViews:
 
     def __init__(self, layout: Layout, base_ns: int, kind: str = "fill",
                  vehicles: int = 1) -> None:
-        if kind not in ("fill", "empty", "orders"):
-            raise ValueError(f"mission kind {kind!r} is not 'fill', 'empty' or 'orders'")
+        if kind not in ("fill", "empty", "orders", EXTERNAL):
+            raise ValueError(f"mission kind {kind!r} is not 'fill', 'empty', 'orders' or "
+                             f"'{EXTERNAL}'")
         self.layout = layout
         self.vehicles = vehicles
         self.latest: dict[int, VehicleState] = {}  # each forklift's last state shown
@@ -160,7 +162,8 @@ class SceneViews:
         self.kind = kind
         self._stacks = {(s.cluster, s.index): s.cell for s in layout.stacks}
         # An empty mission starts with goods on every stack; StackDone removes them. (An
-        # order mission's shelves are in the layout's slots: it has no stacks.)
+        # order mission's shelves are in the layout's slots: it has no stacks.) A session of
+        # an outside master's starts empty: its goods are those the store holds (GOODS).
         self.goods: set[Cell] = {s.cell for s in layout.stacks} if kind == "empty" else set()
         self.reserved: dict[int, list[_Reserved]] = {}  # forklift -> its reservations
         # A lane layout's shelves: where each stands, which AGV carries which.
@@ -188,6 +191,8 @@ class SceneViews:
         if isinstance(message, VehicleState):
             return self._on_state(message, sim_time)
         if isinstance(message, WireChange):
+            if message.vehicle == GOODS:
+                return self._on_goods(message, sim_time)
             self._on_change(message)
             return []  # shown with the forklift's next state, at most 0.5 s later
         if isinstance(message, StackDone):
@@ -239,9 +244,23 @@ class SceneViews:
             entities=[self._reserved_ahead(v, t, ns) for v in vehicles]), ns))
         return views
 
+    def _on_goods(self, change: WireChange, sim_time: float) -> list[View]:
+        """A mission's goods are drawn from StackDone (the engine reserves a stack's goods
+        ahead, when it decides the delivery); an outside master's session's from the store:
+        the gateway reserves goods from the instant a drop puts them down, and lets them go
+        when a pick takes them."""
+        if self.kind != EXTERNAL or not _plausible(sim_time):
+            return []
+        if change.op == "commit":
+            self.goods |= {(c, r) for c, r, _, _ in change.intervals}
+        elif change.release_cells is None:
+            self.goods.clear()
+        else:
+            self.goods -= {tuple(cell) for cell in change.release_cells}
+        ns = self.log_ns(sim_time)
+        return [(GOODS_TOPIC, self._goods_update(ns), ns)]
+
     def _on_change(self, change: WireChange) -> None:
-        if change.vehicle == GOODS:
-            return  # goods are drawn from StackDone, on their own topic
         if change.op == "release":
             self._release(change.vehicle, -math.inf if change.release_from is None
                           else change.release_from)
