@@ -2,12 +2,13 @@
 
 A generated warehouse with a park per forklift, `fleet run --dispatch external` on a
 mosquitto of its own, and a measuring master (a paho client of this process) that sends
-every forklift an order at once, from its park to the nearest free stack node, and reads
-every state:
+every forklift an order at once, from its park to the nearest free stack node, then, once
+every one is driven, an order back to its park (the agents warm: each has planned once),
+and reads every state:
 
 - order-to-motion latency: from an order's publication to the forklift's first state with
   `driving` true (the gateway's check, the agent's plan and commit, the first step), p50 and
-  p99 over the fleet;
+  p99 over the fleet, for the first orders (fresh agents) and the second (warm ones);
 - states per second held: every state received while the fleet works its orders, over that
   window (states go out on events and every 10 s), and the visualizations (every 0.5 s);
 - messages lost: the gaps in each forklift's state and visualization headerIds (they count
@@ -90,27 +91,31 @@ class _Listener:
         self.client.loop_stop()
 
 
-def _orders(layout_path: Path, vehicles: int) -> dict[int, dict]:
-    """Each forklift's order: from its park to the nearest stack node no other takes."""
+def _orders(layout_path: Path, vehicles: int) -> tuple[dict[int, dict], dict[int, dict]]:
+    """Each forklift's two orders: from its park to the nearest stack node no other takes,
+    and back."""
     layout = load_layout(str(layout_path))
     found = nodes(layout)
     stacks = [n for n in found if n.place == STACK]
     taken: set = set()
-    out = {}
+    there, back = {}, {}
+
+    def order(order_id: str, a, b) -> dict:
+        return {"orderId": order_id, "orderUpdateId": 0,
+                "nodes": [{"nodeId": n.node_id, "sequenceId": 2 * k, "released": True,
+                           "nodePosition": node_position(n, layout.name), "actions": []}
+                          for k, n in enumerate((a, b))],
+                "edges": [{"edgeId": edge_id(a.node_id, b.node_id), "sequenceId": 1,
+                           "released": True, "startNodeId": a.node_id,
+                           "endNodeId": b.node_id, "actions": []}]}
+
     for v in range(1, vehicles + 1):
         park = next(n for n in found if n.node_id == f"park-{v}")
         target = min((n for n in stacks if n.cell not in taken),
                      key=lambda n: math.hypot(n.x - park.x, n.y - park.y))
         taken.add(target.cell)
-        out[v] = {
-            "orderId": f"bench-{v}", "orderUpdateId": 0,
-            "nodes": [{"nodeId": n.node_id, "sequenceId": 2 * k, "released": True,
-                       "nodePosition": node_position(n, layout.name), "actions": []}
-                      for k, n in enumerate((park, target))],
-            "edges": [{"edgeId": edge_id(park.node_id, target.node_id), "sequenceId": 1,
-                       "released": True, "startNodeId": park.node_id,
-                       "endNodeId": target.node_id, "actions": []}]}
-    return out
+        there[v], back[v] = order(f"bench-{v}", park, target), order(f"back-{v}", target, park)
+    return there, back
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -127,7 +132,7 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
         folder = Path(tmp)
         layout_path = folder / "bench.toml"
         layout_path.write_text(generate_toml(shape, "bench-vda5050"))
-        orders = _orders(layout_path, vehicles)
+        rounds = _orders(layout_path, vehicles)
         broker = start_mosquitto(folder / "broker")
         listener = _Listener(broker.port, manufacturer)
         log_path = folder / "fleet-run.log"
@@ -144,27 +149,32 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
                           lambda: len(listener.online) >= vehicles, ONLINE_TIMEOUT_S, fleet,
                           log_path)
             up_s = time.monotonic() - started
-            say(f"all online after {up_s:.0f} s; sending {vehicles} orders at once")
-            sent: dict[str, float] = {}
-            for header, (v, order) in enumerate(orders.items()):
-                serial = f"forklift-{v}"
-                message = {"headerId": header, "timestamp": timestamp(time.time()),
-                           "version": "2.0.0",
-                           "manufacturer": manufacturer, "serialNumber": serial, **order}
-                sent[serial] = time.monotonic()
-                listener.client.publish(f"uagv/v2/{manufacturer}/{serial}/order",
-                                        json.dumps(message), qos=1)
-            t0 = min(sent.values())
+            sent: list[dict[str, float]] = []
+            header = itertools.count()
+            say(f"all online after {up_s:.0f} s")
+            for k, orders in enumerate(rounds):
+                say(f"sending {vehicles} orders at once ({'fresh' if k == 0 else 'warm'} "
+                    "agents)")
+                sent.append({})
+                for v, order in orders.items():
+                    serial = f"forklift-{v}"
+                    message = {"headerId": next(header), "timestamp": timestamp(time.time()),
+                               "version": "2.0.0", "manufacturer": manufacturer,
+                               "serialNumber": serial, **order}
+                    sent[-1][serial] = time.monotonic()
+                    listener.client.publish(f"uagv/v2/{manufacturer}/{serial}/order",
+                                            json.dumps(message), qos=1)
 
-            def finished(serial: str) -> bool:
-                return any(s["orderId"] == f"bench-{serial.split('-')[1]}" and
-                           not s["nodeStates"] and not s["driving"]
-                           for _, s in listener.states.get(serial, []))
+                def finished(v: int, order_id: str) -> bool:
+                    return any(s["orderId"] == order_id and not s["nodeStates"]
+                               and not s["driving"]
+                               for _, s in listener.states.get(f"forklift-{v}", []))
 
-            listener.wait("every order driven", lambda: all(finished(s) for s in sent),
-                          DONE_TIMEOUT_S, fleet, log_path)
-            t1 = time.monotonic()
-            say(f"every order driven in {t1 - t0:.0f} s")
+                listener.wait("every order driven", lambda orders=orders: all(
+                    finished(v, o["orderId"]) for v, o in orders.items()), DONE_TIMEOUT_S,
+                    fleet, log_path)
+                say(f"every order driven in {time.monotonic() - min(sent[-1].values()):.0f} s")
+            t0, t1 = min(sent[0].values()), time.monotonic()
         finally:
             if fleet.poll() is None:
                 fleet.send_signal(signal.SIGINT)
@@ -178,12 +188,14 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
         with listener.lock:
             states = {k: list(v) for k, v in listener.states.items()}
             shown = {k: list(v) for k, v in listener.visualizations.items()}
-    latencies = []
-    for serial, t_sent in sent.items():
-        first = next((t for t, s in states.get(serial, []) if t >= t_sent and s["driving"]),
-                     None)
-        if first is not None:
-            latencies.append(first - t_sent)
+    latencies: list[list[float]] = [[], []]  # fresh agents, warm ones
+    for k, times in enumerate(sent):
+        for serial, t_sent in times.items():
+            first = next((t for t, s in states.get(serial, []) if t >= t_sent and s["driving"]),
+                         None)
+            if first is not None:
+                latencies[k].append(first - t_sent)
+    cold, warm = latencies
     window = [t for series in states.values() for t, _ in series if t0 <= t <= t1]
     lost = sum(max(0, b["headerId"] - a["headerId"] - 1)
                for series in states.values()
@@ -192,9 +204,12 @@ def run(vehicles: int = 50, progress: Callable[[str], None] | None = None) -> di
     shown_lost = sum(max(0, b - a - 1) for series in shown.values()
                      for (_, a), (_, b) in itertools.pairwise(series))
     return {"vehicles": vehicles, "layout": f"generated {shape.cols} x {shape.rows} cells",
-            "startup_s": round(up_s, 1), "orders": len(sent), "moved": len(latencies),
-            "latency_p50_s": round(statistics.median(latencies), 3) if latencies else None,
-            "latency_p99_s": round(_percentile(latencies, 0.99), 3) if latencies else None,
+            "startup_s": round(up_s, 1), "orders": len(sent[0]), "moved": len(cold),
+            "latency_p50_s": round(statistics.median(cold), 3) if cold else None,
+            "latency_p99_s": round(_percentile(cold, 0.99), 3) if cold else None,
+            "warm_moved": len(warm),
+            "warm_latency_p50_s": round(statistics.median(warm), 3) if warm else None,
+            "warm_latency_p99_s": round(_percentile(warm, 0.99), 3) if warm else None,
             "window_s": round(t1 - t0, 1), "states": len(window),
             "states_per_s": round(len(window) / (t1 - t0), 1),
             "states_lost": lost,

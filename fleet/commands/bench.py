@@ -166,10 +166,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "vda5050", help="the VDA 5050 gateway under a fleet: latency, states, losses",
         description="A generated warehouse with a park per forklift, fleet run --dispatch "
         "external on a mosquitto of its own, and a measuring master that sends every "
-        "forklift an order at once (its park to the nearest free stack) and reads every "
-        "state: order-to-motion latency p50 and p99 (order published to the first state "
-        "with driving true), states per second held while the fleet drives, states lost "
-        "(gaps in each forklift's headerIds). Needs mosquitto.")
+        "forklift an order at once (its park to the nearest free stack), then one back once "
+        "all are driven, and reads every state: order-to-motion latency p50 and p99 (order "
+        "published to the first state with driving true) for fresh agents and warm ones, "
+        "states per second held while the fleet drives, states lost (gaps in each "
+        "forklift's headerIds). Needs mosquitto.")
     vda.add_argument("--vehicles", type=positive_int, default=50,
                      help="forklifts, each a VDA 5050 AGV (default 50)")
     vda.add_argument("--json", action="store_true", help="print one JSON object")
@@ -442,7 +443,9 @@ def run_vda5050(args: argparse.Namespace) -> int:
         return 0
     print(f"{r['vehicles']} forklifts as VDA 5050 AGVs ({r['layout']}), {r['orders']} orders "
           f"at once: order-to-motion latency p50 {r['latency_p50_s']} s, p99 "
-          f"{r['latency_p99_s']} s ({r['moved']} moved); over {r['window_s']} s "
+          f"{r['latency_p99_s']} s ({r['moved']} moved), then warm: p50 "
+          f"{r['warm_latency_p50_s']} s, p99 {r['warm_latency_p99_s']} s "
+          f"({r['warm_moved']} moved); over {r['window_s']} s "
           f"{r['states_per_s']} states/s ({r['states_lost']} lost) and "
           f"{r['visualizations_per_s']} visualizations/s ({r['visualizations_lost']} lost)")
     return 0
