@@ -25,9 +25,11 @@ import zenoh
 from dispatcher.claims import Claims, Roster
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.pacing import LEAD_WALL_S
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
 from dispatcher.remote004 import dispatch_mission004
+from dispatcher.vda5050_master import VDA5050_LEAD_WALL_S, MasterExecutor
 from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.engine import Engine, EngineOptions, MissionStuck
@@ -104,13 +106,18 @@ def fleet_limit(mission: Mission, layout: Layout) -> int:
 
 def serve(config: DispatcherConfig) -> int:
     layout = load_layout(config.mission.layout)
-    if config.dispatch == "external" and (config.clock is not ClockMode.REALTIME
-                                          or layout.vehicle_kind.name != "forklift"):
-        raise UserError("--dispatch external runs forklifts on the real-time clock: give "
-                        "--clock realtime and a forklift layout")
+    if config.dispatch != "internal" and (config.clock is not ClockMode.REALTIME
+                                          or layout.vehicle_kind.name != "forklift"
+                                          or layout.has_lanes or layout.floor is not None):
+        raise UserError(f"--dispatch {config.dispatch} runs forklifts on the real-time clock: "
+                        "give --clock realtime and a forklift layout")
+    if config.dispatch == "vda5050" and (config.faults or config.claims or config.recover
+                                         or config.mission.kind is not MissionKind.FILL):
+        raise UserError("--dispatch vda5050 runs fill missions, without --faults, --claims "
+                        "or --recover yet (docs/vda5050.md)")
     # bad weights: at once (an external session runs no engine: it needs none)
     options = engine_options(config.mission, layout, config.weights) \
-        if config.dispatch == "internal" else None
+        if config.dispatch != "external" else None
     keys = Keys(config.bus.run)
     marker = config.restart_marker
     restarted = marker is not None and marker.exists()
@@ -142,6 +149,7 @@ def serve(config: DispatcherConfig) -> int:
         scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
         info = mission_info(mission, layout, len(setup.vehicles), config.clock.value,
                             config.speed, config.command)
+        info = dataclasses.replace(info, dispatch=config.dispatch)
         if config.dispatch == "external":  # no mission of ours: a master's orders
             info = dataclasses.replace(info, kind=EXTERNAL, strategy="vda5050")
         streams = _streams(scope, session, keys)
@@ -274,8 +282,13 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             scope.enter_context(reservations.follow(mirror))
             liveness.wait_for(vehicles, config.startup_timeout_s)
             log.info("%d forklifts and the reservation service are up", len(vehicles))
-            executor = RemoteExecutor(session, keys, reservations, mirror, liveness, vehicles,
-                                      setup.layout.vehicle_kind)
+            if config.dispatch == "vda5050":  # each subtask a VDA 5050 order
+                executor = MasterExecutor(session, keys, reservations, mirror, liveness,
+                                          vehicles, setup.layout, config.mqtt)
+                scope.callback(executor.close)
+            else:
+                executor = RemoteExecutor(session, keys, reservations, mirror, liveness,
+                                          vehicles, setup.layout.vehicle_kind)
             journal = _journal(config, setup, scope)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
@@ -291,8 +304,11 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                                   tick, t)
             else:
                 closed = frozenset(r.cell for r in mirror.table.reservations(ZONE))
+                # Through the gateway a decision waits for its forklift to be ready to plan
+                # (dispatcher/vda5050_master.py): taken far ahead, it would hold the others.
+                lead = VDA5050_LEAD_WALL_S if config.dispatch == "vda5050" else LEAD_WALL_S
                 clock = RealtimeClock(session, keys, config.speed, vehicles, liveness, scenario,
-                                      tick, t, wall, closed)
+                                      tick, t, wall, closed, lead_wall_s=lead)
             scope.enter_context(closing(clock))
 
             def progress(done: int, total: int, t: float, failures: int) -> None:

@@ -133,14 +133,28 @@ def test_a_leg_not_given_now_is_asked_again_and_a_closed_way_is_a_no_route_error
     leg = f.next_leg(0.0)
     f.planned(leg, None, "cell held by vehicle 2", 0.0)
     assert f.information[0]["infoDescription"] == "cell held by vehicle 2"
-    assert f.next_leg(RETRY_S - 0.1) is None and f.next_leg(RETRY_S) is not None
+    assert f.next_leg(RETRY_S - 0.1) is None
+    again = f.next_leg(RETRY_S)
+    assert again is not None
     ways["open"] = False
-    f.planned(f.next_leg(RETRY_S) or leg, None, "no path", RETRY_S)
+    f.planned(again, None, "no path", RETRY_S)
     assert [e.error_type for e in f.book.errors] == ["noRouteError"]
     assert f.next_leg(RETRY_S + BLOCKED_RETRY_S - 0.1) is None
     ways["open"] = True
     drive(f, RETRY_S + BLOCKED_RETRY_S)
     assert f.book.errors == []  # driven: the error went with it
+
+
+def test_a_refused_leg_asked_ahead_is_asked_again_for_a_start_a_second_later():
+    """The gateway asks for a leg its lead ahead of now (here 2 s, more than RETRY_S): the
+    next try is for a start RETRY_S after the refused one, not at once."""
+    f = forklift()
+    f.order(order(["station-p1", "stack-s1-1-S"]))
+    lead = 2.0
+    leg = f.next_leg(0.0 + lead)
+    f.planned(leg, None, "cell held by vehicle 2", 0.05)  # answered at once
+    assert f.next_leg(0.1 + lead) is None
+    assert f.next_leg(RETRY_S - 0.1 + lead) is None and f.next_leg(RETRY_S + lead) is not None
 
 
 def test_an_edge_the_forklift_cannot_drive_is_refused_with_the_order():

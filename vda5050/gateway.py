@@ -6,11 +6,13 @@ OFFLINE on a clean stop; the factsheet retained). It takes the master's `order` 
 `instantActions`, checks each against the official schema, and runs it through the
 forklift's `Execution` (vda5050/execution.py); it talks to the forklifts over zenoh like any
 other process, and takes the layout and the fleet from the run's dispatcher (which must run
-`--dispatch external`): each released edge goes to the forklift's agent as a task (plan with its own
-planner against the reservation store, commit, drive), the forklift's states say where it
-is, and goods put on or taken off a stack are held in the store. A `state` goes out on every
-event that changes it and at least every --state-interval, a `visualization` every
---visualization-interval. Every message sent is checked against its schema first.
+`--dispatch external`, or `vda5050` for its own mission): each released edge goes to the
+forklift's agent as a task (plan with its own planner against the reservation store,
+commit, drive), the forklift's states say where it is, and goods put on or taken off a
+stack are held in the store (by the dispatcher itself when the mission is its own). A
+`state` goes out on every event that changes it and at least every --state-interval, a
+`visualization` every --visualization-interval. Every message sent is checked against its
+schema first.
 
 MQTT and zenoh callbacks only enqueue; one worker thread does the rest in arrival order, and
 the agents' tasks are asked from a few threads of their own, their answers enqueued too.
@@ -36,7 +38,7 @@ import paho.mqtt.client as mqtt
 import zenoh
 
 from fleet.errors import UserError
-from fleet.mission.spec import EXTERNAL, ClockMode
+from fleet.mission.spec import ClockMode
 from fleet.params import DispatchParams, ManeuverTimes
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, Pose
@@ -51,10 +53,12 @@ from fleet.vda5050.execution import Execution, Handling, LegRequest
 from fleet.vda5050.map import nodes
 from fleet.vda5050.orders import Position
 from fleet.vda5050.schemas import InvalidMessage, validate
+from fleet.wire.convert import leg_to_wire
 from fleet.wire.protocol import (
     GOODS,
     ClockTick,
     Envelope,
+    LegCommitted,
     MqttTraffic,
     ProtocolError,
     TaskRequest,
@@ -174,7 +178,7 @@ class VehicleLink:
 
 class Gateway:
     def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout, vehicles: int,
-                 config: GatewayConfig) -> None:
+                 config: GatewayConfig, dispatch: str = "external") -> None:
         self.session, self.keys, self.layout, self.config = session, keys, layout, config
         self.map_id = layout.name
         self.known = {n.node_id: n for n in nodes(layout)}
@@ -190,6 +194,9 @@ class Gateway:
         params = ManeuverTimes()
         self.cell_mps = {0: 0.0, 1: layout.cell_size / params.T3, 2: layout.cell_size / params.T5}
         self.vehicles = list(range(1, vehicles + 1))
+        # --dispatch vda5050: our dispatcher's fill mission, which starts its forklifts with
+        # goods claimed and holds the stacks' goods in the store itself, as in the direct run
+        self.ours = dispatch == "vda5050"
         dispatch = DispatchParams()
         handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
         self.executions: dict[int, Execution] = {}
@@ -198,9 +205,11 @@ class Gateway:
             park = self.known[f"park-{v}"]  # where forklift v starts, as the map has it
             position = Position(park.x, park.y, park.theta)
             self.executions[v] = Execution(self.known, park.pose, position, handling,
-                                           self.filled, self._drivable, self._escapes)
+                                           self.filled, self._drivable, self._escapes,
+                                           loaded=self.ours)
             self.motion[v] = messages.Motion(position, False)
         self.links: dict[int, VehicleLink] = {}
+        self.legs: dict[int, Stream] = {}  # each vehicle's committed legs (LegCommitted)
         self.lead = dict.fromkeys(self.vehicles, FIRST_LEAD_S)
         self.due_state = dict.fromkeys(self.vehicles, 0.0)  # monotonic time of the next one
         self.due_visualization = dict.fromkeys(self.vehicles, 0.0)
@@ -219,6 +228,8 @@ class Gateway:
                                                     SENDER, reliable=True))
                 self.links[v] = VehicleLink(self.config, v, self.inbox,
                                             functools.partial(self._record, stream, v))
+                self.legs[v] = scope.enter_context(Stream(self.session, self.keys.vda5050_leg(v),
+                                                          SENDER, reliable=True))
             scope.callback(self._close_links)
             scope.callback(self.pool.shutdown, wait=False, cancel_futures=True)
             # up: a compose health check, and anyone else, can see it
@@ -239,7 +250,7 @@ class Gateway:
         while not self.clock.realtime:
             if time.monotonic() > deadline:
                 raise Stopped(f"no real-time clock within {timeout:g} s (the dispatcher runs "
-                              "it with --dispatch external --clock realtime)")
+                              "it with --dispatch external or vda5050 and --clock realtime)")
             self.stopping.wait(WAKE_S)
 
     def _record(self, stream: Stream, vehicle: int, topic: str, received: bool,
@@ -300,11 +311,11 @@ class Gateway:
         """What time brings: actions that end or start, the next leg, the periodic messages."""
         execution = self.executions[vehicle]
         changed, moved = execution.advance(now)
-        for goods in moved:
+        for goods in moved if not self.ours else ():
             self._hold_goods(goods)
         leg = execution.next_leg(now + self.lead[vehicle])
         if leg is not None:
-            self.pool.submit(self._ask_for_leg, vehicle, leg)
+            self.pool.submit(self._ask_for_leg, vehicle, leg, execution.book.order_id)
         wall = time.monotonic()
         if changed or wall >= self.due_state[vehicle]:
             self._publish_state(vehicle)
@@ -334,7 +345,8 @@ class Gateway:
                 raise InvalidMessage(f"addressed to {message.get('manufacturer')}/"
                                      f"{message.get('serialNumber')}, sent to "
                                      f"{self.config.manufacturer}/{link.serial}")
-        except (ValueError, InvalidMessage) as exc:  # JSONDecodeError is a ValueError
+        except (ValueError, InvalidMessage, RecursionError) as exc:  # JSONDecodeError is a
+            # ValueError; JSON nested deeper than Python's recursion limit a RecursionError
             header = message.get("headerId") if isinstance(message, dict) else None
             log.warning("%s: refused a %s message: %s", link.serial, topic, exc)
             execution.book.invalid(topic, f"invalid {topic} message: {exc}", header)
@@ -398,10 +410,11 @@ class Gateway:
         here = planner.component(pose)
         return here is not None and here == planner.component(self.layout.stations[0].dock)
 
-    def _ask_for_leg(self, vehicle: int, leg: LegRequest) -> None:
-        """In a task thread: the agent plans and commits the leg; its answer is enqueued."""
+    def _ask_for_leg(self, vehicle: int, leg: LegRequest, order_id: str) -> None:
+        """In a task thread: the agent plans and commits the leg; its answer is enqueued,
+        the leg it committed published."""
         request = TaskRequest(self.tasks.next_id(), vehicle, "return", str(leg.start),
-                              leg.t_i, [str(leg.goal)], sorted(self.filled), leg.loaded, 0)
+                              leg.t_i, [str(leg.goal)], sorted(leg.filled), leg.loaded, 0)
         started = time.monotonic()
         try:
             reply = self.tasks.request(self.keys.vehicle_task(vehicle), request, leg.t_i).message
@@ -419,6 +432,9 @@ class Gateway:
         if reply.ok:
             log.info("forklift %d: edge %d to %s committed, arriving at t=%.2f", vehicle,
                      leg.sequence_id, leg.goal, result.t_end)
+            self.legs[vehicle].put(LegCommitted(vehicle, order_id, leg.sequence_id,
+                                                reply.revision, leg_to_wire(result)),
+                                   result.t_start)
             self.inbox.put(_Planned(vehicle, leg, result.t_end, "", wall_s))
         else:
             self.inbox.put(_Planned(vehicle, leg, None, f"no way to {leg.goal} now: "
@@ -477,11 +493,12 @@ def serve(config: GatewayConfig) -> int:
     keys = Keys(config.bus.run)
     with open_session(config.bus.config()) as session:
         info, layout, _ = mission_layout(session, keys, config.startup_timeout_s)
-        if info.kind != EXTERNAL:
-            raise UserError(f"the run's dispatcher runs a {info.kind} mission itself: a master "
-                            "drives a fleet started with --dispatch external")
+        if info.dispatch == "internal":
+            raise UserError(f"the run's dispatcher hands its {info.kind} mission to the "
+                            "forklifts itself: a master drives a fleet started with --dispatch "
+                            "external (or vda5050)")
         nodes(layout)  # a layout without a VDA 5050 map is refused by name
-        gateway = Gateway(session, keys, layout, info.vehicles, config)
+        gateway = Gateway(session, keys, layout, info.vehicles, config, info.dispatch)
         stop_on_signals(gateway.stop)
         try:
             gateway.run()

@@ -240,7 +240,7 @@ def analyze(recording: Recording) -> Report:
         meetings=met,
         battery=_battery(info, layout, usable),
         protocol=protocol_verdict(m for _, m in recording.of(MqttTraffic))
-        if info.kind == EXTERNAL else None,
+        if info.kind == EXTERNAL or info.dispatch != "internal" else None,
     )
 
 

@@ -99,7 +99,7 @@ class Report:
     # Seed 002's batteries, from the states' charge (fleet/analysis/battery.py); None: the
     # states carry none.
     battery: BatteryVerdict | None = None
-    protocol: ProtocolVerdict | None = None  # an external session's VDA 5050 traffic
+    protocol: ProtocolVerdict | None = None  # a run through the VDA 5050 gateway: its traffic
 
     @property
     def safe(self) -> bool:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from fleet.commands.analyze import stopped_lines
 from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.run004 import run004
-from fleet.commands.run_external import run_external
+from fleet.commands.run_external import broker_of, check_vda5050_run, run_external
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Scenario, check_against, load_scenario
@@ -62,9 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "improved hybrid A* against the shared reservation table.",
                        epilog=strategies_epilog())
     add_mission_args(p)
-    p.add_argument("--clock", choices=[m.value for m in ClockMode], default=ClockMode.FAST.value,
+    p.add_argument("--clock", choices=[m.value for m in ClockMode],
                    help="fast: discrete events, deterministic (default); realtime: sim time "
-                   "= speed x wall time")
+                   "= speed x wall time (the default, and the only clock, of --dispatch "
+                   "vda5050 and external)")
     p.add_argument("--speed", type=positive_float, default=1.0,
                    help="sim seconds per wall second with --clock realtime (default 1)")
     p.add_argument("--inprocess", action="store_true",
@@ -90,13 +91,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
                    "faults list) or a TOML file (docs/faults.md; default: no faults)")
     p.add_argument("--dispatch", choices=DISPATCH_MODES, default="internal",
-                   help="internal: the dispatcher runs the mission (default); external: no "
+                   help="internal: the dispatcher runs the mission (default); vda5050: it "
+                   "runs it as VDA 5050 orders over MQTT, through the gateway; external: no "
                    "mission, the forklifts park and take a VDA 5050 master's orders over MQTT "
-                   "through the gateway, on the real-time clock, until Ctrl-C "
+                   "through the gateway until Ctrl-C; both on the real-time clock "
                    "(docs/vda5050.md)")
     p.add_argument("--mqtt", type=mqtt_url, metavar="URL",
-                   help="--dispatch external: the MQTT broker, mqtt://HOST[:PORT] (default: "
-                   "a mosquitto started for the run on a free port of 127.0.0.1)")
+                   help="--dispatch vda5050 or external: the MQTT broker, mqtt://HOST[:PORT] "
+                   "(default: a mosquitto started for the run on a free port of 127.0.0.1)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress: only the summary and errors")
     p.add_argument("--json", action="store_true",
@@ -200,7 +202,8 @@ def summary_json(report: Report, wall_s: float, digest: str,
         "verdicts": {"safety": report.safe, "work": report.work_done,
                      "messages": report.messages_whole, "passed": report.passed,
                      **({"lanes": report.lanes_kept} if report.lane_layout else {}),
-                     **({"battery": report.batteries_kept} if report.battery else {})},
+                     **({"battery": report.batteries_kept} if report.battery else {}),
+                     **({"vda5050": report.protocol.passed} if report.protocol else {})},
         **({"orders": asdict(report.orders)} if report.orders is not None else {}),
         **({"battery": asdict(report.battery)} if report.battery is not None else {}),
     }
@@ -209,14 +212,21 @@ def summary_json(report: Report, wall_s: float, digest: str,
 def run(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout)
     _check_run_flags(args)
+    if args.dispatch != "internal":
+        check_vda5050_run(args, layout)
+        args.clock = args.clock or ClockMode.REALTIME.value
+    args.clock = args.clock or ClockMode.FAST.value
     if args.dispatch == "external":
         return run_external(args, layout, command_line())
-    if args.mqtt is not None:
-        raise UserError("--mqtt is the broker of --dispatch external; the internal dispatcher "
-                        "speaks no MQTT")
+    if args.mqtt is not None and args.dispatch == "internal":
+        raise UserError("--mqtt is the broker of --dispatch vda5050 or external; the internal "
+                        "dispatcher speaks no MQTT")
     if layout.floor is not None:  # seed 004's lifting AGVs
         return run004(args, layout, command_line())
     mission = mission_from_args(args, layout)
+    if args.dispatch == "vda5050" and mission.kind is not MissionKind.FILL:
+        raise UserError(f"--dispatch vda5050 runs fill missions, not {mission.kind.value} "
+                        "(docs/vda5050.md)")
     if not registry.is_built(layout.vehicle.kind):  # a planned kind: nothing drives it yet
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
     if mission.kind is MissionKind.ORDERS:
@@ -269,7 +279,8 @@ def _check_run_flags(args: argparse.Namespace) -> None:
         raise UserError("--force replaces the directory given with --out DIR; without --out "
                         "a run gets a new directory of its own and replaces nothing")
     process_only = [flag for flag, given in (
-        ("--clock realtime", args.clock != ClockMode.FAST), ("--port", args.port is not None),
+        ("--clock realtime", args.clock == ClockMode.REALTIME.value),
+        ("--port", args.port is not None),
         ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
     if args.inprocess and process_only:
         raise UserError(f"--inprocess runs the fast clock in this one process, without a "
@@ -367,9 +378,11 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
         if args.foxglove is not None:
             print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
                   file=sys.stderr)
+    url, own_broker = broker_of(args) if args.dispatch == "vda5050" else ("", False)
     spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
-                   faults_source=args.faults or "", secure=args.secure)
+                   faults_source=args.faults or "", secure=args.secure,
+                   dispatch=args.dispatch, mqtt=url, own_broker=own_broker)
     forklifts = f"{n} forklift agent{'s' if n > 1 else ''}"
     progress.status(f"starting the router, recorder, reservation service, {forklifts} and "
                     "dispatcher")

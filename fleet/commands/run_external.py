@@ -25,16 +25,31 @@ from fleet.world.layout import Layout
 from fleet.world.reachability import fleet_size
 
 
-def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
+def check_vda5050_run(args: argparse.Namespace, layout: Layout) -> None:
+    """What a run through the VDA 5050 gateway (--dispatch external or vda5050) refuses."""
     refused = [flag for flag, given in (
-        ("--inprocess", args.inprocess), ("--secure", args.secure),
-        ("--faults", args.faults is not None)) if given]
+        ("--inprocess", args.inprocess), ("--faults", args.faults is not None),
+        ("--clock fast", args.clock == ClockMode.FAST.value)) if given]
     if refused:
-        raise UserError(f"--dispatch external takes no {' and no '.join(refused)} (not built "
-                        "yet: docs/vda5050.md)")
+        raise UserError(f"--dispatch {args.dispatch} takes no {' and no '.join(refused)} (it "
+                        "runs on the real-time clock; the rest is not built yet: "
+                        "docs/vda5050.md)")
     if layout.has_lanes or layout.floor is not None:
-        raise UserError(f"--dispatch external: layout {layout.name} is not a forklift layout; "
-                        "only forklifts speak VDA 5050 yet (docs/vda5050.md)")
+        raise UserError(f"--dispatch {args.dispatch}: layout {layout.name} is not a forklift "
+                        "layout; only forklifts speak VDA 5050 yet (docs/vda5050.md)")
+
+
+def broker_of(args: argparse.Namespace) -> tuple[str, bool]:
+    """The run's MQTT broker (--mqtt, or a mosquitto of its own on a free port) and whether
+    the run starts it; a mosquitto that is not installed is said before anything starts."""
+    if args.mqtt is not None:
+        return args.mqtt, False
+    mosquitto_binary()
+    return f"mqtt://127.0.0.1:{free_port()}", True
+
+
+def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
+    check_vda5050_run(args, layout)
     mission = mission_from_args(args, layout)
     n = fleet_size(layout, mission.vehicles)
     say = (lambda line: None) if args.quiet or args.json else \
@@ -45,13 +60,10 @@ def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
         raise KeyboardInterrupt  # SIGTERM ends the session like Ctrl-C
 
     signal.signal(signal.SIGTERM, interrupted)
-    own_broker = args.mqtt is None
-    url = args.mqtt or f"mqtt://127.0.0.1:{free_port()}"
+    url, own_broker = broker_of(args)
     spec = RunSpec(mission, n, out, ClockMode.REALTIME, args.speed,
                    port=args.port or free_port(), command=command, foxglove=args.foxglove,
-                   dispatch="external", mqtt=url, own_broker=own_broker)
-    if own_broker:
-        mosquitto_binary()  # not installed: said before anything starts
+                   dispatch="external", mqtt=url, own_broker=own_broker, secure=args.secure)
     g = GatewayConfig
     say(f"{n} forklifts as VDA 5050 2.0.0 AGVs on {url}, topics "
         f"{g.interface}/v2/{g.manufacturer}/forklift-1 .. forklift-{n}; their map: "

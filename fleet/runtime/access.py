@@ -143,7 +143,7 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
             (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/vehicle/*/state",
                          f"{root}/vehicle/*/fault", f"{root}/reservation/change",
-                         f"{root}/recorder/status"]),
+                         f"{root}/recorder/status", f"{root}/vda5050/*/leg"]),
             (TOKEN, [f"{root}/dispatch/alive"]),
             (WATCH, [f"{root}/**"])],
         RESERVATION: [

@@ -21,7 +21,6 @@ from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
 from fleet.runtime.args import BusFlags
 from fleet.runtime.argtypes import topic_level
 from fleet.runtime.process_configs import (
-    DISPATCH_MODES,
     AgentConfig,
     DispatcherConfig,
     GatewayConfig,
@@ -127,7 +126,7 @@ def _parse(name: str, text: str, default: object) -> object:
 
 
 def _check(config: DeployConfig) -> None:
-    choices = {"mission": [k.value for k in MissionKind], "dispatch": list(DISPATCH_MODES),
+    choices = {"mission": [k.value for k in MissionKind], "dispatch": ["internal", "external"],
                "strategy": [s.value for s in Strategy], "clock": [m.value for m in ClockMode]}
     for name, allowed in choices.items():
         if name in ("mission", "strategy") and getattr(config, name) == "":

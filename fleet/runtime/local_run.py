@@ -92,7 +92,7 @@ class RunSpec:
     # run's dispatcher applies its faults itself)
     faults_source: str = ""
     secure: bool = False  # access control and a login per process (fleet/runtime/access.py)
-    # "external": no mission; the VDA 5050 gateway takes a master's orders from `mqtt`
+    # DISPATCH_MODES: "vda5050" and "external" run the VDA 5050 gateway on `mqtt`
     dispatch: str = "internal"
     mqtt: str = ""
     own_broker: bool = False  # start a mosquitto on `mqtt`'s port of 127.0.0.1 for the run
@@ -123,7 +123,8 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
                             recorded=spec.record, recover=recover,
                             journal=spec.run_dir / DISPATCHER_JOURNAL
                             if spec.mission.kind is MissionKind.ORDERS else None,
-                            dispatch=spec.dispatch)
+                            dispatch=spec.dispatch,
+                            **({"mqtt": spec.mqtt} if spec.mqtt else {}))
 
 
 class Secrets:
@@ -227,7 +228,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             injector = Injector(spec.faults, session, keys, launcher,
                                 lambda kind: args_of(kind, again=True), proxies)
         launcher.start("dispatcher", args_of("dispatcher"))
-        if spec.dispatch == "external":
+        if spec.dispatch != "internal":
             launcher.start("vda5050", args_of("vda5050"))
         if on_ready is not None:
             on_ready(session, keys, launcher)

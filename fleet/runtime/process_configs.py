@@ -37,7 +37,9 @@ from fleet.runtime.argtypes import (
 )
 from fleet.runtime.helptext import strategies_epilog
 
-DISPATCH_MODES = ("internal", "external")
+# internal: the dispatcher hands the mission's subtasks to the agents; vda5050: as VDA 5050
+# orders through the gateway; external: no mission, a master of the user's gives the orders
+DISPATCH_MODES = ("internal", "vda5050", "external")
 
 
 class ProcessConfig:
@@ -255,16 +257,22 @@ class DispatcherConfig(ProcessConfig):
     gather_s: float = 5.0  # claims without a fleet size: start once no claim came this long
     restart_marker: Path | None = None
     journal: Path | None = None  # an order mission's book's inputs, for a restarted one
-    dispatch: str = "internal"  # "external": no mission, the clock only (a master drives)
+    dispatch: str = "internal"  # DISPATCH_MODES
+    mqtt: str = "mqtt://127.0.0.1:1883"  # --dispatch vda5050: the gateway's broker
 
     @classmethod
     def add_arguments(cls, p: argparse.ArgumentParser) -> None:
         add_bus_arguments(p)
         add_mission_args(p)
         p.add_argument("--dispatch", choices=DISPATCH_MODES, default=cls.dispatch,
-                       help="internal: run the mission; external: run no mission, only the "
-                       "real-time clock, while a VDA 5050 master gives the forklifts their "
-                       "orders through the gateway (docs/vda5050.md; default internal)")
+                       help="internal: run the mission; vda5050: run it as VDA 5050 orders "
+                       "through the gateway (on the real-time clock); external: run no "
+                       "mission, only the real-time clock, while a VDA 5050 master gives the "
+                       "forklifts their orders through the gateway (docs/vda5050.md; default "
+                       "internal)")
+        p.add_argument("--mqtt", type=mqtt_url, default=cls.mqtt, metavar="URL",
+                       help=f"--dispatch vda5050: the gateway's MQTT broker, mqtt://HOST[:PORT] "
+                       f"(default {cls.mqtt})")
         p.add_argument("--clock", choices=[m.value for m in ClockMode], default=cls.clock.value,
                        help="fast: discrete events, deterministic; realtime: sim time = speed "
                        "x wall time (default fast)")
@@ -313,7 +321,7 @@ class DispatcherConfig(ProcessConfig):
         return cls(BusFlags.from_args(args), mission_from_args(args), args.weights,
                    ClockMode(args.clock), args.speed, args.startup_timeout, args.command,
                    args.faults, args.recorded, args.recover, args.exit_when_done, args.claims,
-                   args.gather, args.restart_marker, args.journal, args.dispatch)
+                   args.gather, args.restart_marker, args.journal, args.dispatch, args.mqtt)
 
     def argv(self) -> list[str]:
         d = DispatcherConfig
@@ -328,6 +336,7 @@ class DispatcherConfig(ProcessConfig):
                 *_flag("--restart-marker", self.restart_marker),
                 *_flag("--journal", self.journal),
                 *_flag("--dispatch", self.dispatch, d.dispatch),
+                *_flag("--mqtt", self.mqtt, d.mqtt),
                 *_flag("--exit-when-done", self.exit_when_done, False),
                 *_flag("--command", self.command, "")]
 

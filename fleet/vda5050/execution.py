@@ -44,6 +44,7 @@ class LegRequest:
     goal: Pose
     t_i: float
     loaded: bool
+    filled: frozenset[Cell]  # the stacks holding goods when asked: the static map to plan on
 
 
 @dataclass(frozen=True)
@@ -108,9 +109,10 @@ class Execution:
         """A schema-valid order or update (vda5050.orders.OrderBook.receive)."""
         decision = self.book.receive(message, self.known, at=self.position,
                                      reachable=self._reachable)
-        if decision.outcome == "new":
+        if decision.outcome == "new":  # what the last order waited for is over
             first = self.known.get(self.book.last_node_id)
             self.due = [(a, first) for a in decision.start_actions]
+            self.waiting, self.retry_at = "", 0.0
         return decision
 
     def instant_actions(self, message: Mapping[str, Any], t: float) -> set[str]:
@@ -134,7 +136,7 @@ class Execution:
                     self.underway.since = t
             elif kind == "cancelOrder":
                 interrupted = self.book.cancel(action.action_id)
-                self.due = []
+                self.due, self.waiting, self.retry_at = [], "", 0.0
                 if self.underway is not None and self.underway.action.action_id in interrupted:
                     self.book.action_status(self.underway.action.action_id, FAILED,
                                             "interrupted by cancelOrder")
@@ -168,8 +170,9 @@ class Execution:
     # --- what to do next -------------------------------------------------------------------
 
     def next_leg(self, t: float) -> LegRequest | None:
-        """The leg to ask the agent for now, if any: the next released edge, once the vehicle
-        stands on its start, no action of the node holds it and the order is not paused."""
+        """The leg to ask the agent for now, to start at `t`, if any: the next released edge,
+        once the vehicle stands on its start, no action of the node holds it and the order is
+        not paused."""
         if (self.planning is not None or self.driving is not None or self.due
                 or self.underway is not None or t < self.retry_at or not self.book.on_node
                 or not self.book.may_drive()):
@@ -181,18 +184,20 @@ class Execution:
             return None
         self.planning = edge.sequence_id
         return LegRequest(edge.sequence_id, self.pose, self.known[edge.end_node_id].pose, t,
-                          self.loaded)
+                          self.loaded, frozenset(self.filled))
 
     def planned(self, leg: LegRequest, arrival: float | None, why: str, t: float
                 ) -> list[tuple[Mapping[str, Any], float]]:
         """The agent's answer: committed, arriving at `arrival`; or not (`why`), to be asked
-        again RETRY_S later (BLOCKED_RETRY_S with a noRouteError when the goods on the
-        stacks close every way). Returns the instant actions that waited for it, to replay."""
+        again for a start RETRY_S after the one refused (BLOCKED_RETRY_S with a noRouteError
+        when the goods on the stacks close every way; `next_leg` is given the start it asks
+        for, its lead ahead of now). Returns the instant actions that waited for it, to
+        replay."""
         self.planning = None
         if arrival is None:
-            self.waiting, self.retry_at = why, t + RETRY_S
+            self.waiting, self.retry_at = why, leg.t_i + RETRY_S
             if not self.drivable(leg.start, leg.goal):
-                self.retry_at = t + BLOCKED_RETRY_S
+                self.retry_at = leg.t_i + BLOCKED_RETRY_S
                 self.book.edge_blocked(leg.sequence_id, f"no way from {leg.start} to "
                                        f"{leg.goal} as the goods on the stacks stand")
         else:

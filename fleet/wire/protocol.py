@@ -329,6 +329,9 @@ class MissionInfo(Message):
     # from the mission's history run: every AGV plans with these very numbers.
     heat_w: float = 0.0
     heat: list[tuple[int, int, float]] = field(default_factory=list)
+    # Who gives the work: "internal" (the dispatcher to the agents), "vda5050" (the dispatcher
+    # as a VDA 5050 master, through the gateway) or "external" (a master of the user's)
+    dispatch: str = "internal"
 
 
 @dataclass(frozen=True)
@@ -668,6 +671,21 @@ class MqttTraffic(Message):
 
 
 @dataclass(frozen=True)
+class LegCommitted(Message):
+    """The leg a forklift's agent committed for an order's edge, as the VDA 5050 gateway
+    had it planned: what a master cannot learn over MQTT (VDA 5050 states carry no times),
+    for the recording and for the dispatcher of `fleet run --dispatch vda5050`, whose engine
+    goes on from the trajectory the forklift really drives."""
+
+    TYPE: ClassVar[str] = "vda5050.leg"
+    vehicle: int
+    order_id: str
+    sequence_id: int  # the order's edge
+    revision: int  # the table revision that holds it
+    leg: WireLeg
+
+
+@dataclass(frozen=True)
 class Envelope:
     message: Message
     sender: str
@@ -684,7 +702,7 @@ TYPES: dict[str, type[Message]] = {
                               ResumeRequest, Halt, Resume, StackReopened, ZoneClosed,
                               VehicleFault, InjectFault, StatusRequest, VehicleStatus,
                               VehicleClaim, ClaimReply, CellRequest, CellReply, RouteRequest,
-                              RouteReply, AgvEvent, MqttTraffic)
+                              RouteReply, AgvEvent, MqttTraffic, LegCommitted)
 }
 
 

@@ -32,6 +32,7 @@ from fleet.wire.protocol import (
     HaltRequest,
     InjectFault,
     LegAmended,
+    LegCommitted,
     Message,
     MissionDone,
     MissionInfo,
@@ -193,6 +194,7 @@ class Keys:
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)
     # The VDA 5050 gateway: each forklift's MQTT traffic, for the recording.
     vda5050_mqtt = Topic("vda5050/{vehicle}/mqtt", TopicKind.PUBLICATION, (MqttTraffic,), GATEWAY)
+    vda5050_leg = Topic("vda5050/{vehicle}/leg", TopicKind.PUBLICATION, (LegCommitted,), GATEWAY)
     vda5050_alive = Topic("vda5050/alive", TopicKind.TOKEN, sender=GATEWAY)
     # The recorder.
     recorder_status = Topic("recorder/status", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
