@@ -6,11 +6,12 @@ reservation store and commits it).
 
 Each forklift has one order for the whole mission, `mission-N`, and each subtask is a release
 of it, every one after the first an update stitched at the node the last one ended on
-(6.6.2): one edge to the subtask's node, `drop` on a stack, `pick` at a station. An update
-may come while the last node's action still runs; the gateway plans the edge during it, to
-start when it ends, as the direct run's forklift does. A fill mission starts every forklift
-with goods on its forks (the engine's model: claimed before the start), and so does the
-gateway of such a run; the engine holds the stacks' goods in the store, as in the direct
+(6.6.2): one edge to the subtask's node, `drop` on a stack, `pick` at a station. The
+gateway has the edge planned once the forklift stands ready to drive it (the last node's
+action done), so a leg starts a little after the engine's decision instant, and the end time
+is the direct run's only within a tolerance (docs/vda5050.md). A fill mission starts every
+forklift with goods on its forks (the engine's model: claimed before the start), and so does
+the gateway of such a run; the engine holds the stacks' goods in the store, as in the direct
 run (the gateway holds them only for an outside master).
 
 What a master cannot learn over MQTT, the leg's times (VDA 5050 2.0.0 states carry none),

@@ -122,10 +122,12 @@ def test_a_run_of_processes_records_only_catalogued_streams_from_their_senders(t
     # No delivery cut short, no deadlock to break, the mission finished (tests/
     # test_failed_runs.py has one that did not), and no leg postponed (seed 002's AGVs only:
     # tests/test_agv_missions.py records them), and no seed-004 tracking event (its lifting
-    # AGVs only: tests/test_runtime004.py records them).
+    # AGVs only: tests/test_runtime004.py records them), and nothing of the VDA 5050 gateway
+    # (tests/test_vda5050_dispatch.py records its traffic and legs).
     assert set(PUBLICATIONS) - set(heard) == {Keys.dispatch_reopen, Keys.dispatch_deadlock,
                                               Keys.dispatch_stopped, Keys.dispatch_amended,
-                                              Keys.dispatch_agv, Keys.vda5050_mqtt}
+                                              Keys.dispatch_agv, Keys.vda5050_mqtt,
+                                              Keys.vda5050_leg}
     # The recorder chose each channel's schema by its key's topic.
     with open(run_dir / "run.mcap", "rb") as f:
         summary = mcap.reader.make_reader(f).get_summary()
