@@ -34,7 +34,7 @@ import paho.mqtt.client as mqtt
 
 from fleet.errors import UserError
 from fleet.runtime.mqtt_broker import start_mosquitto, stop
-from fleet.vda5050.map import STACK, edge_id, node_position, nodes
+from fleet.vda5050.map import STACK, nodes, released_order
 from fleet.vda5050.messages import timestamp
 from fleet.world.generator import Shape, generate_toml
 from fleet.world.layout_file import load_layout
@@ -100,21 +100,13 @@ def _orders(layout_path: Path, vehicles: int) -> tuple[dict[int, dict], dict[int
     taken: set = set()
     there, back = {}, {}
 
-    def order(order_id: str, a, b) -> dict:
-        return {"orderId": order_id, "orderUpdateId": 0,
-                "nodes": [{"nodeId": n.node_id, "sequenceId": 2 * k, "released": True,
-                           "nodePosition": node_position(n, layout.name), "actions": []}
-                          for k, n in enumerate((a, b))],
-                "edges": [{"edgeId": edge_id(a.node_id, b.node_id), "sequenceId": 1,
-                           "released": True, "startNodeId": a.node_id,
-                           "endNodeId": b.node_id, "actions": []}]}
-
     for v in range(1, vehicles + 1):
         park = next(n for n in found if n.node_id == f"park-{v}")
         target = min((n for n in stacks if n.cell not in taken),
                      key=lambda n: math.hypot(n.x - park.x, n.y - park.y))
         taken.add(target.cell)
-        there[v], back[v] = order(f"bench-{v}", park, target), order(f"back-{v}", target, park)
+        there[v] = released_order(f"bench-{v}", 0, [park, target], layout.name)
+        back[v] = released_order(f"back-{v}", 0, [target, park], layout.name)
     return there, back
 
 

@@ -24,7 +24,6 @@ the direct run, and no order goes out.
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import os
@@ -44,7 +43,7 @@ from fleet.mission.seam import Task
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.process_configs import GatewayConfig
-from fleet.vda5050.map import PARK, Node, edge_id, node_position, nodes
+from fleet.vda5050.map import PARK, Node, nodes, released_order
 from fleet.vda5050.messages import Headers
 from fleet.vda5050.schemas import InvalidMessage, validate
 from fleet.wire.convert import leg_from_wire
@@ -204,21 +203,12 @@ class MasterExecutor(RemoteExecutor):
         """The next release: from the node the order ends on along `path`, `action` on the
         last node."""
         order.update_id += 1
-        first, update = order.sequence_id, order.update_id
-        stops = [order.node, *path]  # the first release starts where it stands
-
-        def node(k: int, at: Node) -> dict[str, Any]:
-            acts = [{"actionId": f"{order.order_id}-{update}-{action}", "actionType": action,
-                     "blockingType": "HARD"}] if action and k == len(stops) - 1 else []
-            return {"nodeId": at.node_id, "sequenceId": first + 2 * k, "released": True,
-                    "nodePosition": node_position(at, self.map_id), "actions": acts}
-
-        edges = [{"edgeId": edge_id(a.node_id, b.node_id), "sequenceId": first + 2 * k + 1,
-                  "released": True, "startNodeId": a.node_id, "endNodeId": b.node_id,
-                  "actions": []} for k, (a, b) in enumerate(itertools.pairwise(stops))]
+        acts = [{"actionId": f"{order.order_id}-{order.update_id}-{action}",
+                 "actionType": action, "blockingType": "HARD"}] if action else []
+        # the first release starts where it stands, each later one where the last ended
         message = {**self.headers[vehicle].next("order", time.time()),
-                   "orderId": order.order_id, "orderUpdateId": update,
-                   "nodes": [node(k, n) for k, n in enumerate(stops)], "edges": edges}
+                   **released_order(order.order_id, order.update_id, [order.node, *path],
+                                    self.map_id, order.sequence_id, acts)}
         validate("order", message)  # ours: a bug if not
         # QoS 1: a lost order would leave the engine waiting for its leg
         self.client.publish(f"{self.root}/forklift-{vehicle}/order", json.dumps(message), qos=1)

@@ -93,6 +93,25 @@ def node_position(node: Node, map_id: str) -> dict[str, Any]:
             "allowedDeviationXY": 0.0, "allowedDeviationTheta": 0.0}
 
 
+def released_order(order_id: str, update_id: int, stops: list[Node], map_id: str,
+                   first_sequence: int = 0, last_actions: list[dict[str, Any]] | None = None
+                   ) -> dict[str, Any]:
+    """The body of an order (6.6, no header) along `stops`, every node and edge released,
+    each node with its position, `last_actions` on the last node: what a master of ours (the
+    dispatcher of --dispatch vda5050, the bench) sends."""
+    def node(k: int, at: Node) -> dict[str, Any]:
+        return {"nodeId": at.node_id, "sequenceId": first_sequence + 2 * k, "released": True,
+                "nodePosition": node_position(at, map_id),
+                "actions": list(last_actions or []) if k == len(stops) - 1 else []}
+
+    return {"orderId": order_id, "orderUpdateId": update_id,
+            "nodes": [node(k, at) for k, at in enumerate(stops)],
+            "edges": [{"edgeId": edge_id(a.node_id, b.node_id),
+                       "sequenceId": first_sequence + 2 * k + 1, "released": True,
+                       "startNodeId": a.node_id, "endNodeId": b.node_id, "actions": []}
+                      for k, (a, b) in enumerate(itertools.pairwise(stops))]}
+
+
 def vda_map(layout: Layout) -> dict[str, Any]:
     """The map as JSON-ready data: `mapId` the layout's name, its nodes and edges."""
     found = nodes(layout)
