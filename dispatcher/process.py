@@ -107,10 +107,12 @@ def fleet_limit(mission: Mission, layout: Layout) -> int:
 def serve(config: DispatcherConfig) -> int:
     layout = load_layout(config.mission.layout)
     if config.dispatch != "internal" and (config.clock is not ClockMode.REALTIME
-                                          or layout.vehicle_kind.name != "forklift"
-                                          or layout.has_lanes or layout.floor is not None):
-        raise UserError(f"--dispatch {config.dispatch} runs forklifts on the real-time clock: "
-                        "give --clock realtime and a forklift layout")
+                                          or layout.floor is not None):
+        raise UserError(f"--dispatch {config.dispatch} runs forklifts or lane AGVs on the "
+                        "real-time clock: give --clock realtime and a layout of either")
+    if config.dispatch == "vda5050" and layout.has_lanes:
+        raise UserError("--dispatch vda5050 runs fill missions on a forklift layout; a lane "
+                        "layout's AGVs take a master's orders with --dispatch external")
     if config.dispatch == "vda5050" and (config.faults or config.claims or config.recover
                                          or config.mission.kind is not MissionKind.FILL):
         raise UserError("--dispatch vda5050 runs fill missions, without --faults, --claims "

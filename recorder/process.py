@@ -38,6 +38,7 @@ from fleet.runtime.bus import Stream, open_session
 from fleet.runtime.lifecycle import process_main, stop_on_signals
 from fleet.runtime.process_configs import RecorderConfig
 from fleet.vda5050 import TOPICS as VDA_TOPICS
+from fleet.vda5050.messages import serial_number
 from fleet.vda5050.schemas import schema_text
 from fleet.wire.protocol import (
     MissionDone,
@@ -70,6 +71,7 @@ class Recorder:
         self.live = live
         self.inbox: queue.Queue[tuple[str, bytes, int] | None] = queue.Queue()
         self.views = None  # Foxglove scene views, once the run's description is known
+        self.vehicle_kind = "forklift"  # the layout's, once known: VDA 5050 serial numbers
         self.done_seen = False
         self.exit_when_done = exit_when_done
         self.lock = threading.Lock()  # status answers read what the writer thread counts
@@ -160,8 +162,9 @@ class Recorder:
             log.exception("could not show the message on %s", key)
 
     def _mqtt_view(self, traffic: MqttTraffic, log_ns: int, sim_time: float) -> None:
-        """A VDA 5050 message also as JSON on /vda5050/forklift-N/TOPIC with the official
-        schema, for Foxglove (one that is not a JSON object stays on its raw channel only)."""
+        """A VDA 5050 message also as JSON on /vda5050/SERIAL/TOPIC (forklift-N, agv-N) with
+        the official schema, for Foxglove (one that is not a JSON object stays on its raw
+        channel only)."""
         if traffic.topic not in VDA_TOPICS:
             return
         try:
@@ -170,7 +173,8 @@ class Recorder:
         except ValueError:
             return
         with self.lock:
-            self.writer.write_json(f"{VDA5050_PREFIX}forklift-{traffic.vehicle}/{traffic.topic}",
+            serial = serial_number(self.vehicle_kind, traffic.vehicle)
+            self.writer.write_json(f"{VDA5050_PREFIX}{serial}/{traffic.topic}",
                                    traffic.payload, f"vda5050.{traffic.topic}",
                                    schema_text(traffic.topic), log_ns, sim_time)
 
@@ -191,6 +195,7 @@ class Recorder:
         except LayoutError as exc:
             log.warning("no Foxglove views: %s", exc)
             return
+        self.vehicle_kind = layout.vehicle.kind
         self.views = scene_views(layout, log_ns, kind=info.kind, vehicles=info.vehicles)
         self._show(self.views.start())
 

@@ -40,8 +40,8 @@ def map_nodes(layout: str) -> dict[str, Node]:
     return {n.node_id: n for n in nodes(load_layout(layout))}
 
 
-def serial(vehicle: int) -> str:
-    return f"forklift-{vehicle}"
+def serial(vehicle: int, kind: str = "forklift") -> str:
+    return f"{kind}-{vehicle}"
 
 
 def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: int = 0,

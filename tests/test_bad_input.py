@@ -203,15 +203,15 @@ BAD = [
     # VDA 5050: the external session and the gateway
     ("run --mqtt tcp://host:1883", "argument --mqtt: 'tcp://host:1883' is not an MQTT broker"),
     ("run --dispatch external --layout paper004", "--dispatch external: layout paper004 is "
-     "not a forklift layout"),
+     "a seed-004 floor"),
     ("run --dispatch external --inprocess", "--dispatch external takes no --inprocess"),
     ("run --mqtt mqtt://127.0.0.1:1883", "--mqtt is the broker of --dispatch vda5050 or "
      "external"),
     ("run --dispatch vda5050 --mission empty", "--dispatch vda5050 runs fill missions, not "
      "empty"),
     ("run --dispatch vda5050 --clock fast", "--dispatch vda5050 takes no --clock fast"),
-    ("run --dispatch vda5050 --layout paper002", "--dispatch vda5050: layout paper002 is not "
-     "a forklift layout"),
+    ("run --dispatch vda5050 --layout paper002", "layout paper002 is a lane layout, whose "
+     "order missions do not go through it yet"),
     ("vda5050 gateway --state-interval 31",
      "argument --state-interval: '31' is more than 30 s"),
     ("vda5050 gateway --interface a/b",

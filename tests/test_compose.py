@@ -214,14 +214,15 @@ def test_compose_up_runs_lifting_agvs_on_a_seed004_floor(deployment):
 
 
 def test_compose_vda5050_session_takes_a_masters_orders(deployment, tmp_path):
-    """The profile vda5050 with FLEET_DISPATCH=external: the broker published on the host,
-    the gateway, two forklift containers. A master nobody here wrote (vda-5050-lib, on the
-    host) sees both ONLINE, sends each an order with a pick and a drop and sees both
+    """The profile vda5050 with FLEET_DISPATCH=external, behind access control (the gateway
+    logs in as itself, with the grants it needs and no more): the broker published on the
+    host, the gateway, two forklift containers. A master nobody here wrote (vda-5050-lib, on
+    the host) sees both ONLINE, sends each an order with a pick and a drop and sees both
     finished; `docker compose stop` ends the session, and its recording passes every
     verdict, the VDA 5050 one included, with both orders in it."""
     mqtt = free_port()
-    d = deployment(profiles=("vda5050",), FLEET_DISPATCH="external", FLEET_VEHICLES="2",
-                   FLEET_MQTT_PORT=str(mqtt))
+    d = deployment(secure=True, profiles=("vda5050",), FLEET_DISPATCH="external",
+                   FLEET_VEHICLES="2", FLEET_MQTT_PORT=str(mqtt))
     d.compose("up", "-d", "--no-build", "--scale", "vehicle=2")
     with running_master(f"mqtt://127.0.0.1:{mqtt}", tmp_path, "fleet-emulator") as master:
         online: set[str] = set()

@@ -60,8 +60,7 @@ def test_every_setting_comes_from_its_variable():
     ({"FLEET_VEHICLES": "many"}, "FLEET_VEHICLES"), ({"FLEET_MISSION": "x"}, "FLEET_MISSION"),
     ({"FLEET_DISPATCH": "vda"}, "FLEET_DISPATCH"), ({"FLEET_MANUFACTURER": "a/b"},
                                                     "FLEET_MANUFACTURER"),
-    ({"FLEET_DISPATCH": "external", "FLEET_CLOCK": "fast"}, "FLEET_CLOCK=fast"),
-    ({"FLEET_DISPATCH": "external", "FLEET_SECURE": "1"}, "FLEET_SECURE")])
+    ({"FLEET_DISPATCH": "external", "FLEET_CLOCK": "fast"}, "FLEET_CLOCK=fast")])
 def test_a_bad_setting_is_an_error_naming_the_variable(env, named):
     with pytest.raises(UserError, match=named):
         config_from_env(env)
@@ -179,10 +178,11 @@ def test_a_secure_deployment_logs_every_service_in_with_its_own_secret():
     config = DeployConfig(secure=True)
     router = parser.parse_args(service_config("router", config).argv())
     assert str(router.users) == "/run/secrets/fleet_users" and router.acl is not None
-    for service in ("reservation", "dispatcher", "recorder"):
+    for service, login in (("reservation", "reservation"), ("dispatcher", "dispatcher"),
+                           ("recorder", "recorder"), ("gateway", "vda5050")):
         args = parser.parse_args(service_config(service, config).argv())
         assert (args.user, str(args.password_file)) == \
-            (service, f"/run/secrets/fleet_{service}_password")
+            (login, f"/run/secrets/fleet_{login}_password")
     vehicle = parser.parse_args(service_config("vehicle", config).argv())
     assert str(vehicle.logins) == "/run/secrets/fleet_vehicle_logins" and not vehicle.user
 
@@ -197,6 +197,7 @@ def test_the_secrets_give_the_router_every_login_and_the_forklifts_only_theirs(t
     assert read_dictionary(tmp_path / "vehicle_logins") == {
         f"vehicle-{v}": credentials.vehicle(v).password for v in (1, 2, 3)}
     assert files["dispatcher_password"].strip() == credentials["dispatcher"].password
+    assert files["vda5050_password"].strip() == credentials["vda5050"].password
     (tmp_path / "bad").write_text("vehicle-1 no colon\n")
     with pytest.raises(UserError, match="bad:1: not a 'user:password' line"):
         read_dictionary(tmp_path / "bad")

@@ -179,3 +179,55 @@ def test_an_instant_action_the_forklift_lacks_is_an_instant_action_error():
     f.instant_actions({"instantActions": [{"actionId": "x", "actionType": "liftForks"}]}, 0.0)
     assert f.book.actions["x"].status == "FAILED"
     assert f.book.errors[0].error_type == "instantActionError"
+
+
+LANE_NODES = {n.node_id: n for n in nodes(load_layout("paper002"))}
+
+
+def lane_agv(at: str = "pile-c9") -> Execution:
+    """A seed 002 AGV: shelves in every slot, a lift that works at once."""
+    node = LANE_NODES[at]
+    slots = {n.cell for n in LANE_NODES.values() if n.place == "slot"}
+    return Execution(LANE_NODES, node.pose, Position(node.x, node.y, node.theta),
+                     Handling(0.0, 0.0), slots, lambda a, b: True, lambda pose, filled: True,
+                     noun="AGV")
+
+
+def test_a_lane_agv_lifts_a_shelf_and_does_not_drive_it_under_another():
+    """Its slot's shelf lifted, the AGV takes it to a station; sent on into a slot that
+    holds a shelf, it asks for no leg and says why (a noRouteError naming the slot), until
+    that shelf is lifted away; then it drives in and puts its own down."""
+    agv = lane_agv()
+    home, full = LANE_NODES["slot-s-10-27"], LANE_NODES["slot-s-11-27"]
+    assert agv.order(order(["pile-c9", "slot-s-10-27", "station-p29", "slot-s-11-27"],
+                           {1: ["pick"], 3: ["drop"]})).accepted
+    t = drive(agv, 0.0)
+    assert agv.advance(t)[1] == [GoodsMoved(home.cell, False, t)]  # lifted at once
+    assert agv.loaded and home.cell not in agv.filled
+    t = drive(agv, t)
+    assert agv.next_leg(t) is None
+    assert agv.waiting == "slot s-11-27 holds a shelf"
+    assert [(e.error_type, e.description) for e in agv.book.errors] == [
+        ("noRouteError", "a loaded AGV cannot drive into slot s-11-27: it holds a shelf")]
+    assert agv.next_leg(t + BLOCKED_RETRY_S - 0.1) is None
+    agv.filled.discard(full.cell)  # another AGV lifted it
+    t = drive(agv, t + BLOCKED_RETRY_S)
+    assert agv.advance(t)[1] == [GoodsMoved(full.cell, True, t)]
+    assert not agv.loaded and full.cell in agv.filled and not agv.book.active
+
+
+@pytest.mark.parametrize(("at", "kind", "why"), [
+    ("slot-s-10-27", "drop", "drop: the AGV is not loaded"),
+    ("station-p29", "pick", "pick: packing station"),
+])
+def test_a_lane_agv_picks_and_drops_shelves_in_slots_only(at, kind, why):
+    agv = lane_agv(at)
+    decision = agv.order(order([at], {0: [kind]}))
+    if kind == "drop":
+        assert decision.accepted
+        agv.advance(0.0)
+        assert statuses(agv) == {"drop0": "FAILED"}
+        assert agv.book.errors[0].description == why
+    else:  # a packing station works the shelf the AGV stands with: nothing to lift there
+        assert not decision.accepted
+        assert agv.book.errors[0].error_type == "orderError"

@@ -4,6 +4,7 @@ MasterController (tests/master_controller.py) giving four forklifts their orders
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -44,9 +45,13 @@ class Session:
     run: subprocess.Popen[bytes]
     out: Path
     master: Master
+    kind: str = "forklift"
+
+    def serial(self, vehicle: int) -> str:
+        return serial(vehicle, self.kind)
 
     def send_order(self, vehicle: int, message: Message, tag: int) -> None:
-        self.master.send(cmd="order", serialNumber=serial(vehicle), order=message, id=tag)
+        self.master.send(cmd="order", serialNumber=self.serial(vehicle), order=message, id=tag)
         sent = self.master.expect(f"order {tag} sent", lambda e: e.get("id") == tag)
         assert sent["event"] == "orderAssigned", sent.get("message", sent)
 
@@ -55,14 +60,15 @@ class Session:
         return self.master.find(what, match, within)
 
     def processed(self, vehicle: int, order_id: str) -> Message:
-        return self.find(f"{serial(vehicle)} finishing {order_id}",
+        return self.find(f"{self.serial(vehicle)} finishing {order_id}",
                          lambda e: e["event"] == "orderProcessed"
-                         and e["serialNumber"] == serial(vehicle) and e["orderId"] == order_id)
+                         and e["serialNumber"] == self.serial(vehicle)
+                         and e["orderId"] == order_id)
 
     def state_where(self, vehicle: int, what: str, match: Callable[[Message], bool]) -> Message:
         """The first state of the vehicle that `match`es, seen already or still to come."""
         return self.find(what, lambda e: e["event"] == "state" and
-                         e["serialNumber"] == serial(vehicle) and match(e["state"]))["state"]
+                         e["serialNumber"] == self.serial(vehicle) and match(e["state"]))["state"]
 
     def end(self) -> Report:
         """Ctrl-C the session as a user would; the analysis of its recording."""
@@ -72,7 +78,7 @@ class Session:
 
     def states(self, vehicle: int) -> list[Message]:
         return [e["state"] for e in self.master.seen
-                if e["event"] == "state" and e["serialNumber"] == serial(vehicle)]
+                if e["event"] == "state" and e["serialNumber"] == self.serial(vehicle)]
 
 
 @pytest.fixture
@@ -86,21 +92,30 @@ def broker(tmp_path) -> Iterator[Broker]:
 
 @pytest.fixture
 def session(tmp_path, broker) -> Iterator[Session]:
+    with external_session(tmp_path, broker, LAYOUT, VEHICLES) as running:
+        yield running
+
+
+@contextlib.contextmanager
+def external_session(tmp_path: Path, broker: Broker, layout: str, vehicles: int,
+                     kind: str = "forklift", *flags: str) -> Iterator[Session]:
+    """`fleet run --layout LAYOUT --vehicles N --dispatch external` on the broker, with a
+    master that has seen every vehicle ONLINE."""
     with running_master(broker.url, tmp_path, MANUFACTURER) as master:
         out = tmp_path / "run"
         log = (tmp_path / "fleet-run.log").open("wb")
-        run = subprocess.Popen([sys.executable, "-m", "fleet", "run", "--layout", LAYOUT,
-                                "--vehicles", str(VEHICLES), "--dispatch", "external",
-                                "--mqtt", broker.url, "--out", str(out)],
+        run = subprocess.Popen([sys.executable, "-m", "fleet", "run", "--layout", layout,
+                                "--vehicles", str(vehicles), "--dispatch", "external",
+                                "--mqtt", broker.url, "--out", str(out), *flags],
                                stdout=log, stderr=subprocess.STDOUT)
         try:
             online: set[str] = set()
-            while len(online) < VEHICLES:
-                seen = master.expect("every forklift online", lambda e: e["event"] ==
+            while len(online) < vehicles:
+                seen = master.expect(f"every {kind} online", lambda e: e["event"] ==
                                      "connection" and e["connectionState"] == "ONLINE",
                                      START_S)
                 online.add(seen["serialNumber"])
-            yield Session(run, out, master)
+            yield Session(run, out, master, kind)
         finally:
             with (tmp_path / "master-events.jsonl").open("w") as seen:  # to read after a failure
                 seen.writelines(json.dumps(e) + "\n" for e in master.seen)
@@ -216,6 +231,49 @@ def test_two_forklifts_sent_to_one_node_take_turns(session):
     assert len(waited) <= 3 * (max(stamps) - min(stamps)) + 5, len(waited)
     report = session.end()
     assert report.safe and report.passed, "\n".join(report.verdict_lines())
+
+
+@pytest.fixture
+def agv_session(tmp_path, broker) -> Iterator[Session]:
+    """Seed 002's lane AGVs: two on `paper002`, on the piles c9 and c25 (where an order
+    mission of two starts them), at four times real time."""
+    with external_session(tmp_path, broker, "paper002", 2, "agv", "--speed", "4") as running:
+        yield running
+
+
+def test_lane_agvs_take_a_masters_orders_and_swap_two_shelves(agv_session):
+    """Seed 002's AGVs as VDA 5050 vehicles, driven by vda-5050-lib: AGV 1 lifts the shelf of
+    slot s-10-27, takes it to packing station p29 and is sent on to put it down in s-11-27,
+    which still holds its own shelf: a loaded AGV does not drive under another shelf, so it
+    waits at the station with a noRouteError naming the slot. Only then does AGV 2 get its
+    order: lift s-11-27's shelf, take it to p30, put it down in s-10-27, left empty by AGV 1.
+    Its lift frees s-11-27, and AGV 1 goes on: both orders finish, the shelves swapped, every
+    state valid, and the recording passes every verdict, the lanes' one too."""
+    s = agv_session
+    s.send_order(1, order("a1", ["pile-c9", "slot-s-10-27", "station-p29", "slot-s-11-27"],
+                          actions={1: ["pick"], 3: ["drop"]}, layout="paper002"), 1)
+    blocked = s.state_where(1, "agv-1 waiting at p29 for slot s-11-27", lambda st: any(
+        e["errorType"] == "noRouteError" and "slot s-11-27" in e["errorDescription"]
+        for e in st["errors"]))
+    assert blocked["lastNodeId"] == "station-p29" and not blocked["driving"]
+    assert blocked["loads"] == [{"loadPosition": "lift"}]
+    s.send_order(2, order("a2", ["pile-c25", "slot-s-11-27", "station-p30", "slot-s-10-27"],
+                          actions={1: ["pick"], 3: ["drop"]}, layout="paper002"), 2)
+    for vehicle, order_id in ((1, "a1"), (2, "a2")):
+        done = s.processed(vehicle, order_id)
+        assert done["error"] is None and not done["byCancelation"], done
+    for vehicle, slot in ((1, "slot-s-11-27"), (2, "slot-s-10-27")):
+        put_down = s.state_where(vehicle, f"agv-{vehicle}'s drop done", lambda st: any(
+            a["actionType"] == "drop" and a["actionStatus"] == "FINISHED"
+            for a in st["actionStates"]))
+        assert put_down["lastNodeId"] == slot and put_down["loads"] == []
+    factsheet = s.find("agv-1's factsheet", lambda e: e["event"] == "factsheet"
+                       and e["serialNumber"] == "agv-1")["factsheet"]
+    assert factsheet["typeSpecification"]["agvClass"] == "CARRIER"
+    assert no_trouble(s.master) == []
+    report = s.end()
+    assert report.passed and report.lanes_kept, "\n".join(report.verdict_lines())
+    assert report.protocol.orders == 2
 
 
 def header(vehicle: int, header_id: int, version: str = "2.0.0") -> Message:

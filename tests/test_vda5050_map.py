@@ -66,24 +66,51 @@ def test_the_command_writes_the_map_and_refuses_what_it_cannot(tmp_path, capsys)
     assert main(["vda5050", "map", "small", "--out", str(out)]) == 0
     assert json.loads(out.read_text()) == vda_map(load_layout("small"))
     assert "70 nodes" in capsys.readouterr().out
-    assert main(["vda5050", "map", "paper002"]) == 2
+    assert main(["vda5050", "map", "paper004"]) == 2
     err = capsys.readouterr().err
-    assert "paper002 is not a forklift layout" in err and "Traceback" not in err
+    assert "paper004 is a seed-004 floor" in err and "Traceback" not in err
 
 
-def test_the_map_as_a_lif_file_reads_back_with_every_node_edge_and_work_place(tmp_path, capsys):
+def test_a_lane_layouts_nodes_are_its_slots_stations_and_piles_each_on_its_cell():
+    """Seed 002: an AGV drives onto its places, each its own cell; edges join the stations
+    and piles to every slot and the piles to the stations, both ways."""
+    layout = load_layout("paper002")
+    found = vda_map(layout)
+    cells = {n["nodeId"]: (n["place"], n["pose"]) for n in found["nodes"]}
+    assert cells == {**{f"station-{p.name}": ("packing", f"{p.cell[0]},{p.cell[1]},E")
+                        for p in layout.packing},
+                     **{f"slot-{s.name}": ("slot", f"{s.cell[0]},{s.cell[1]},E")
+                        for s in layout.slots},
+                     **{f"pile-{p.name}": ("pile", f"{p.cell[0]},{p.cell[1]},E")
+                        for p in layout.piles}}
+    for node in found["nodes"]:
+        col, row, _ = node["pose"].split(",")
+        assert (node["nodePosition"]["x"], node["nodePosition"]["y"]) == pytest.approx(
+            layout.cell_center((int(col), int(row))))
+    ways = {(e["startNodeId"], e["endNodeId"]) for e in found["edges"]}
+    places = {kind: [i for i, (place, _) in cells.items() if place == kind]
+              for kind in ("packing", "slot", "pile")}
+    expected = {(a, b) for a in places["packing"] + places["pile"] for b in places["slot"]}
+    expected |= {(a, b) for a in places["pile"] for b in places["packing"]}
+    assert ways == expected | {(b, a) for a, b in expected}
+
+
+@pytest.mark.parametrize(("name", "nodes", "vehicle_type"), [("small", 70, "forklift"),
+                                                             ("paper002", 441, "agv")])
+def test_the_map_as_a_lif_file_reads_back_with_every_node_edge_and_work_place(
+        tmp_path, capsys, name, nodes, vehicle_type):
     """`--lif`: one LIF layout named after the layout, read back by the LIF library's own
     parser: the map's nodes at their positions and headings (pick and drop where forklifts
     work), its edges, a station for each station and each stack with its sides as
     interaction nodes."""
     from vdma_lif.parser import LIFParser
 
-    out = tmp_path / "small.lif.json"
-    assert main(["vda5050", "map", "small", "--lif", "--out", str(out)]) == 0
-    assert "LIF 1.0.0 layout small, 70 nodes" in capsys.readouterr().out
+    out = tmp_path / f"{name}.lif.json"
+    assert main(["vda5050", "map", name, "--lif", "--out", str(out)]) == 0
+    assert f"LIF 1.0.0 layout {name}, {nodes} nodes" in capsys.readouterr().out
     (layout,) = LIFParser.from_file(str(out)).layouts
-    found = vda_map(load_layout("small"))
-    assert layout.layout_id == "small"
+    found = vda_map(load_layout(name))
+    assert layout.layout_id == name
     by_id = {n.node_id: n for n in layout.nodes}
     assert by_id.keys() == {n["nodeId"] for n in found["nodes"]}
     for n in found["nodes"]:
@@ -91,9 +118,11 @@ def test_the_map_as_a_lif_file_reads_back_with_every_node_edge_and_work_place(tm
         (props,) = lif.vehicle_type_node_properties
         position = n["nodePosition"]
         assert (lif.node_position.x, lif.node_position.y, props.theta, lif.map_id) == (
-            position["x"], position["y"], position["theta"], "small")
+            position["x"], position["y"], position["theta"], name)
+        assert props.vehicle_type_id == vehicle_type
+        # a forklift works stacks and stations, an AGV lifts shelves in their slots
         assert [a.action_type for a in props.actions or []] == (
-            [] if n["place"] == "park" else ["pick", "drop"])
+            ["pick", "drop"] if n["place"] in ("stack", "station", "slot") else [])
     assert {(e.edge_id, e.start_node_id, e.end_node_id) for e in layout.edges} == {
         (e["edgeId"], e["startNodeId"], e["endNodeId"]) for e in found["edges"]}
     sides = {}

@@ -1,15 +1,17 @@
-"""`fleet vda5050 gateway`: every forklift of a run as a VDA 5050 2.0.0 AGV on MQTT.
+"""`fleet vda5050 gateway`: every vehicle of a run (forklifts, or seed 002's lane AGVs) as a
+VDA 5050 2.0.0 AGV on MQTT.
 
-For each forklift an MQTT client of its own under interfaceName/v2/manufacturer/forklift-ID/
+For each vehicle an MQTT client of its own under interfaceName/v2/manufacturer/KIND-ID/
 (its last will CONNECTIONBROKEN on `connection`, QoS 1, retained; ONLINE when connected,
 OFFLINE on a clean stop; the factsheet retained). It takes the master's `order` and
 `instantActions`, checks each against the official schema, and runs it through the
-forklift's `Execution` (vda5050/execution.py); it talks to the forklifts over zenoh like any
-other process, and takes the layout and the fleet from the run's dispatcher (which must run
-`--dispatch external`, or `vda5050` for its own mission): each released edge goes to the
-forklift's agent as a task (plan with its own planner against the reservation store,
-commit, drive), the forklift's states say where it is, and goods put on or taken off a
-stack are held in the store (by the dispatcher itself when the mission is its own). A
+vehicle's `Execution` (vda5050/execution.py); it talks to the vehicles over zenoh like any
+other process, and takes the layout, the fleet and its start poses from the run's dispatcher
+(which must run `--dispatch external`, or `vda5050` for its own mission): each released edge
+goes to the vehicle's agent as a task (plan with its own planner against the reservation
+store, commit, drive), the vehicle's states say where it is, and goods put on or taken off a
+stack are held in the store (by the dispatcher itself when the mission is its own; a slot's
+shelf stands off an AGV's lanes, and the gateway alone keeps account of it). A
 `state` goes out on every event that changes it and at least every --state-interval, a
 `visualization` every --visualization-interval. Every message sent is checked against its
 schema first.
@@ -39,7 +41,7 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
-from fleet.params import DispatchParams, ManeuverTimes
+from fleet.params import DispatchParams
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, Pose
 from fleet.runtime.argtypes import mqtt_host_port
@@ -50,7 +52,8 @@ from fleet.runtime.process_configs import GatewayConfig
 from fleet.runtime.tasks import result_from_wire
 from fleet.vda5050 import messages
 from fleet.vda5050.execution import Execution, Handling, LegRequest
-from fleet.vda5050.map import nodes
+from fleet.vda5050.map import at_rest, nodes
+from fleet.vda5050.messages import serial_number
 from fleet.vda5050.orders import Position
 from fleet.vda5050.schemas import InvalidMessage, validate
 from fleet.wire.convert import leg_to_wire
@@ -119,11 +122,11 @@ class _Planned:
 
 
 class VehicleLink:
-    """One forklift's MQTT client: its topics, its last will, what it publishes."""
+    """One vehicle's MQTT client: its topics, its last will, what it publishes."""
 
-    def __init__(self, config: GatewayConfig, vehicle: int, inbox: queue.Queue,
+    def __init__(self, config: GatewayConfig, serial: str, vehicle: int, inbox: queue.Queue,
                  record: Callable[[str, bool, str], None]) -> None:
-        self.serial = f"forklift-{vehicle}"
+        self.serial = serial
         self.record = record  # (topic, received, text): the recording's copy
         self.root = f"{config.interface}/{MAJOR}/{config.manufacturer}/{self.serial}"
         self.headers = messages.Headers(config.manufacturer, self.serial)
@@ -177,23 +180,28 @@ class VehicleLink:
 
 
 class Gateway:
-    def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout, vehicles: int,
-                 config: GatewayConfig, dispatch: str = "external") -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout,
+                 starts: tuple[Pose, ...], config: GatewayConfig,
+                 dispatch: str = "external") -> None:
         self.session, self.keys, self.layout, self.config = session, keys, layout, config
         self.map_id = layout.name
         self.known = {n.node_id: n for n in nodes(layout)}
         self.kind = layout.vehicle_kind
+        self.type = messages.VEHICLE_TYPES[self.kind.name]
         self.planners = planners_for(layout)
+        # A forklift's plans keep off the stacks' goods (the store holds them, and it plans
+        # on the stacks filled); an AGV drives the lanes, and the shelves stand in slots off
+        # them, each in its own from the start.
+        self.goods_block = not layout.has_lanes
         self.inbox: queue.Queue = queue.Queue()
         self.clock = SimClock()
         self.tasks = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
         self.reservations = ReservationClient(session, keys, Requester(session, SENDER))
         self.pool = ThreadPoolExecutor(TASK_THREADS, thread_name_prefix="vda5050-task")
         self.stopping = threading.Event()
-        self.filled: set = set()  # the stacks holding goods, as the master's picks and drops
-        params = ManeuverTimes()
-        self.cell_mps = {0: 0.0, 1: layout.cell_size / params.T3, 2: layout.cell_size / params.T5}
-        self.vehicles = list(range(1, vehicles + 1))
+        # the stacks or slots holding goods, as the master's picks and drops
+        self.filled: set = set() if self.goods_block else {s.cell for s in layout.slots}
+        self.vehicles = list(range(1, len(starts) + 1))
         # --dispatch vda5050: our dispatcher's fill mission, which starts its forklifts with
         # goods claimed and holds the stacks' goods in the store itself, as in the direct run
         self.ours = dispatch == "vda5050"
@@ -201,12 +209,13 @@ class Gateway:
         handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
         self.executions: dict[int, Execution] = {}
         self.motion: dict[int, messages.Motion] = {}
-        for v in self.vehicles:
-            park = self.known[f"park-{v}"]  # where forklift v starts, as the map has it
-            position = Position(park.x, park.y, park.theta)
-            self.executions[v] = Execution(self.known, park.pose, position, handling,
+        if not self.goods_block:  # an AGV's lift takes up and puts down at once (note A.3)
+            handling = Handling(pick_s=0.0, drop_s=0.0)
+        for v, start in zip(self.vehicles, starts, strict=True):  # as the dispatcher has it
+            position = Position(*at_rest(layout, start))
+            self.executions[v] = Execution(self.known, start, position, handling,
                                            self.filled, self._drivable, self._escapes,
-                                           loaded=self.ours)
+                                           noun=self.kind.noun, loaded=self.ours)
             self.motion[v] = messages.Motion(position, False)
         self.links: dict[int, VehicleLink] = {}
         self.legs: dict[int, Stream] = {}  # each vehicle's committed legs (LegCommitted)
@@ -226,7 +235,8 @@ class Gateway:
             for v in self.vehicles:
                 stream = scope.enter_context(Stream(self.session, self.keys.vda5050_mqtt(v),
                                                     SENDER, reliable=True))
-                self.links[v] = VehicleLink(self.config, v, self.inbox,
+                self.links[v] = VehicleLink(self.config, serial_number(self.kind.name, v), v,
+                                            self.inbox,
                                             functools.partial(self._record, stream, v))
                 self.legs[v] = scope.enter_context(Stream(self.session, self.keys.vda5050_leg(v),
                                                           SENDER, reliable=True))
@@ -235,7 +245,7 @@ class Gateway:
             # up: a compose health check, and anyone else, can see it
             scope.enter_context(self.session.liveliness().declare_token(
                 self.keys.vda5050_alive))
-            log.info("%d forklifts on MQTT at %s under %s/%s/%s/", len(self.vehicles),
+            log.info("%d %ss on MQTT at %s under %s/%s/%s/", len(self.vehicles), self.kind.noun,
                      self.config.mqtt, self.config.interface, MAJOR, self.config.manufacturer)
             self._work()
 
@@ -245,7 +255,7 @@ class Gateway:
             raise Stopped(f"no reservation service within {timeout:g} s")
         for v in self.vehicles:
             if not wait_alive(self.session, self.keys.vehicle_alive(v), timeout):
-                raise Stopped(f"forklift {v}'s agent was not up within {timeout:g} s")
+                raise Stopped(f"{self.kind.noun} {v}'s agent was not up within {timeout:g} s")
         deadline = time.monotonic() + timeout
         while not self.clock.realtime:
             if time.monotonic() > deadline:
@@ -300,7 +310,7 @@ class Gateway:
                 self.lead[vehicle] = min(MAX_LEAD_S, 2 * self.lead[vehicle]) if late else \
                     max(MIN_LEAD_S, min(MAX_LEAD_S, 2 * wall_s * speed))
                 if arrival is None and why != execution.waiting:
-                    log.info("forklift %d: edge %d to %s not now: %s", vehicle,
+                    log.info("%s %d: edge %d to %s not now: %s", self.kind.noun, vehicle,
                              leg.sequence_id, leg.goal, why)
                 for message, t in execution.planned(leg, arrival, why, now):
                     self._instant_actions(vehicle, message, t)
@@ -311,9 +321,11 @@ class Gateway:
         """What time brings: actions that end or start, the next leg, the periodic messages."""
         execution = self.executions[vehicle]
         changed, moved = execution.advance(now)
-        for goods in moved if not self.ours else ():
+        for goods in moved if self.goods_block and not self.ours else ():
             self._hold_goods(goods)
+        waiting = execution.waiting
         leg = execution.next_leg(now + self.lead[vehicle])
+        changed = changed or execution.waiting != waiting
         if leg is not None:
             self.pool.submit(self._ask_for_leg, vehicle, leg, execution.book.order_id)
         wall = time.monotonic()
@@ -366,7 +378,7 @@ class Gateway:
             self._publish_factsheet(vehicle)
         self._publish_state(vehicle)
 
-    # --- the forklifts ---------------------------------------------------------------------
+    # --- the vehicles ----------------------------------------------------------------------
 
     def _on_clock(self, sample: zenoh.Sample) -> None:
         envelope = _believed(sample, ClockTick)
@@ -388,24 +400,36 @@ class Gateway:
             return
         position = Position(state.x, state.y, state.theta)
         driving = bool(state.maneuver) and not self.kind.is_wait(state.maneuver)
-        self.motion[vehicle] = messages.Motion(position, driving,
-                                               self.cell_mps.get(state.speed, 0.0),
-                                               state.battery)
+        last = self.motion[vehicle].position
+        # an AGV that moves without turning: its velocity along the way it went since
+        direction = math.atan2(position.y - last.y, position.x - last.x) \
+            if self.type.kinematic == "OMNI" and (position.x, position.y) != (last.x, last.y) \
+            else None
+        self.motion[vehicle] = messages.Motion(
+            position, driving, self.type.speed(state.speed, self.layout.cell_size),
+            state.battery, direction)
         execution = self.executions[vehicle]
         was_driving = execution.moving
         if execution.observed(pose, position, driving, t) or was_driving != driving:
             self._publish_state(vehicle)
 
+    def _static(self, filled) -> frozenset:
+        """The static map's goods: the stacks filled (an AGV's lanes have none)."""
+        return frozenset(filled) if self.goods_block else frozenset()
+
     def _drivable(self, start: Pose, goal: Pose) -> bool:
-        """Whether a forklift can drive from one pose to another on today's static map (the
+        """Whether the vehicle can drive from one pose to another on today's static map (the
         same part of the floor): the spec's noRouteError otherwise."""
-        planner = self.planners.get(frozenset(self.filled))
+        planner = self.planners.get(self._static(self.filled))
         here, there = planner.component(start), planner.component(goal)
         return here is not None and here == there
 
     def _escapes(self, pose: Pose, filled: frozenset) -> bool:
         """Whether a forklift at `pose` still reaches the stations with `filled` stacks full
-        (goods dropped from inside a cluster can wall the forklift in)."""
+        (goods dropped from inside a cluster can wall the forklift in; a shelf put down in
+        its slot walls no AGV in)."""
+        if not self.goods_block:
+            return True
         planner = self.planners.get(filled)
         here = planner.component(pose)
         return here is not None and here == planner.component(self.layout.stations[0].dock)
@@ -414,24 +438,26 @@ class Gateway:
         """In a task thread: the agent plans and commits the leg; its answer is enqueued,
         the leg it committed published."""
         request = TaskRequest(self.tasks.next_id(), vehicle, "return", str(leg.start),
-                              leg.t_i, [str(leg.goal)], sorted(leg.filled), leg.loaded, 0)
+                              leg.t_i, [str(leg.goal)], sorted(self._static(leg.filled)),
+                              leg.loaded, 0)
         started = time.monotonic()
         try:
             reply = self.tasks.request(self.keys.vehicle_task(vehicle), request, leg.t_i).message
             if not isinstance(reply, TaskResult) or reply.task_id != request.task_id:
-                raise ProtocolError(f"forklift {vehicle} answered with {reply}")
+                raise ProtocolError(f"{self.kind.noun} {vehicle} answered with {reply}")
             result = result_from_wire(reply)
         except (RequestFailed, ProtocolError) as exc:
-            self.inbox.put(_Planned(vehicle, leg, None, f"forklift {vehicle}: {exc}"))
+            self.inbox.put(_Planned(vehicle, leg, None, f"{self.kind.noun} {vehicle}: {exc}"))
             return
         except Exception as exc:  # a bug here must not leave the vehicle waiting forever
-            log.exception("forklift %d: asking for edge %d failed", vehicle, leg.sequence_id)
+            log.exception("%s %d: asking for edge %d failed", self.kind.noun, vehicle,
+                          leg.sequence_id)
             self.inbox.put(_Planned(vehicle, leg, None, f"internal error: {exc}"))
             return
         wall_s = time.monotonic() - started
         if reply.ok:
-            log.info("forklift %d: edge %d to %s committed, arriving at t=%.2f", vehicle,
-                     leg.sequence_id, leg.goal, result.t_end)
+            log.info("%s %d: edge %d to %s committed, arriving at t=%.2f", self.kind.noun,
+                     vehicle, leg.sequence_id, leg.goal, result.t_end)
             self.legs[vehicle].put(LegCommitted(vehicle, order_id, leg.sequence_id,
                                                 reply.revision, leg_to_wire(result)),
                                    result.t_start)
@@ -467,7 +493,8 @@ class Gateway:
         execution = self.executions[vehicle]
         link.publish("state", messages.state(execution.book.state_fields(),
                                              self.motion[vehicle], self.map_id,
-                                             execution.loaded, execution.information))
+                                             self.type.load_position if execution.loaded
+                                             else None, execution.information))
         self.due_state[vehicle] = time.monotonic() + self.config.state_interval_s
 
     def _publish_factsheet(self, vehicle: int) -> None:
@@ -492,13 +519,14 @@ def _believed(sample: zenoh.Sample, expected: type) -> Envelope | None:
 def serve(config: GatewayConfig) -> int:
     keys = Keys(config.bus.run)
     with open_session(config.bus.config()) as session:
-        info, layout, _ = mission_layout(session, keys, config.startup_timeout_s)
+        info, layout, starts = mission_layout(session, keys, config.startup_timeout_s)
         if info.dispatch == "internal":
             raise UserError(f"the run's dispatcher hands its {info.kind} mission to the "
-                            "forklifts itself: a master drives a fleet started with --dispatch "
+                            "vehicles itself: a master drives a fleet started with --dispatch "
                             "external (or vda5050)")
         nodes(layout)  # a layout without a VDA 5050 map is refused by name
-        gateway = Gateway(session, keys, layout, info.vehicles, config, info.dispatch)
+        gateway = Gateway(session, keys, layout, starts[:info.vehicles], config,
+                          info.dispatch)
         stop_on_signals(gateway.stop)
         try:
             gateway.run()

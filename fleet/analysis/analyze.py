@@ -239,7 +239,7 @@ def analyze(recording: Recording) -> Report:
         lane_breaches=breaches,
         meetings=met,
         battery=_battery(info, layout, usable),
-        protocol=protocol_verdict(m for _, m in recording.of(MqttTraffic))
+        protocol=protocol_verdict((m for _, m in recording.of(MqttTraffic)), kind.name)
         if info.kind == EXTERNAL or info.dispatch != "internal" else None,
     )
 

@@ -20,6 +20,7 @@ import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from fleet.vda5050.messages import serial_number
 from fleet.vda5050.schemas import InvalidMessage, validate
 from fleet.wire.protocol import MqttTraffic
 
@@ -50,7 +51,9 @@ class ProtocolVerdict:
                 f"{len(self.actions_open)} actions left open")
 
 
-def protocol_verdict(traffic: Iterable[MqttTraffic]) -> ProtocolVerdict:
+def protocol_verdict(traffic: Iterable[MqttTraffic], kind: str = "forklift") -> ProtocolVerdict:
+    """The VDA 5050 verdict of a session's MQTT traffic, its vehicles named as their serial
+    numbers say (`kind`-N)."""
     sent = received = refused = 0
     invalid: list[str] = []
     headers: list[str] = []
@@ -58,7 +61,7 @@ def protocol_verdict(traffic: Iterable[MqttTraffic]) -> ProtocolVerdict:
     runs: dict[int, list[tuple[str, dict]]] = {}  # vehicle: (orderId, its last state) in turn
     actions: dict[tuple[int, str], str] = {}  # (vehicle, actionId): its latest status
     for t in traffic:
-        where = f"forklift-{t.vehicle} {t.topic}"
+        where = f"{serial_number(kind, t.vehicle)} {t.topic}"
         message = _json(t.payload)
         if t.received:
             received += 1
@@ -84,9 +87,9 @@ def protocol_verdict(traffic: Iterable[MqttTraffic]) -> ProtocolVerdict:
             states[-1] = (order_id, message)
         for a in message["actionStates"]:
             actions[(t.vehicle, a["actionId"])] = a["actionStatus"]
-    open_orders = [f"forklift-{v} {order_id}" for v, states in runs.items()
+    open_orders = [f"{serial_number(kind, v)} {order_id}" for v, states in runs.items()
                    for order_id, last in states if not _ended(last)]
-    open_actions = [f"forklift-{v} {a} {status}" for (v, a), status in actions.items()
+    open_actions = [f"{serial_number(kind, v)} {a} {status}" for (v, a), status in actions.items()
                     if status not in ENDED]
     return ProtocolVerdict(sent, received, refused, invalid, headers,
                            sum(len(s) for s in runs.values()), open_orders, open_actions)

@@ -19,6 +19,7 @@ from fleet.errors import UserError
 from fleet.recording.rundir import run_id_of
 from fleet.runtime.argtypes import positive_int, writable_dir
 from fleet.runtime.deploy import MAX_VEHICLES
+from fleet.wire.topics import GATEWAY
 
 DEFAULT_PROJECT = "forklift-fleet"  # also in .env, which both compose tools read
 SECRETS = Path("deploy/secrets")  # compose.secure.yaml reads them here ($FLEET_SECRETS)
@@ -113,11 +114,13 @@ def run_up(args: argparse.Namespace) -> int:
         folder = secrets_folder(None)
         if not (folder / "users").exists():
             write_secrets(folder, force=False)
+        elif not (folder / f"{GATEWAY}_password").exists():  # made before the gateway had one
+            raise UserError(f"{folder} holds no login for the VDA 5050 gateway: `fleet compose "
+                            "secrets --force` writes this deployment's logins anew")
         files += ["-f", str(args.file.with_name("compose.secure.yaml"))]
     if args.dispatch == "external":
-        if args.secure or args.orders:
-            raise UserError(f"--dispatch external takes no "
-                            f"{'--secure' if args.secure else '--orders'} (docs/vda5050.md)")
+        if args.orders:
+            raise UserError("--dispatch external takes no --orders (docs/vda5050.md)")
         files += ["--profile", "vda5050"]
     up = [*compose_command(), "-p", args.project, *files, "up", "--scale",
           f"vehicle={args.vehicles}", *(["--build"] if args.build else [])]

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         print(shipped_source(args.scenario, layout.name), end="")
         return 0
     scenario = load_scenario(args.scenario, layout.name)
-    vehicles = _fleet(layout, args.vehicles)
+    vehicles = fleet_of(layout, args.vehicles)
     if layout.floor is not None:
         check_faults004(scenario.faults, layout.floor, vehicles, scenario.name)
     else:
@@ -85,9 +85,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fleet(layout: Layout, vehicles: int | None) -> int:
-    """The fleet a run on the layout has: its order mission's AGVs on a lane layout or a
-    seed-004 floor."""
+def fleet_of(layout: Layout, vehicles: int | None) -> int:
+    """The fleet a run on the layout has: `vehicles` or its default, checked against the
+    places its vehicles start on (forklift parks; the piles of a lane layout's AGVs; a
+    seed-004 floor's parking)."""
     if layout.floor is not None:
         return fleet004(layout.floor, vehicles)
     return order_fleet(layout, vehicles) if layout.has_lanes else fleet_size(layout, vehicles)

@@ -1,7 +1,7 @@
 """`fleet run --dispatch external`: the fleet with no mission, for a VDA 5050 master. The
-forklifts park at their start poses and take the orders a master sends over MQTT through the
-gateway (docs/vda5050.md), on the real-time clock, until Ctrl-C; everything is recorded
-as in any run."""
+vehicles (forklifts, or a lane layout's AGVs) park at their start poses and take the orders a
+master sends over MQTT through the gateway (docs/vda5050.md), on the real-time clock, until
+Ctrl-C; everything is recorded as in any run."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import signal
 import sys
 from pathlib import Path
 
+from fleet.commands.faults import fleet_of
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
@@ -21,8 +22,8 @@ from fleet.runtime.bus import free_port
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.runtime.mqtt_broker import mosquitto_binary
 from fleet.runtime.process_configs import GatewayConfig
+from fleet.vda5050.messages import serial_number
 from fleet.world.layout import Layout
-from fleet.world.reachability import fleet_size
 
 
 def check_vda5050_run(args: argparse.Namespace, layout: Layout) -> None:
@@ -34,9 +35,14 @@ def check_vda5050_run(args: argparse.Namespace, layout: Layout) -> None:
         raise UserError(f"--dispatch {args.dispatch} takes no {' and no '.join(refused)} (it "
                         "runs on the real-time clock; the rest is not built yet: "
                         "docs/vda5050.md)")
-    if layout.has_lanes or layout.floor is not None:
-        raise UserError(f"--dispatch {args.dispatch}: layout {layout.name} is not a forklift "
-                        "layout; only forklifts speak VDA 5050 yet (docs/vda5050.md)")
+    if layout.floor is not None:
+        raise UserError(f"--dispatch {args.dispatch}: layout {layout.name} is a seed-004 "
+                        "floor; its lifting AGVs do not speak VDA 5050 yet (docs/vda5050.md)")
+    if args.dispatch == "vda5050" and layout.has_lanes:
+        raise UserError(f"--dispatch vda5050 runs our fill missions through the gateway; "
+                        f"layout {layout.name} is a lane layout, whose order missions do not "
+                        "go through it yet: its AGVs take a master's orders with --dispatch "
+                        "external (docs/vda5050.md)")
 
 
 def broker_of(args: argparse.Namespace) -> tuple[str, bool]:
@@ -51,7 +57,7 @@ def broker_of(args: argparse.Namespace) -> tuple[str, bool]:
 def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
     check_vda5050_run(args, layout)
     mission = mission_from_args(args, layout)
-    n = fleet_size(layout, mission.vehicles)
+    n = fleet_of(layout, mission.vehicles)
     say = (lambda line: None) if args.quiet or args.json else \
         (lambda line: print(f"fleet run: {line}", file=sys.stderr, flush=True))
     out = choose(args.out, args.force, layout.name, "external", say).path
@@ -64,10 +70,11 @@ def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
     spec = RunSpec(mission, n, out, ClockMode.REALTIME, args.speed,
                    port=args.port or free_port(), command=command, foxglove=args.foxglove,
                    dispatch="external", mqtt=url, own_broker=own_broker, secure=args.secure)
-    g = GatewayConfig
-    say(f"{n} forklifts as VDA 5050 2.0.0 AGVs on {url}, topics "
-        f"{g.interface}/v2/{g.manufacturer}/forklift-1 .. forklift-{n}; their map: "
-        f"fleet vda5050 map {layout.name}; Ctrl-C ends the session")
+    g, kind = GatewayConfig, layout.vehicle_kind
+    say(f"{n} {kind.noun}s as VDA 5050 2.0.0 AGVs on {url}, topics "
+        f"{g.interface}/v2/{g.manufacturer}/{serial_number(kind.name, 1)} .. "
+        f"{serial_number(kind.name, n)}; their map: fleet vda5050 map {layout.name}; Ctrl-C "
+        "ends the session")
     try:
         outcome = run_processes(spec, on_ready=lambda *_: say(
             "started the router, recorder, reservation service, agents, clock and gateway"))
@@ -89,7 +96,7 @@ def _session_summary(out: Path, as_json: bool) -> int:
         print(json.dumps({"dispatch": "external", "out": str(out), **report.to_json()}))
     else:
         print("\n".join([f"session on {report.mission['layout']} with "
-                         f"{report.mission['vehicles']} forklifts, ended at "
+                         f"{report.mission['vehicles']} vehicles, ended at "
                          f"{report.recovered_sim_s:.1f} s of sim time; recording and logs in "
                          f"{out}", *report.verdict_lines()]))
     return 0 if report.passed else 1

@@ -29,13 +29,13 @@ from fleet.runtime.process_configs import (
     ReservationConfig,
     RouterConfig,
 )
-from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, vehicle_of
+from fleet.wire.topics import DISPATCHER, GATEWAY, RECORDER, RESERVATION, vehicle_of
 from fleet.world.layout_file import load_layout
 
 # The processes of the emulator, then the MQTT broker of an external session (mosquitto)
 FLEET_SERVICES = ("router", "reservation", "dispatcher", "vehicle", "recorder", "gateway")
 SERVICES = (*FLEET_SERVICES, "broker")
-SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR)
+SERVICES_WITH_LOGINS = (DISPATCHER, RESERVATION, RECORDER, OPERATOR, GATEWAY)
 ROUTER_PORT = 7447
 FOXGLOVE_PORT = 8765
 MQTT_PORT = 1883
@@ -142,9 +142,6 @@ def _check(config: DeployConfig) -> None:
     if config.dispatch == "external" and config.clock != ClockMode.REALTIME.value:
         raise UserError(f"FLEET_CLOCK={config.clock}: FLEET_DISPATCH=external drives the "
                         "forklifts on the real-time clock (leave FLEET_CLOCK unset)")
-    if config.dispatch == "external" and config.secure:
-        raise UserError("FLEET_DISPATCH=external does not run behind access control yet "
-                        "(FLEET_SECURE; docs/vda5050.md)")
     for name in ("interface", "manufacturer"):
         try:
             topic_level(getattr(config, name))
@@ -171,7 +168,7 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
                               exit_when_done=True, foxglove=FOXGLOVE_PORT,
                               foxglove_host="0.0.0.0")
     if service == "gateway":
-        return GatewayConfig(_bus(config, ""), config.mqtt, config.interface,
+        return GatewayConfig(_bus(config, GATEWAY), config.mqtt, config.interface,
                              config.manufacturer)
     mission = dispatcher_mission(config)
     return DispatcherConfig(

@@ -1,10 +1,11 @@
-"""One emulated forklift as a VDA 5050 AGV, pure: its order book, the leg it asks its agent to
-drive next, the node actions it does standing (pick and drop, over the kind's handling
-times) and the goods they move. No I/O and no clock: the gateway (vda5050/gateway.py) feeds
+"""One emulated vehicle (a forklift, or a lane AGV of seed 002) as a VDA 5050 AGV, pure: its
+order book, the leg it asks its agent to drive next, the node actions it does standing (pick
+and drop, over the kind's handling times) and the goods they move (a stack's goods, a slot's
+shelf). No I/O and no clock: the gateway (vda5050/gateway.py) feeds
 it the master's messages, the vehicle's states and the agent's answers, each with the sim
 time, and carries out what it asks for (a leg to plan and commit, goods to reserve).
 
-A leg is a released edge: the agent plans it with the forklift's own planner against the
+A leg is a released edge: the agent plans it with the vehicle's own planner against the
 reservation store and commits it, so whatever the master orders, two vehicles never hold a
 cell at once. A leg the store or the map cannot give now is asked for again a second later,
 and the state's `information` says what the vehicle waits for.
@@ -18,7 +19,7 @@ from typing import Any
 
 from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose
-from fleet.vda5050.map import STACK
+from fleet.vda5050.map import HOLDS_GOODS, SLOT
 from fleet.vda5050.map import Node as MapNode
 from fleet.vda5050.orders import FAILED, FINISHED, RUNNING, Action, Decision, OrderBook, Position
 
@@ -28,7 +29,8 @@ BLOCKED_RETRY_S = 5.0  # ... when the static map has no way: until goods are tak
 
 @dataclass(frozen=True)
 class Handling:
-    """How long the forks work a stack or station (the kind's handling times)."""
+    """How long the forks work a stack or station, or the lift a shelf (the kind's handling
+    times)."""
 
     pick_s: float
     drop_s: float
@@ -49,7 +51,8 @@ class LegRequest:
 
 @dataclass(frozen=True)
 class GoodsMoved:
-    """Goods put on (`placed`) or taken off a stack at `t`: the store holds a stack's goods."""
+    """Goods put on (`placed`) or taken off a stack or slot at `t` (the store holds a stack's
+    goods: a forklift's plans keep off them)."""
 
     cell: Cell
     placed: bool
@@ -75,18 +78,19 @@ class _Driving:
 @dataclass
 class Execution:
     """What the vehicle does with its orders. `pose` is where it stands, or will stand once
-    the leg it drives ends; `filled` the stacks holding goods (shared by the gateway's
-    vehicles, changed only through this class's GoodsMoved)."""
+    the leg it drives ends; `filled` the stacks or slots holding goods (shared by the
+    gateway's vehicles, changed only through this class's GoodsMoved)."""
 
     known: Mapping[str, MapNode]
     pose: Pose
     position: Position
     handling: Handling
     filled: set[Cell]
-    drivable: Callable[[Pose, Pose], bool]  # whether the forklift can drive between two poses
-    # whether a forklift standing there can still reach the rest of the floor with these
+    drivable: Callable[[Pose, Pose], bool]  # whether the vehicle can drive between two poses
+    # whether a vehicle standing there can still reach the rest of the floor with these
     # stacks filled
     escapes: Callable[[Pose, frozenset[Cell]], bool]
+    noun: str = "forklift"  # what the vehicle is called in what it says
     book: OrderBook = field(default_factory=OrderBook)
     loaded: bool = False
     moving: bool = False  # the last state heard says it drives
@@ -150,20 +154,21 @@ class Execution:
                 self._init_position(action)
             else:
                 self.book.refuse_instant(action.action_id, kind,
-                                         f"the forklift cannot do {kind!r} as an instant "
+                                         f"the {self.noun} cannot do {kind!r} as an instant "
                                          "action (it does: startPause, stopPause, cancelOrder, "
                                          "stateRequest, factsheetRequest, initPosition)")
         return extra
 
     def _init_position(self, action: Action) -> None:
-        """An emulated forklift knows where it is: initPosition is taken on the node it stands
+        """An emulated vehicle knows where it is: initPosition is taken on the node it stands
         on (which it then reports), refused anywhere else."""
         node_id = str(action.parameters.get("lastNodeId", ""))
         node = self.known.get(node_id)
         if node is not None and node.pose != self.pose:
             self.book.refuse_instant(action.action_id, "initPosition",
-                                     f"the forklift stands at {self.pose}, not on {node_id} "
-                                     f"({node.pose}): an emulated forklift is not moved by hand")
+                                     f"the {self.noun} stands at {self.pose}, not on {node_id} "
+                                     f"({node.pose}): an emulated {self.noun} is not moved by "
+                                     "hand")
             return
         self.book.init_position(node_id, self.known, action.action_id)
 
@@ -181,6 +186,13 @@ class Execution:
                      if e.sequence_id == self.book.last_node_sequence_id + 1 and e.released),
                     None)
         if edge is None:
+            return None
+        end = self.known[edge.end_node_id]
+        if self.loaded and end.place == SLOT and end.cell in self.filled:
+            # a shelf on the lift does not go under another: until that one is taken away
+            self.waiting, self.retry_at = f"slot {end.of} holds a shelf", t + BLOCKED_RETRY_S
+            self.book.edge_blocked(edge.sequence_id, f"a loaded {self.noun} cannot drive "
+                                   f"into slot {end.of}: it holds a shelf")
             return None
         self.planning = edge.sequence_id
         return LegRequest(edge.sequence_id, self.pose, self.known[edge.end_node_id].pose, t,
@@ -203,7 +215,7 @@ class Execution:
         else:
             edge = next(e for e in self.book.edges if e.sequence_id == leg.sequence_id)
             self.waiting = ""
-            self.book.edge_started(leg.sequence_id)  # its actions: none a forklift accepts
+            self.book.edge_started(leg.sequence_id)  # its actions: none a vehicle accepts
             self.driving = _Driving(leg.sequence_id, edge.end_node_id, leg.goal, arrival)
             self.pose = leg.goal
         replay, self.deferred = self.deferred, []
@@ -251,25 +263,26 @@ class Execution:
             self.underway = _Underway(action, node, seconds, t)
 
     def _cannot(self, action: Action, node: MapNode | None) -> str:
-        """Why the forks cannot do this action here now ("" if they can)."""
+        """Why the forks or the lift cannot do this action here now ("" if they can)."""
         picking = action.action_type == "pick"
         if picking == self.loaded:
-            return f"{action.action_type}: the forklift is {'' if self.loaded else 'not '}loaded"
-        if node is not None and node.place == STACK and node.cell is not None:
+            return (f"{action.action_type}: the {self.noun} is "
+                    f"{'' if self.loaded else 'not '}loaded")
+        if node is not None and node.place in HOLDS_GOODS and node.cell is not None:
             if picking and node.cell not in self.filled:
-                return f"pick: stack {node.of} holds no goods"
+                return f"pick: {node.place} {node.of} holds no goods"
             if not picking and node.cell in self.filled:
-                return f"drop: stack {node.of} is full"
+                return f"drop: {node.place} {node.of} is full"
             if not picking and not self.escapes(self.pose, frozenset(self.filled | {node.cell})):
-                return (f"drop: the goods on stack {node.of} would wall the forklift in at "
-                        f"{self.pose}; drop from another side")
+                return (f"drop: the goods on {node.place} {node.of} would wall the {self.noun} "
+                        f"in at {self.pose}; drop from another side")
         return ""
 
     def _finish(self, action: Action, node: MapNode | None, t: float) -> GoodsMoved | None:
         picking = action.action_type == "pick"
         self.loaded = picking
         self.book.action_status(action.action_id, FINISHED)
-        if node is None or node.place != STACK or node.cell is None:
+        if node is None or node.place not in HOLDS_GOODS or node.cell is None:
             return None  # a station has goods to give and takes what it is given
         if picking:
             self.filled.discard(node.cell)

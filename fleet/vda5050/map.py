@@ -1,19 +1,25 @@
-"""The map a VDA 5050 master builds orders on: a forklift layout's places as nodes with stable
-ids and poses, and the drives between them as edges (`fleet vda5050 map LAYOUT`).
+"""The map a VDA 5050 master builds orders on: a layout's places as nodes with stable ids and
+poses, and the drives between them as edges (`fleet vda5050 map LAYOUT`).
 
-Nodes are the poses a forklift stands at to work, in the layout's own terms:
+On a forklift layout (seed 000) nodes are the poses a forklift stands at to work:
 
 - `park-N`: the N-th start pose (where a fleet of N or more forklifts parks);
 - `station-NAME`: the station's dock, the pose that works it;
 - `stack-CLUSTER-INDEX-H`: a pose whose forks point at that stack from side H (E N W S),
   one node for each side a forklift can stand on with its whole body on the empty floor.
 
-Positions are the forklift's reference point at rest in the layout's metres (its origin is
+On a lane layout (seed 002) they are the places an AGV drives onto, each its own cell:
+`slot-NAME` (a shelf's home, `NAME` its `s-COL-ROW`), `station-NAME` (a packing station),
+`pile-NAME` (a charging pile, where the AGVs start).
+
+Positions are the vehicle's reference point at rest in the layout's metres (its origin is
 the centre of cell (0, 0)), theta in radians from +x, counter-clockwise, as the Foxglove views
-draw it. Edges join every park and station node to every stack node and every park to every
-station, both ways: the drives a warehouse's work is made of. A forklift navigates freely
-(it plans each edge itself against the reservation store), so the edges say what the work
-drives, not the only way between two nodes.
+draw it. Edges are the drives a warehouse's work is made of, both ways: on a forklift layout
+every park and station node to every stack node and every park to every station; on a lane
+layout every station and pile to every slot and every pile to every station. A vehicle plans
+each edge itself against the reservation store (a forklift anywhere on the floor, an AGV on
+the lanes), so an order may join any two nodes: the edges say what the work drives, not the
+only ways.
 """
 
 from __future__ import annotations
@@ -27,37 +33,54 @@ from fleet.errors import UserError
 from fleet.planning.geometry import Cell
 from fleet.planning.maneuvers import HEADINGS
 from fleet.planning.trajectory import Pose
+from fleet.vehicles.agv import EAST
 from fleet.world.layout import Layout
 
 PARK, STATION, STACK = "park", "station", "stack"
+SLOT, PACKING, PILE = "slot", "packing", "pile"  # a lane layout's
+HOLDS_GOODS = frozenset({STACK, SLOT})  # places whose goods a pick takes and a drop puts
+HANDLED = HOLDS_GOODS | {STATION}  # places a vehicle picks and drops at (a forklift station
+# gives and takes goods without end; a packing station works the shelf the AGV stands with)
 
 
 @dataclass(frozen=True)
 class Node:
     node_id: str
-    place: str  # park, station or stack
+    place: str  # park, station or stack; slot, packing or pile
     pose: Pose
     x: float
     y: float
     theta: float
-    of: str  # what it works: the station's name, the stack's cluster-index, or ""
-    cell: Cell | None = None  # a stack node's stack
+    of: str  # what it works: the station's name, the stack's cluster-index, the slot's or
+    # pile's name, or ""
+    cell: Cell | None = None  # the cell whose goods a pick or drop there moves (HOLDS_GOODS)
+
+
+def at_rest(layout: Layout, pose: Pose) -> tuple[float, float, float]:
+    """Where a vehicle standing at `pose` is, x and y in the layout's metres and theta in
+    radians: as the vehicles' states say it (fleet/mission/driving.py)."""
+    at, (ox, oy) = layout.vehicle_kind.at_rest(pose), layout.origin
+    return round(at.x + ox, 6), round(at.y + oy, 6), _theta(at.theta)
 
 
 def nodes(layout: Layout) -> list[Node]:
-    """The layout's nodes, parks first, then stations, then stacks in fill order."""
-    if layout.has_lanes or layout.floor is not None:
-        raise UserError(f"layout {layout.name} is not a forklift layout: its VDA 5050 map "
-                        f"is not built yet (docs/vda5050.md)")
-    kind, (ox, oy) = layout.vehicle_kind, layout.origin
+    """The layout's nodes: parks first, then stations, then stacks in fill order; on a lane
+    layout stations, slots, then piles."""
+    if layout.floor is not None:
+        raise UserError(f"layout {layout.name} is a seed-004 floor: its lifting AGVs are not "
+                        f"VDA 5050 vehicles yet (docs/vda5050.md)")
 
     def node(node_id: str, place: str, pose: Pose, of: str = "", cell: Cell | None = None
              ) -> Node:
-        at = kind.at_rest(pose)  # in the frame of cell (0, 0): moved to the layout's, as the
-        # vehicles' states are (fleet/mission/driving.py)
-        return Node(node_id, place, pose, round(at.x + ox, 6), round(at.y + oy, 6),
-                    _theta(at.theta), of, cell)
+        return Node(node_id, place, pose, *at_rest(layout, pose), of, cell)
 
+    if layout.has_lanes:
+        return ([node(f"station-{p.name}", PACKING, Pose(p.cell, EAST), p.name)
+                 for p in layout.packing]
+                + [node(f"slot-{s.name}", SLOT, Pose(s.cell, EAST), s.name, s.cell)
+                   for s in layout.slots]
+                + [node(f"pile-{p.name}", PILE, Pose(p.cell, EAST), p.name)
+                   for p in layout.piles])
     out = [node(f"park-{i}", PARK, pose) for i, pose in enumerate(layout.vehicle_starts, 1)]
     out += [node(f"station-{s.name}", STATION, s.dock, s.name) for s in layout.stations]
     for stack in layout.stacks:
@@ -76,10 +99,15 @@ def _theta(theta: float) -> float:
 def edges(found: list[Node]) -> list[tuple[str, str]]:
     """(start node, end node) of each edge, both ways of each pair."""
     by_place = {place: [n.node_id for n in found if n.place == place]
-                for place in (PARK, STATION, STACK)}
+                for place in (PARK, STATION, STACK, SLOT, PACKING, PILE)}
+    # forklifts: parks and stations to stacks, parks to stations; AGVs: stations and piles
+    # to slots, piles to stations
     pairs = itertools.chain(itertools.product(by_place[PARK] + by_place[STATION],
                                               by_place[STACK]),
-                            itertools.product(by_place[PARK], by_place[STATION]))
+                            itertools.product(by_place[PARK], by_place[STATION]),
+                            itertools.product(by_place[PACKING] + by_place[PILE],
+                                              by_place[SLOT]),
+                            itertools.product(by_place[PILE], by_place[PACKING]))
     return [way for a, b in pairs for way in ((a, b), (b, a))]
 
 
@@ -115,11 +143,13 @@ def released_order(order_id: str, update_id: int, stops: list[Node], map_id: str
 def vda_map(layout: Layout) -> dict[str, Any]:
     """The map as JSON-ready data: `mapId` the layout's name, its nodes and edges."""
     found = nodes(layout)
+    what, who = ("places AGVs drive onto", "An AGV") if layout.has_lanes else \
+        ("poses forklifts work at", "A forklift")
     return {
         "mapId": layout.name,
-        "description": "Nodes are the poses forklifts work at; positions in metres and "
-                       "radians in the layout's frame (origin at the centre of cell (0, 0)). "
-                       "A forklift plans every edge itself: an order may join any two nodes.",
+        "description": f"Nodes are the {what}; positions in metres and radians in the "
+                       "layout's frame (origin at the centre of cell (0, 0)). "
+                       f"{who} plans every edge itself: an order may join any two nodes.",
         "cellSize": layout.cell_size,
         "nodes": [{"nodeId": n.node_id, "place": n.place, "pose": str(n.pose), "of": n.of,
                    "nodePosition": node_position(n, layout.name)} for n in found],

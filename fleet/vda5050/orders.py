@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any, Final, Literal, Protocol
 
-from fleet.vda5050.map import STACK, STATION
+from fleet.vda5050.map import HANDLED
 from fleet.vda5050.map import Node as MapNode
 
 Message = Mapping[str, Any]
@@ -38,10 +38,10 @@ NO_ROUTE_ERROR: Final = "noRouteError"
 NO_ORDER_TO_CANCEL: Final = "noOrderToCancel"
 INSTANT_ACTION_ERROR: Final = "instantActionError"  # not in the text: vda-5050-lib's name
 
-# The actions a forklift does in an order (6.8.1), and the map places it does them at: on
-# nodes only, its forks working a stack or a station while it stands still.
-ORDER_ACTIONS: Final[Mapping[str, frozenset[str]]] = {
-    "pick": frozenset({STACK, STATION}), "drop": frozenset({STACK, STATION})}
+# The actions a vehicle does in an order (6.8.1), and the map places it does them at: on
+# nodes only, standing still, its forks working a stack or a station (a forklift) or its lift
+# a shelf in its slot (an AGV).
+ORDER_ACTIONS: Final[Mapping[str, frozenset[str]]] = {"pick": HANDLED, "drop": HANDLED}
 INSTANT_ACTIONS: Final = ("startPause", "stopPause", "cancelOrder", "stateRequest",
                           "factsheetRequest", "initPosition")
 HANDLING: Final = frozenset({"pick", "drop"})
