@@ -29,6 +29,7 @@ from dispatcher.pacing import LEAD_WALL_S
 from dispatcher.pickup import pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
 from dispatcher.remote004 import dispatch_mission004
+from dispatcher.vda5050_master import ACTIONS as VDA5050_ACTIONS
 from dispatcher.vda5050_master import VDA5050_LEAD_WALL_S, MasterExecutor
 from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
@@ -114,9 +115,9 @@ def serve(config: DispatcherConfig) -> int:
         raise UserError("--dispatch vda5050 runs fill missions on a forklift layout; a lane "
                         "layout's AGVs take a master's orders with --dispatch external")
     if config.dispatch == "vda5050" and (config.faults or config.claims or config.recover
-                                         or config.mission.kind is not MissionKind.FILL):
-        raise UserError("--dispatch vda5050 runs fill missions, without --faults, --claims "
-                        "or --recover yet (docs/vda5050.md)")
+                                         or config.mission.kind not in VDA5050_ACTIONS):
+        raise UserError("--dispatch vda5050 runs fill and empty missions, without --faults, "
+                        "--claims or --recover yet (docs/vda5050.md)")
     # bad weights: at once (an external session runs no engine: it needs none)
     options = engine_options(config.mission, layout, config.weights) \
         if config.dispatch != "external" else None
@@ -286,7 +287,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             log.info("%d forklifts and the reservation service are up", len(vehicles))
             if config.dispatch == "vda5050":  # each subtask a VDA 5050 order
                 executor = MasterExecutor(session, keys, reservations, mirror, liveness,
-                                          vehicles, setup.layout, config.mqtt)
+                                          vehicles, setup.layout, config.mqtt,
+                                          config.mission.kind)
                 scope.callback(executor.close)
             else:
                 executor = RemoteExecutor(session, keys, reservations, mirror, liveness,

@@ -6,13 +6,15 @@ reservation store and commits it).
 
 Each forklift has one order for the whole mission, `mission-N`, and each subtask is a release
 of it, every one after the first an update stitched at the node the last one ended on
-(6.6.2): one edge to the subtask's node, `drop` on a stack, `pick` at a station. The
+(6.6.2): one edge to the subtask's node, `drop` on a stack and `pick` at a station in a
+fill mission, the other way round in an empty one. The
 gateway has the edge planned once the forklift stands ready to drive it (the last node's
 action done), so a leg starts a little after the engine's decision instant, and the end time
 is the direct run's only within a tolerance (docs/vda5050.md). A fill mission starts every
-forklift with goods on its forks (the engine's model: claimed before the start), and so does
-the gateway of such a run; the engine holds the stacks' goods in the store, as in the direct
-run (the gateway holds them only for an outside master).
+forklift with goods on its forks (the engine's model: claimed before the start), an empty
+one every stack full, and so does the gateway of such a run; the engine holds the stacks'
+goods in the store, as in the direct run (the gateway holds them only for an outside master,
+and leaves the question which way is open to the engine, which planned it).
 
 What a master cannot learn over MQTT, the leg's times (VDA 5050 2.0.0 states carry none),
 comes from the gateway's `vda5050/N/leg` (LegCommitted), so the engine goes on from the very
@@ -40,6 +42,7 @@ from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.remote import RemoteExecutor
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.seam import Task
+from fleet.mission.spec import MissionKind
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.process_configs import GatewayConfig
@@ -55,7 +58,9 @@ from reservation.client import ReservationClient
 from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
-ACTIONS = {TaskKind.DELIVER: "drop", TaskKind.RETURN: "pick"}  # at the subtask's node
+# at the subtask's node, by mission: a fill puts goods on the stacks, an empty takes them
+ACTIONS = {MissionKind.FILL: {TaskKind.DELIVER: "drop", TaskKind.RETURN: "pick"},
+           MissionKind.EMPTY: {TaskKind.DELIVER: "pick", TaskKind.RETURN: "drop"}}
 LEG_TIMEOUT_S = 300.0  # wall seconds for an order's edge to be committed: the gateway asks
 # again while the store cannot give it, so this only ends a fleet that stopped answering
 ONLINE_TIMEOUT_S = 60.0  # for the gateway to say each forklift is there
@@ -83,10 +88,11 @@ class MasterExecutor(RemoteExecutor):
 
     def __init__(self, session: zenoh.Session, keys: Keys, reservations: ReservationClient,
                  mirror: TableMirror, liveness: Liveness, vehicles: list[int], layout: Layout,
-                 mqtt_url: str) -> None:
+                 mqtt_url: str, mission: MissionKind = MissionKind.FILL) -> None:
         super().__init__(session, keys, reservations, mirror, liveness, vehicles,
                          layout.vehicle_kind)
         self.map_id = layout.name
+        self.actions = ACTIONS[mission]
         self.planners = planners_for(layout)
         self.nodes = nodes(layout)
         # a pose's node: a station's or stack's before a park that shares it (the first node
@@ -185,7 +191,7 @@ class MasterExecutor(RemoteExecutor):
         if isinstance(planned, PlanFailure):
             return planned
         goal = self.node_at[planned.goal]
-        self._send(task.vehicle, order, [goal], ACTIONS.get(task.kind))
+        self._send(task.vehicle, order, [goal], self.actions.get(task.kind))
         leg = self._committed(task.vehicle, order)
         self._sync(leg.revision)
         order.node, order.sequence_id = goal, order.sequence_id + 2

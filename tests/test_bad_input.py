@@ -207,8 +207,7 @@ BAD = [
     ("run --dispatch external --inprocess", "--dispatch external takes no --inprocess"),
     ("run --mqtt mqtt://127.0.0.1:1883", "--mqtt is the broker of --dispatch vda5050 or "
      "external"),
-    ("run --dispatch vda5050 --mission empty", "--dispatch vda5050 runs fill missions, not "
-     "empty"),
+    ("run --dispatch vda5050 --faults kill_vehicle", "--dispatch vda5050 takes no --faults"),
     ("run --dispatch vda5050 --clock fast", "--dispatch vda5050 takes no --clock fast"),
     ("run --dispatch vda5050 --layout paper002", "layout paper002 is a lane layout, whose "
      "order missions do not go through it yet"),

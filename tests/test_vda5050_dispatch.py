@@ -1,5 +1,5 @@
-"""`fleet run --dispatch vda5050`: the internal dispatcher runs a whole fill mission as VDA
-5050 orders over a real broker (a mosquitto the run starts), through the gateway, and the
+"""`fleet run --dispatch vda5050`: the internal dispatcher runs a whole fill or empty mission
+as VDA 5050 orders over a real broker (a mosquitto the run starts), through the gateway, and the
 result matches the direct run's within the tolerance docs/vda5050.md states."""
 
 from __future__ import annotations
@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+
+import pytest
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
@@ -24,20 +26,23 @@ SPEED = 10  # sim seconds a wall second: the mission's 600 s in about a minute
 # forklift stands ready and the gateway has had it planned, up to some 3 s of sim time at
 # speed 10 after the decision instant (the gateway's lead of 1 to 2 s, its look every
 # 0.05 s of wall time and the round trips, each wall second ten of sim time); a forklift
-# drives 24 legs on `small`, so up to 72 s (of the direct fill's 598 s). It may also end a
-# little sooner: a leg that starts later meets the others elsewhere, and what follows differs.
+# drives 24 legs on `small`, so up to 72 s (of the direct fill's 598 s, the direct empty's
+# 574.5 s). It may also end a little sooner: a leg that starts later meets the others
+# elsewhere, and what follows differs.
 LEG_DELAY_S, LEGS = 3.0, 24
 END_TIME_TOLERANCE_S = LEG_DELAY_S * LEGS
 
 
-def test_a_whole_fill_mission_runs_as_vda5050_orders(tmp_path):
+@pytest.mark.parametrize("kind", [MissionKind.FILL, MissionKind.EMPTY])
+def test_a_whole_mission_runs_as_vda5050_orders(tmp_path, kind):
     """Behind the router's access control (the gateway logged in as itself), every subtask
     goes out as a release of the forklift's one order, stitched at the node the last ended
-    on, a drop at a stack and a pick at a station; every stack is filled once, no two
-    forklifts ever share a cell, the MQTT traffic passes the VDA 5050 verdict, and the end
-    time is the direct run's within the tolerance."""
+    on, a drop at a stack and a pick at a station (the other way round when emptying);
+    every stack is served once, no two forklifts ever share a cell, the MQTT traffic passes
+    the VDA 5050 verdict, and the end time is the direct run's within the tolerance."""
     out = tmp_path / "run"
     done = subprocess.run([sys.executable, "-m", "fleet", "run", "--layout", LAYOUT,
+                           "--mission", kind.value,
                            "--dispatch", "vda5050", "--secure", "--speed", str(SPEED),
                            "--json", "--out", str(out)], capture_output=True, text=True,
                           timeout=600)
@@ -54,11 +59,13 @@ def test_a_whole_fill_mission_runs_as_vda5050_orders(tmp_path):
     # one order a forklift, one release a subtask, each a leg the forklift's agent committed
     assert {o["orderId"] for o in orders} == {"mission-1", "mission-2"}
     assert len(orders) == len(subtasks) == len(legs) == 2 * summary["stacks_done"]
+    at_stack = "drop" if kind is MissionKind.FILL else "pick"
+    at_station = "pick" if kind is MissionKind.FILL else "drop"
     for o in orders:
         (action,) = o["nodes"][-1]["actions"]
-        assert action["actionType"] == ("drop" if o["nodes"][-1]["nodeId"].startswith("stack")
-                                        else "pick")
-    mission, layout = Mission(LAYOUT, MissionKind.FILL, Strategy.ANN), load_layout(LAYOUT)
+        assert action["actionType"] == (at_stack if o["nodes"][-1]["nodeId"].startswith("stack")
+                                        else at_station)
+    mission, layout = Mission(LAYOUT, kind, Strategy.ANN), load_layout(LAYOUT)
     direct = run_mission(mission, engine_options(mission, layout, None), layout)
     assert abs(summary["end_time_s"] - direct.end_time) <= END_TIME_TOLERANCE_S, (
         summary["end_time_s"], direct.end_time)

@@ -40,7 +40,7 @@ import paho.mqtt.client as mqtt
 import zenoh
 
 from fleet.errors import UserError
-from fleet.mission.spec import ClockMode
+from fleet.mission.spec import ClockMode, MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, Pose
@@ -73,6 +73,7 @@ from fleet.wire.topics import GATEWAY, Keys, genuine
 from fleet.world.layout import Layout
 from fleet.world.site import planners_for
 from reservation.client import ReservationClient
+from reservation.mirror import TableMirror
 from vehicle_agent.clock import SimClock, tick_problem
 
 log = logging.getLogger("fleet.vda5050")
@@ -182,7 +183,7 @@ class VehicleLink:
 class Gateway:
     def __init__(self, session: zenoh.Session, keys: Keys, layout: Layout,
                  starts: tuple[Pose, ...], config: GatewayConfig,
-                 dispatch: str = "external") -> None:
+                 dispatch: str = "external", mission: str = "") -> None:
         self.session, self.keys, self.layout, self.config = session, keys, layout, config
         self.map_id = layout.name
         self.known = {n.node_id: n for n in nodes(layout)}
@@ -197,14 +198,18 @@ class Gateway:
         self.clock = SimClock()
         self.tasks = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
         self.reservations = ReservationClient(session, keys, Requester(session, SENDER))
+        self.store = TableMirror()  # followed for our own dispatcher's mission only
         self.pool = ThreadPoolExecutor(TASK_THREADS, thread_name_prefix="vda5050-task")
         self.stopping = threading.Event()
-        # the stacks or slots holding goods, as the master's picks and drops
-        self.filled: set = set() if self.goods_block else {s.cell for s in layout.slots}
         self.vehicles = list(range(1, len(starts) + 1))
-        # --dispatch vda5050: our dispatcher's fill mission, which starts its forklifts with
-        # goods claimed and holds the stacks' goods in the store itself, as in the direct run
+        # --dispatch vda5050: our dispatcher's fill or empty mission, which starts its
+        # forklifts with goods claimed (fill) or its stacks full (empty), holds the stacks'
+        # goods in the store itself, as in the direct run, and plans every leg it orders
         self.ours = dispatch == "vda5050"
+        emptying = self.ours and mission == MissionKind.EMPTY.value
+        # the stacks or slots holding goods, as the master's picks and drops
+        self.filled: set = {s.cell for s in layout.stacks} if emptying else \
+            set() if self.goods_block else {s.cell for s in layout.slots}
         dispatch = DispatchParams()
         handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
         self.executions: dict[int, Execution] = {}
@@ -215,7 +220,8 @@ class Gateway:
             position = Position(*at_rest(layout, start))
             self.executions[v] = Execution(self.known, start, position, handling,
                                            self.filled, self._drivable, self._escapes,
-                                           noun=self.kind.noun, loaded=self.ours)
+                                           noun=self.kind.noun,
+                                           loaded=self.ours and not emptying)
             self.motion[v] = messages.Motion(position, False)
         self.links: dict[int, VehicleLink] = {}
         self.legs: dict[int, Stream] = {}  # each vehicle's committed legs (LegCommitted)
@@ -232,6 +238,8 @@ class Gateway:
             scope.enter_context(self.session.declare_subscriber(
                 self.keys.vehicle_state("*"), self._on_state))
             self._wait_for_the_fleet()
+            if self.ours:  # the engine's goods, as its store holds them
+                scope.enter_context(self.reservations.follow(self.store))
             for v in self.vehicles:
                 stream = scope.enter_context(Stream(self.session, self.keys.vda5050_mqtt(v),
                                                     SENDER, reliable=True))
@@ -414,12 +422,22 @@ class Gateway:
             self._publish_state(vehicle)
 
     def _static(self, filled) -> frozenset:
-        """The static map's goods: the stacks filled (an AGV's lanes have none)."""
+        """The static map's goods: the stacks filled (an AGV's lanes have none). Our own
+        dispatcher's mission: the stacks its store holds goods on for good, as its engine
+        plans on them (it takes a stack's goods off its map when it commits the leg that
+        claims them, and holds them in the store until the claim is done)."""
+        if self.ours:
+            with self.store.frozen() as store:
+                return frozenset(r.cell for r in store.table.reservations(GOODS)
+                                 if r.t1 == math.inf)
         return frozenset(filled) if self.goods_block else frozenset()
 
     def _drivable(self, start: Pose, goal: Pose) -> bool:
         """Whether the vehicle can drive from one pose to another on today's static map (the
-        same part of the floor): the spec's noRouteError otherwise."""
+        same part of the floor): the spec's noRouteError otherwise. Our own dispatcher's
+        orders are its plans: it knows its goods to the instant, the gateway a little later."""
+        if self.ours:
+            return True
         planner = self.planners.get(self._static(self.filled))
         here, there = planner.component(start), planner.component(goal)
         return here is not None and here == there
@@ -428,7 +446,7 @@ class Gateway:
         """Whether a forklift at `pose` still reaches the stations with `filled` stacks full
         (goods dropped from inside a cluster can wall the forklift in; a shelf put down in
         its slot walls no AGV in)."""
-        if not self.goods_block:
+        if not self.goods_block or self.ours:
             return True
         planner = self.planners.get(filled)
         here = planner.component(pose)
@@ -526,7 +544,7 @@ def serve(config: GatewayConfig) -> int:
                             "external (or vda5050)")
         nodes(layout)  # a layout without a VDA 5050 map is refused by name
         gateway = Gateway(session, keys, layout, starts[:info.vehicles], config,
-                          info.dispatch)
+                          info.dispatch, info.kind)
         stop_on_signals(gateway.stop)
         try:
             gateway.run()

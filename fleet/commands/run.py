@@ -224,9 +224,9 @@ def run(args: argparse.Namespace) -> int:
     if layout.floor is not None:  # seed 004's lifting AGVs
         return run004(args, layout, command_line())
     mission = mission_from_args(args, layout)
-    if args.dispatch == "vda5050" and mission.kind is not MissionKind.FILL:
-        raise UserError(f"--dispatch vda5050 runs fill missions, not {mission.kind.value} "
-                        "(docs/vda5050.md)")
+    if args.dispatch == "vda5050" and mission.kind not in (MissionKind.FILL, MissionKind.EMPTY):
+        raise UserError(f"--dispatch vda5050 runs fill and empty missions, not "
+                        f"{mission.kind.value} (docs/vda5050.md)")
     if not registry.is_built(layout.vehicle.kind):  # a planned kind: nothing drives it yet
         raise UserError(f"layout {layout.name}: {registry.not_built(layout.vehicle.kind)}")
     if mission.kind is MissionKind.ORDERS:

@@ -161,7 +161,8 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
                    f"{root}/dispatch/mission"]),
             (PUBLISH, [f"{root}/vda5050/**"]),
             (TOKEN, [f"{root}/vda5050/alive"]),
-            (SUBSCRIBE, [f"{root}/clock", f"{root}/vehicle/*/state"]),
+            (SUBSCRIBE, [f"{root}/clock", f"{root}/vehicle/*/state",
+                         f"{root}/reservation/change"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/*/alive"])],
         OPERATOR: [
             (ASK, [f"{root}/vehicle/*/inject"]),
