@@ -112,8 +112,9 @@ def serve(config: DispatcherConfig) -> int:
         raise UserError(f"--dispatch {config.dispatch} runs forklifts or lane AGVs on the "
                         "real-time clock: give --clock realtime and a layout of either")
     if config.dispatch == "vda5050" and layout.has_lanes:
-        raise UserError("--dispatch vda5050 runs fill missions on a forklift layout; a lane "
-                        "layout's AGVs take a master's orders with --dispatch external")
+        raise UserError("--dispatch vda5050 runs fill and empty missions on a forklift "
+                        "layout; a lane layout's AGVs take a master's orders with --dispatch "
+                        "external")
     if config.dispatch == "vda5050" and (config.faults or config.claims or config.recover
                                          or config.mission.kind not in VDA5050_ACTIONS):
         raise UserError("--dispatch vda5050 runs fill and empty missions, without --faults, "

@@ -208,6 +208,8 @@ BAD = [
     ("run --mqtt mqtt://127.0.0.1:1883", "--mqtt is the broker of --dispatch vda5050 or "
      "external"),
     ("run --dispatch vda5050 --faults kill_vehicle", "--dispatch vda5050 takes no --faults"),
+    ("run --dispatch external --layout paper002 --mission fill", "--dispatch external "
+     "--mission fill: the AGVs of lane layout paper002 park on their piles"),
     ("run --dispatch vda5050 --clock fast", "--dispatch vda5050 takes no --clock fast"),
     ("run --dispatch vda5050 --layout paper002", "layout paper002 is a lane layout, whose "
      "order missions do not go through it yet"),

@@ -12,12 +12,14 @@ import pytest
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
-from fleet.mission.engine import run_mission
+from fleet.mission.engine import Engine, run_mission
+from fleet.mission.seam import LocalExecutor
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
 from fleet.runtime.args import engine_options
-from fleet.wire.protocol import LegCommitted, MqttTraffic, SubtaskEvent
+from fleet.wire.protocol import GOODS, LegCommitted, MqttTraffic, SubtaskEvent
 from fleet.world.layout_file import load_layout
+from vda5050.gateway import engine_map
 
 LAYOUT = "small"
 SPEED = 10  # sim seconds a wall second: the mission's 600 s in about a minute
@@ -69,3 +71,33 @@ def test_a_whole_mission_runs_as_vda5050_orders(tmp_path, kind):
     direct = run_mission(mission, engine_options(mission, layout, None), layout)
     assert abs(summary["end_time_s"] - direct.end_time) <= END_TIME_TOLERANCE_S, (
         summary["end_time_s"], direct.end_time)
+
+
+class _Watching(LocalExecutor):
+    """The in-process executor, noting for each task the map it is planned on and what the
+    store holds as goods then."""
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.seen: list[tuple[frozenset, list]] = []
+
+    def execute(self, task):
+        self.seen.append((task.filled, self.store.reservations(GOODS)))
+        return super().execute(task)
+
+
+@pytest.mark.parametrize("kind", [MissionKind.FILL, MissionKind.EMPTY])
+def test_the_gateway_plans_our_legs_on_the_engines_map_read_off_its_store(kind):
+    """What the gateway of --dispatch vda5050 hands an agent to plan on, read off the store
+    alone, is at every task of a whole mission the map the engine plans that task on."""
+    layout = load_layout(LAYOUT)
+    mission = Mission(LAYOUT, kind, Strategy.ANN)
+    options = engine_options(mission, layout, None)
+    engine = Engine(mission, options, layout)
+    watching = _Watching(engine.vehicle_kind, engine.planners)
+    engine = Engine(mission, options, layout, executor=watching)
+    engine.run()
+    stacks = frozenset(s.cell for s in layout.stacks)
+    assert len(watching.seen) >= 2 * len(layout.stacks)
+    for filled, goods in watching.seen:
+        assert engine_map(goods, stacks, kind is MissionKind.EMPTY) == filled

@@ -206,7 +206,7 @@ def test_a_lane_agv_lifts_a_shelf_and_does_not_drive_it_under_another():
     assert agv.loaded and home.cell not in agv.filled
     t = drive(agv, t)
     assert agv.next_leg(t) is None
-    assert agv.waiting == "slot s-11-27 holds a shelf"
+    assert agv.waiting == "slot s-11-27: it holds a shelf"
     assert [(e.error_type, e.description) for e in agv.book.errors] == [
         ("noRouteError", "a loaded AGV cannot drive into slot s-11-27: it holds a shelf")]
     assert agv.next_leg(t + BLOCKED_RETRY_S - 0.1) is None
@@ -216,18 +216,36 @@ def test_a_lane_agv_lifts_a_shelf_and_does_not_drive_it_under_another():
     assert not agv.loaded and full.cell in agv.filled and not agv.book.active
 
 
-@pytest.mark.parametrize(("at", "kind", "why"), [
-    ("slot-s-10-27", "drop", "drop: the AGV is not loaded"),
-    ("station-p29", "pick", "pick: packing station"),
-])
-def test_a_lane_agv_picks_and_drops_shelves_in_slots_only(at, kind, why):
+def test_a_lane_agv_with_nothing_on_its_lift_has_nothing_to_put_down():
+    agv = lane_agv("slot-s-10-27")
+    assert agv.order(order(["slot-s-10-27"], {0: ["drop"]})).accepted
+    agv.advance(0.0)
+    assert statuses(agv) == {"drop0": "FAILED"}
+    assert agv.book.errors[0].description == "drop: the AGV is not loaded"
+
+
+@pytest.mark.parametrize(("at", "kind"), [("station-p29", "pick"), ("station-p29", "drop"),
+                                          ("pile-c9", "pick"), ("pile-c9", "drop")])
+def test_a_lane_agv_lifts_and_puts_down_in_slots_only(at, kind):
+    """A packing station works the shelf the AGV stands with, a pile charges it: an order
+    that lifts or puts down there is refused, naming the action."""
     agv = lane_agv(at)
-    decision = agv.order(order([at], {0: [kind]}))
-    if kind == "drop":
-        assert decision.accepted
-        agv.advance(0.0)
-        assert statuses(agv) == {"drop0": "FAILED"}
-        assert agv.book.errors[0].description == why
-    else:  # a packing station works the shelf the AGV stands with: nothing to lift there
-        assert not decision.accepted
-        assert agv.book.errors[0].error_type == "orderError"
+    assert not agv.order(order([at], {0: [kind]})).accepted
+    (error,) = agv.book.errors
+    assert error.error_type == "orderError" and kind in error.description
+    assert "slot" in error.description  # it says where the action may be
+
+
+def test_a_loaded_lane_agv_waits_for_a_slot_another_brings_a_shelf_to():
+    """Another AGV stands, or will, in the slot with a shelf on its lift: it may put it down
+    before this one arrives, so this one does not drive in yet."""
+    coming = {LANE_NODES["slot-s-11-27"].cell}
+    node = LANE_NODES["station-p29"]
+    agv = Execution(LANE_NODES, node.pose, Position(node.x, node.y, node.theta),
+                    Handling(0.0, 0.0), set(), lambda a, b: True, lambda pose, filled: True,
+                    noun="AGV", loaded=True, shelf_coming=lambda cell: cell in coming)
+    assert agv.order(order(["station-p29", "slot-s-11-27"], {1: ["drop"]})).accepted
+    assert agv.next_leg(0.0) is None
+    assert agv.waiting == "slot s-11-27: another vehicle brings a shelf there"
+    coming.clear()  # it went on without putting its shelf down there
+    assert agv.next_leg(BLOCKED_RETRY_S) is not None

@@ -28,6 +28,8 @@ from fleet.cli import main
 from fleet.recording.reader import read_recording
 from fleet.runtime.mqtt_broker import Broker, start_mosquitto, stop
 from fleet.vda5050.schemas import schema_text
+from fleet.wire.convert import leg_from_wire
+from fleet.wire.protocol import LegCommitted
 
 LAYOUT = "paper"
 VEHICLES = 4
@@ -274,6 +276,40 @@ def test_lane_agvs_take_a_masters_orders_and_swap_two_shelves(agv_session):
     report = s.end()
     assert report.passed and report.lanes_kept, "\n".join(report.verdict_lines())
     assert report.protocol.orders == 2
+
+
+@pytest.fixture
+def fast_agv_session(tmp_path, broker) -> Iterator[Session]:
+    with external_session(tmp_path, broker, "paper002", 2, "agv", "--speed", "6") as running:
+        yield running
+
+
+def test_a_lane_agv_whose_leg_another_postpones_drives_the_postponed_leg(fast_agv_session):
+    """Seed 002's collision rules settle a crossing by putting waits into a leg already
+    committed: AGV 1 leaves pile c24 for slot s-8-23, and AGV 2, sent from pile c21 to slot
+    s-28-14 once AGV 1 drives (its leg starting 0.5 to 3 s of sim time later, which is what
+    the rules settle so), postpones AGV 1's leg. The gateway tells AGV 1's agent, which drives
+    the postponed leg (recorded as the leg it commits), both orders finish, and the recording
+    passes every verdict, the lanes' included."""
+    s = fast_agv_session
+    s.send_order(1, order("p1", ["pile-c9", "pile-c24"], layout="paper002"), 1)
+    s.send_order(2, order("p2", ["pile-c25", "pile-c21"], layout="paper002"), 2)
+    for vehicle, order_id in ((1, "p1"), (2, "p2")):
+        assert s.processed(vehicle, order_id)["error"] is None
+    s.send_order(1, order("c1", ["pile-c24", "slot-s-8-23"], layout="paper002"), 3)
+    s.find("agv-1 driving", lambda e: e["event"] == "edgeTraversing" and
+           e["edgeId"] == "pile-c24>slot-s-8-23")
+    s.send_order(2, order("c2", ["pile-c21", "slot-s-28-14"], layout="paper002"), 4)
+    for vehicle, order_id in ((1, "c1"), (2, "c2")):
+        assert s.processed(vehicle, order_id)["error"] is None
+    assert no_trouble(s.master) == []
+    report = s.end()
+    assert report.passed and report.lanes_kept, "\n".join(report.verdict_lines())
+    legs = [m for _, m in read_recording(s.out).of(LegCommitted)
+            if m.vehicle == 1 and m.order_id == "c1"]
+    assert len(legs) == 2, legs  # as committed, then as postponed
+    first, postponed = (leg_from_wire(m.leg, "leg") for m in legs)
+    assert postponed.t_end > first.t_end and postponed.t_start == first.t_start
 
 
 def header(vehicle: int, header_id: int, version: str = "2.0.0") -> Message:

@@ -42,7 +42,8 @@ import zenoh
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode, MissionKind
 from fleet.params import DispatchParams
-from fleet.planning.reservations import Interval
+from fleet.planning.geometry import Cell
+from fleet.planning.reservations import Interval, Reservation
 from fleet.planning.trajectory import FailureReason, Pose
 from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.bus import Requester, RequestFailed, Stream, open_session, wait_alive
@@ -56,17 +57,20 @@ from fleet.vda5050.map import at_rest, nodes
 from fleet.vda5050.messages import serial_number
 from fleet.vda5050.orders import Position
 from fleet.vda5050.schemas import InvalidMessage, validate
-from fleet.wire.convert import leg_to_wire
+from fleet.wire.convert import leg_from_wire, leg_to_wire
 from fleet.wire.protocol import (
     GOODS,
+    AmendRequest,
     ClockTick,
     Envelope,
     LegCommitted,
     MqttTraffic,
     ProtocolError,
+    Reply,
     TaskRequest,
     TaskResult,
     VehicleState,
+    WireLeg,
     decode,
 )
 from fleet.wire.topics import GATEWAY, Keys, genuine
@@ -110,6 +114,16 @@ class _State:
     vehicle: int
     state: VehicleState
     t: float
+
+
+@dataclass(frozen=True)
+class _Postponed:
+    """Another AGV's commit postponed this one's leg, which its agent now drives."""
+
+    vehicle: int
+    leg: WireLeg
+    arrival: float
+    revision: int
 
 
 @dataclass(frozen=True)
@@ -206,22 +220,25 @@ class Gateway:
         # forklifts with goods claimed (fill) or its stacks full (empty), holds the stacks'
         # goods in the store itself, as in the direct run, and plans every leg it orders
         self.ours = dispatch == "vda5050"
-        emptying = self.ours and mission == MissionKind.EMPTY.value
+        self.emptying = self.ours and mission == MissionKind.EMPTY.value
+        self.stacks = frozenset(s.cell for s in layout.stacks)
+        self.piles = frozenset(p.cell for p in layout.piles)
         # the stacks or slots holding goods, as the master's picks and drops
-        self.filled: set = {s.cell for s in layout.stacks} if emptying else \
-            set() if self.goods_block else {s.cell for s in layout.slots}
+        self.filled: set[Cell] = set(self._goods_at_start(layout))
         dispatch = DispatchParams()
-        handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload)
+        # an AGV's lift takes up and puts down at once (note A.3)
+        handling = Handling(pick_s=dispatch.t_claim, drop_s=dispatch.t_unload) \
+            if self.goods_block else Handling(pick_s=0.0, drop_s=0.0)
         self.executions: dict[int, Execution] = {}
         self.motion: dict[int, messages.Motion] = {}
-        if not self.goods_block:  # an AGV's lift takes up and puts down at once (note A.3)
-            handling = Handling(pick_s=0.0, drop_s=0.0)
         for v, start in zip(self.vehicles, starts, strict=True):  # as the dispatcher has it
             position = Position(*at_rest(layout, start))
             self.executions[v] = Execution(self.known, start, position, handling,
                                            self.filled, self._drivable, self._escapes,
                                            noun=self.kind.noun,
-                                           loaded=self.ours and not emptying)
+                                           loaded=self.ours and not self.emptying,
+                                           shelf_coming=functools.partial(self._shelf_coming,
+                                                                          v))
             self.motion[v] = messages.Motion(position, False)
         self.links: dict[int, VehicleLink] = {}
         self.legs: dict[int, Stream] = {}  # each vehicle's committed legs (LegCommitted)
@@ -300,7 +317,8 @@ class Gateway:
                     self._step(v, now)
                 sweep = time.monotonic() + WAKE_S
 
-    def _handle(self, event: _Mqtt | _Connected | _State | _Planned, now: float) -> int:
+    def _handle(self, event: _Mqtt | _Connected | _State | _Planned | _Postponed,
+                now: float) -> int:
         """Take one event; the vehicle it concerns."""
         match event:
             case _Mqtt(vehicle, topic, payload):
@@ -312,6 +330,13 @@ class Gateway:
                 self._publish_state(vehicle)
             case _State(vehicle, state, t):
                 self._observed(vehicle, state, t)
+            case _Postponed(vehicle, wire, arrival, revision):
+                execution = self.executions[vehicle]
+                if execution.driving is not None:  # published as the leg it now drives
+                    execution.driving.arrival = arrival
+                    self.legs[vehicle].put(LegCommitted(
+                        vehicle, execution.book.order_id, execution.driving.sequence_id,
+                        revision, wire), leg_from_wire(wire, "postponed").t_start)
             case _Planned(vehicle, leg, arrival, why, wall_s, late):
                 execution = self.executions[vehicle]
                 speed = self.clock.tick.speed if self.clock.tick else 1.0
@@ -413,24 +438,40 @@ class Gateway:
         direction = math.atan2(position.y - last.y, position.x - last.x) \
             if self.type.kinematic == "OMNI" and (position.x, position.y) != (last.x, last.y) \
             else None
+        # a battery charges while its AGV stands on a pile (seed 002's model)
+        charging = not driving and state.battery is not None and state.battery < 100.0 \
+            and pose.cell in self.piles
         self.motion[vehicle] = messages.Motion(
             position, driving, self.type.speed(state.speed, self.layout.cell_size),
-            state.battery, direction)
+            state.battery, direction, charging)
         execution = self.executions[vehicle]
         was_driving = execution.moving
         if execution.observed(pose, position, driving, t) or was_driving != driving:
             self._publish_state(vehicle)
 
-    def _static(self, filled) -> frozenset:
-        """The static map's goods: the stacks filled (an AGV's lanes have none). Our own
-        dispatcher's mission: the stacks its store holds goods on for good, as its engine
-        plans on them (it takes a stack's goods off its map when it commits the leg that
-        claims them, and holds them in the store until the claim is done)."""
-        if self.ours:
-            with self.store.frozen() as store:
-                return frozenset(r.cell for r in store.table.reservations(GOODS)
-                                 if r.t1 == math.inf)
-        return frozenset(filled) if self.goods_block else frozenset()
+    def _shelf_coming(self, vehicle: int, cell: Cell) -> bool:
+        """Whether another AGV stands, or will once its leg ends, in that slot with a shelf
+        on its lift: it may put it down there before `vehicle` drives in."""
+        return any(e.loaded and e.pose.cell == cell for v, e in self.executions.items()
+                   if v != vehicle)
+
+    def _goods_at_start(self, layout: Layout) -> frozenset[Cell]:
+        """Where goods stand when the session starts: every slot's own shelf (AGVs), every
+        stack full for our own empty mission, else nothing (an outside master fills)."""
+        if not self.goods_block:
+            return frozenset(s.cell for s in layout.slots)
+        return self.stacks if self.emptying else frozenset()
+
+    def _static(self, filled: frozenset[Cell]) -> tuple[frozenset[Cell], int]:
+        """The static map's goods, and the store's revision the agent plans on at least: the
+        stacks filled (an AGV's lanes have none); for our own dispatcher's mission, the
+        stacks its engine plans on as filled, read off its store (`engine_map`)."""
+        if not self.ours:
+            return (frozenset(filled) if self.goods_block else frozenset()), 0
+        with self.store.frozen() as store:
+            goods = store.table.reservations(GOODS)
+            revision = store.revision
+        return engine_map(goods, self.stacks, self.emptying), revision
 
     def _drivable(self, start: Pose, goal: Pose) -> bool:
         """Whether the vehicle can drive from one pose to another on today's static map (the
@@ -438,7 +479,7 @@ class Gateway:
         orders are its plans: it knows its goods to the instant, the gateway a little later."""
         if self.ours:
             return True
-        planner = self.planners.get(self._static(self.filled))
+        planner = self.planners.get(self._static(frozenset(self.filled))[0])
         here, there = planner.component(start), planner.component(goal)
         return here is not None and here == there
 
@@ -454,16 +495,20 @@ class Gateway:
 
     def _ask_for_leg(self, vehicle: int, leg: LegRequest, order_id: str) -> None:
         """In a task thread: the agent plans and commits the leg; its answer is enqueued,
-        the leg it committed published."""
-        request = TaskRequest(self.tasks.next_id(), vehicle, "return", str(leg.start),
-                              leg.t_i, [str(leg.goal)], sorted(self._static(leg.filled)),
-                              leg.loaded, 0)
+        the leg it committed published, the legs it postponed (seed 002's collision rules)
+        told to their AGVs."""
         started = time.monotonic()
         try:
+            filled, revision = self._static(leg.filled)
+            request = TaskRequest(self.tasks.next_id(), vehicle, "return", str(leg.start),
+                                  leg.t_i, [str(leg.goal)], sorted(filled), leg.loaded,
+                                  revision)
             reply = self.tasks.request(self.keys.vehicle_task(vehicle), request, leg.t_i).message
             if not isinstance(reply, TaskResult) or reply.task_id != request.task_id:
                 raise ProtocolError(f"{self.kind.noun} {vehicle} answered with {reply}")
             result = result_from_wire(reply)
+            for wire in reply.amended if reply.ok else ():
+                self._amend(wire, leg.t_i)
         except (RequestFailed, ProtocolError) as exc:
             self.inbox.put(_Planned(vehicle, leg, None, f"{self.kind.noun} {vehicle}: {exc}"))
             return
@@ -484,6 +529,19 @@ class Gateway:
             self.inbox.put(_Planned(vehicle, leg, None, f"no way to {leg.goal} now: "
                                     f"{reply.failure}: {reply.detail}", wall_s,
                                     reply.failure == FailureReason.LATE.value))
+
+    def _amend(self, wire: WireLeg, t: float) -> None:
+        """Another AGV's committed leg, postponed by a commit (seed 002's collision rules):
+        its agent drives it so from now on, as it does when the dispatcher tells it."""
+        postponed = leg_from_wire(wire, "TaskResult.amended")
+        reply = self.tasks.request(self.keys.vehicle_task(postponed.vehicle), AmendRequest(
+            self.tasks.next_id(), postponed.vehicle, wire), t).message
+        if not (isinstance(reply, Reply) and reply.ok):
+            raise ProtocolError(f"{self.kind.noun} {postponed.vehicle} did not take its "
+                                f"postponed leg: {getattr(reply, 'reason', reply)}")
+        log.info("%s %d: its leg postponed, now arriving at t=%.2f", self.kind.noun,
+                 postponed.vehicle, postponed.t_end)
+        self.inbox.put(_Postponed(postponed.vehicle, wire, postponed.t_end, reply.revision))
 
     def _hold_goods(self, goods) -> None:
         """The store holds a stack's goods from the instant they are put there, so no plan
@@ -519,6 +577,17 @@ class Gateway:
         self.links[vehicle].publish("factsheet", messages.factsheet(
             self.kind, self.layout.cell_size, self.config.state_interval_s,
             self.config.visualization_interval_s), qos=1, retain=True)
+
+
+def engine_map(goods: list[Reservation], stacks: frozenset[Cell], emptying: bool
+               ) -> frozenset[Cell]:
+    """The stacks our engine plans on as filled, from the goods its store holds (`goods`,
+    owner GOODS): in a fill, those held for good (placed when the drop's leg is committed);
+    in an empty, every stack but those held for a while (claimed: off its map from the commit
+    of the leg that claims them, held until the claim is done)."""
+    if emptying:
+        return stacks - {r.cell for r in goods}
+    return frozenset(r.cell for r in goods if r.t1 == math.inf)
 
 
 def _believed(sample: zenoh.Sample, expected: type) -> Envelope | None:

@@ -114,7 +114,8 @@ def run_up(args: argparse.Namespace) -> int:
         folder = secrets_folder(None)
         if not (folder / "users").exists():
             write_secrets(folder, force=False)
-        elif not (folder / f"{GATEWAY}_password").exists():  # made before the gateway had one
+        elif args.dispatch == "external" and not (folder / f"{GATEWAY}_password").exists():
+            # made before the gateway had a login
             raise UserError(f"{folder} holds no login for the VDA 5050 gateway: `fleet compose "
                             "secrets --force` writes this deployment's logins anew")
         files += ["-f", str(args.file.with_name("compose.secure.yaml"))]

@@ -39,10 +39,14 @@ def check_vda5050_run(args: argparse.Namespace, layout: Layout) -> None:
         raise UserError(f"--dispatch {args.dispatch}: layout {layout.name} is a seed-004 "
                         "floor; its lifting AGVs do not speak VDA 5050 yet (docs/vda5050.md)")
     if args.dispatch == "vda5050" and layout.has_lanes:
-        raise UserError(f"--dispatch vda5050 runs our fill missions through the gateway; "
-                        f"layout {layout.name} is a lane layout, whose order missions do not "
-                        "go through it yet: its AGVs take a master's orders with --dispatch "
-                        "external (docs/vda5050.md)")
+        raise UserError(f"--dispatch vda5050 runs our fill and empty missions through the "
+                        f"gateway; layout {layout.name} is a lane layout, whose order missions "
+                        "do not go through it yet: its AGVs take a master's orders with "
+                        "--dispatch external (docs/vda5050.md)")
+    if args.dispatch == "external" and layout.has_lanes and args.mission not in (None, "orders"):
+        raise UserError(f"--dispatch external --mission {args.mission}: the AGVs of lane layout "
+                        f"{layout.name} park on their piles as an order mission starts them, "
+                        "and take a master's orders; give no --mission")
 
 
 def broker_of(args: argparse.Namespace) -> tuple[str, bool]:

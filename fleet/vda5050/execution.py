@@ -91,6 +91,9 @@ class Execution:
     # stacks filled
     escapes: Callable[[Pose, frozenset[Cell]], bool]
     noun: str = "forklift"  # what the vehicle is called in what it says
+    # whether another vehicle stands or will stand in that slot with a shelf on its lift
+    # (it may put it down there before this one arrives)
+    shelf_coming: Callable[[Cell], bool] = lambda cell: False
     book: OrderBook = field(default_factory=OrderBook)
     loaded: bool = False
     moving: bool = False  # the last state heard says it drives
@@ -187,16 +190,19 @@ class Execution:
                     None)
         if edge is None:
             return None
-        end = self.known[edge.end_node_id]
-        if self.loaded and end.place == SLOT and end.cell in self.filled:
+        end = self.known[edge.end_node_id]  # an order names only nodes of the map
+        if self.loaded and end.place == SLOT and (end.cell in self.filled
+                                                  or self.shelf_coming(end.cell)):
             # a shelf on the lift does not go under another: until that one is taken away
-            self.waiting, self.retry_at = f"slot {end.of} holds a shelf", t + BLOCKED_RETRY_S
+            why = "it holds a shelf" if end.cell in self.filled else \
+                "another vehicle brings a shelf there"
+            self.waiting, self.retry_at = f"slot {end.of}: {why}", t + BLOCKED_RETRY_S
             self.book.edge_blocked(edge.sequence_id, f"a loaded {self.noun} cannot drive "
-                                   f"into slot {end.of}: it holds a shelf")
+                                   f"into slot {end.of}: {why}")
             return None
         self.planning = edge.sequence_id
-        return LegRequest(edge.sequence_id, self.pose, self.known[edge.end_node_id].pose, t,
-                          self.loaded, frozenset(self.filled))
+        return LegRequest(edge.sequence_id, self.pose, end.pose, t, self.loaded,
+                          frozenset(self.filled))
 
     def planned(self, leg: LegRequest, arrival: float | None, why: str, t: float
                 ) -> list[tuple[Mapping[str, Any], float]]:

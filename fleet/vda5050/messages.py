@@ -53,11 +53,13 @@ class VehicleType:
     agv_class: str  # agvClass
     navigation: str  # navigationTypes' first
     load_position: str  # where a load sits (loadSpecification, a state's loads)
-    works: str  # what pick and drop work, for the actions' descriptions
+    works: str  # what a pick takes, for the actions' descriptions
+    puts: str  # where a drop puts it
     acceleration: Callable[[float], float]  # m/s^2, of the cell size
     speed: Callable[[int, float], float]  # m/s at a state's speed level, of the cell size
 
 
+_FORKLIFT = ManeuverTimes()
 # A forklift steers its rear wheel (THREEWHEEL) and reaches mid speed over one cell in T2.
 # Seed 002's AGV moves to its eight neighbours without turning (OMNI) along the lanes, at one
 # constant speed it takes up at once: the seed gives no acceleration, so the factsheet says
@@ -65,11 +67,13 @@ class VehicleType:
 VEHICLE_TYPES: dict[str, VehicleType] = {
     "forklift": VehicleType("THREEWHEEL", "FORKLIFT", "AUTONOMOUS", "forks",
                             "the goods of the stack or station the node faces",
-                            lambda cell: 2 * cell / ManeuverTimes().T2 ** 2,
-                            lambda level, cell: {1: cell / ManeuverTimes().T3,
-                                                 2: cell / ManeuverTimes().T5}.get(level, 0.0)),
+                            "on the stack or station the node faces",
+                            lambda cell: 2 * cell / _FORKLIFT.T2 ** 2,
+                            lambda level, cell: {1: cell / _FORKLIFT.T3,
+                                                 2: cell / _FORKLIFT.T5}.get(level, 0.0)),
     "agv": VehicleType("OMNI", "CARRIER", "VIRTUAL_LINE_GUIDED", "lift",
-                       "the shelf of the slot the AGV stands in", lambda cell: 10.0,
+                       "the shelf of the slot the AGV stands in",
+                       "(the shelf) down in the slot the AGV stands in", lambda cell: 10.0,
                        lambda level, cell: SPEED_CELLS_PER_S * cell if level else 0.0),
 }
 
@@ -86,7 +90,7 @@ def factsheet(kind: VehicleKind, cell_size: float,
         {"actionType": "pick", "actionScopes": ["NODE"], "actionParameters": node_action,
          "actionDescription": f"take {of.works}"},
         {"actionType": "drop", "actionScopes": ["NODE"], "actionParameters": node_action,
-         "actionDescription": f"put down {of.works}"},
+         "actionDescription": f"put the goods {of.puts}"},
         *({"actionType": a, "actionScopes": ["INSTANT"]} for a in INSTANT_ACTIONS),
     ]
     return {
@@ -119,6 +123,7 @@ class Motion:
     speed_mps: float = 0.0
     battery: float | None = None  # % (None: no battery is modelled)
     direction: float | None = None  # of travel, radians (None: along the heading)
+    charging: bool = False
 
 
 def agv_position(position: Position, map_id: str) -> dict[str, Any]:
@@ -147,7 +152,7 @@ def state(order_fields: dict[str, Any], motion: Motion, map_id: str,
         "driving": motion.driving,
         "loads": [{"loadPosition": load_position}] if load_position else [],
         "batteryState": {"batteryCharge": 100.0 if motion.battery is None else motion.battery,
-                         "charging": False},
+                         "charging": motion.charging},
         "operatingMode": "AUTOMATIC",
         "information": information,
         "safetyState": {"eStop": "NONE", "fieldViolation": False},
