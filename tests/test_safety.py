@@ -18,6 +18,7 @@ from fleet.analysis.safety import (
     Sample,
     covered_cells,
     double_bookings,
+    on_goods,
     outside_reservation,
     overlaps,
     placed,
@@ -71,6 +72,18 @@ def test_double_bookings_are_found_and_back_to_back_is_not_one():
             Held(1, (4, 4), 0.0, INF), Held(1, (4, 4), 3.0, 6.0)]  # one owner twice: fine
     (found,) = double_bookings(held)
     assert (found.cell, found.vehicles, found.t0, found.t1) == ((0, 0), (2, 3), 8.0, 9.0)
+
+
+def test_a_body_on_a_stack_while_goods_stand_on_it_is_found():
+    """Goods on stack (3, 3) over [0, 5) (an empty mission: there until claimed) and on
+    (9, 9) from 4 on (a fill): a body covering (3, 3) at 2 s is on goods, at 5 s it is not
+    (claimed); covering (9, 9) at 2 s it is not (not filled yet)."""
+    goods = {(3, 3): [(0.0, 5.0)], (9, 9): [(4.0, INF)]}
+    on = Sample(1, 2.0, 4.0, 6.0, 0.0)  # cells (2, 3), (3, 3)
+    after = Sample(1, 5.0, 4.0, 6.0, 0.0)
+    early = Sample(2, 2.0, 18.0, 18.0, math.pi)  # cells (9, 9), (8, 9)
+    (found,) = on_goods([on, after, early], goods, BODY)
+    assert (found.t, found.vehicle, found.cells) == (2.0, 1, ((3, 3),))
 
 
 def test_overlaps_and_excursions_at_shared_instants():

@@ -42,8 +42,10 @@ from fleet.analysis.protocol5050 import protocol_verdict
 from fleet.analysis.report import Report
 from fleet.analysis.safety import (
     Body,
+    Cell,
     Sample,
     double_bookings,
+    on_goods,
     outside_reservation,
     overlaps,
     replay,
@@ -156,6 +158,7 @@ def analyze(recording: Recording) -> Report:
         lambda d: any(reservations_unknown(unverified, v, d.t0, d.t1) for v in d.vehicles))
     announced = announced_stacks(recording)
     stacks = Counter((a.cluster, a.index) for a in announced)
+    goods_seen = on_goods(samples, _goods(info.kind, layout, announced), body)
     cells = {(s.cluster, s.index): s.cell for s in layout.stacks}
     clusters: dict[str, list[int]] = {}
     for s in layout.stacks:
@@ -219,6 +222,7 @@ def analyze(recording: Recording) -> Report:
         overlaps=overlaps(samples, body, kind.max_speed_mps, STATE_GAP_PERIODS * period),
         outside_reservation=outside,
         double_bookings=bookings,
+        on_goods=goods_seen,
         segments=[SegmentRead(str(s.path), s.messages, s.complete, s.problem,
                               None if s.first_log_ns is None else s.first_log_ns / NS,
                               None if s.last_log_ns is None else s.last_log_ns / NS,
@@ -394,6 +398,24 @@ def decision_order(recording: Recording, record: MissionSummary, final: Final | 
     own = set(final.subtasks) if final is not None else set()
     processes = recording.info.clock != IN_PROCESS  # read once: it looks through everything
     return [s for s in record.subtasks if processes or s in own]
+
+
+def _goods(kind: str, layout: Layout, announced: list[Announced]
+           ) -> dict[Cell, list[tuple[float, float]]]:
+    """When goods stand on each stack, by the mission's own account: a fill's from the
+    instant a stack is announced filled on, an empty's from the start until it is announced
+    emptied (never: all along); none for any other mission (a master's goods are the store's,
+    which the reservation check covers)."""
+    first: dict[tuple[str, int], float] = {}
+    for a in announced:
+        first.setdefault((a.cluster, a.index), a.t)
+    if kind == MissionKind.FILL.value:
+        return {s.cell: [(first[s.cluster, s.index], math.inf)] for s in layout.stacks
+                if (s.cluster, s.index) in first}
+    if kind == MissionKind.EMPTY.value:
+        return {s.cell: [(0.0, first.get((s.cluster, s.index), math.inf))]
+                for s in layout.stacks}
+    return {}
 
 
 def announced_stacks(recording: Recording) -> list[Announced]:

@@ -63,6 +63,7 @@ class Report:
     overlaps: list = field(default_factory=list)
     outside_reservation: list = field(default_factory=list)
     double_bookings: list = field(default_factory=list)
+    on_goods: list = field(default_factory=list)  # a body on a stack holding goods
     # The work as the forklifts' states show it: announced stacks they did not serve, stacks
     # taken on the dispatcher's word (their forklift's states then not recorded), stacks
     # served out of their cluster's order, and states no vehicle of the kind can be in.
@@ -104,7 +105,7 @@ class Report:
     @property
     def safe(self) -> bool:
         return not (self.overlaps or self.outside_reservation or self.double_bookings
-                    or self.meetings)
+                    or self.on_goods or self.meetings)
 
     @property
     def lanes_kept(self) -> bool:
@@ -138,7 +139,7 @@ class Report:
 
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
-        for name in ("overlaps", "outside_reservation", "double_bookings",
+        for name in ("overlaps", "outside_reservation", "double_bookings", "on_goods",
                      "outside_reservation_unverified", "double_bookings_unverified",
                      "stacks_not_served", "stacks_out_of_order", "impossible_states",
                      "lane_breaches", "meetings"):
@@ -184,6 +185,7 @@ class Report:
             f"safety             {mark(self.safe)}: {len(self.overlaps)} overlaps, "
             f"{len(self.outside_reservation)} moments outside a reservation, "
             f"{len(self.double_bookings)} double-booked cells"
+            + ("" if self.lane_layout else f", {len(self.on_goods)} moments on goods")
             + (f", {kinds['node']} AGVs met at a node, {kinds['swap']} swaps, "
                f"{kinds['diagonal']} crossed diagonals" if self.lane_layout else "")
             + unchecked,
@@ -394,6 +396,8 @@ FINDINGS = (
             f"on {list(o.cells)}"),
     Listing("double_bookings", "double-booked", lambda d: f"cell {d.cell} by {d.vehicles} "
             f"over [{d.t0:.2f}, {d.t1:.2f})"),
+    Listing("on_goods", "on goods", lambda o: f"t={o.t:.2f} s forklift {o.vehicle} on the "
+            f"goods of {list(o.cells)}"),
     Listing("lane_breaches", "against the lanes", lambda b: f"t={b.t:.2f} s AGV {b.vehicle} "
             f"{b.move[0]} -> {b.move[1]}: {b.rule}: {b.detail}", more="moves"),
     Listing("meetings", "met", lambda m: f"t={m.t:.2f} s AGVs {m.vehicles}: {m.kind} at "

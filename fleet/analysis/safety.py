@@ -248,6 +248,22 @@ def outside_reservation(samples: list[Sample], held: list[Held], body: Body) -> 
     return found
 
 
+def on_goods(samples: list[Sample], goods: dict[Cell, list[tuple[float, float]]],
+             body: Body) -> list[Outside]:
+    """Every recorded instant at which a vehicle's body covered a stack cell while goods
+    stood on it (`goods`: each stack's spans with goods, from the mission's own account of
+    its stacks, not from the table): a plan must never drive through goods, and the table
+    alone cannot say so where goods are not held in it."""
+    spans = {cell: sorted(s) for cell, s in goods.items()}
+    found = []
+    for s in samples:
+        on = [cell for cell in covered_cells(body, s.x, s.y, s.theta)
+              if _holds(spans.get(cell, []), s.t)]
+        if on:
+            found.append(Outside(s.t, s.vehicle, tuple(sorted(on))))
+    return found
+
+
 def _holds(spans: list[tuple[float, float]], t: float) -> bool:
     started = bisect.bisect_right(spans, (t, math.inf))  # spans[:started] start at or before t
     return any(t < t1 for _, t1 in spans[:started])
