@@ -162,7 +162,7 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (PUBLISH, [f"{root}/vda5050/**"]),
             (TOKEN, [f"{root}/vda5050/alive"]),
             (SUBSCRIBE, [f"{root}/clock", f"{root}/vehicle/*/state",
-                         f"{root}/reservation/change"]),
+                         f"{root}/reservation/change", f"{root}/dispatch/mission"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/*/alive"])],
         OPERATOR: [
             (ASK, [f"{root}/vehicle/*/inject"]),
@@ -177,7 +177,7 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
             (ASK, [f"{root}/reservation/request/{vehicle_sender(v)}", f"{root}/dispatch/claim",
                    f"{root}/dispatch/mission"]),
             (SUBSCRIBE, [f"{root}/clock", f"{root}/reservation/change",
-                         f"{root}/dispatch/done"]),
+                         f"{root}/dispatch/done", f"{root}/dispatch/mission"]),
             (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/{v}/alive"])]
     return grants
 

@@ -29,37 +29,50 @@ def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSIO
     very map the dispatcher decides on; asked until it answers."""
     deadline = time.monotonic() + timeout_s
     said = False
-    while True:
-        for reply in session.get(keys.dispatch_mission, timeout=ASK_TIMEOUT_S):
-            info = _mission_info(reply)
-            if info is not None:
-                try:
-                    starts = tuple(Pose.parse(p) for p in info.starts)
-                    return info, parse_layout(info.layout_toml, f"the mission's layout "
-                                              f"{info.layout}"), starts
-                except ValueError as exc:  # a LayoutError too
-                    raise UserError(f"the dispatcher's mission: {exc}") from None
-        if time.monotonic() > deadline:
-            raise UserError(f"no dispatcher said what the mission is (on "
-                            f"{keys.dispatch_mission}) within {timeout_s:g} s")
-        if not said:
-            log.info("waiting for the dispatcher to say what the mission is")
-            said = True
-        time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
+    heard: list[MissionInfo] = []  # the dispatcher also publishes it once, when it starts:
+    # heard that way too, a query the router could not route to it does not hold us up
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        info = _believed(sample.payload.to_bytes(), str(sample.key_expr))
+        if info is not None:
+            heard.append(info)
+
+    with session.declare_subscriber(keys.dispatch_mission, on_sample):
+        while True:
+            for reply in session.get(keys.dispatch_mission, timeout=ASK_TIMEOUT_S):
+                if reply.ok is not None:
+                    info = _believed(reply.ok.payload.to_bytes(), str(reply.ok.key_expr))
+                    if info is not None:
+                        heard.append(info)
+            if heard:
+                return _described(heard[0])
+            if time.monotonic() > deadline:
+                raise UserError(f"no dispatcher said what the mission is (on "
+                                f"{keys.dispatch_mission}) within {timeout_s:g} s")
+            if not said:
+                log.info("waiting for the dispatcher to say what the mission is")
+                said = True
+            time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
 
 
-def _mission_info(reply: zenoh.Reply) -> MissionInfo | None:
-    """The run's description in a reply, believed only from the dispatcher."""
-    if reply.ok is None:
-        return None
+def _described(info: MissionInfo) -> tuple[MissionInfo, Layout, tuple[Pose, ...]]:
     try:
-        envelope = decode(reply.ok.payload.to_bytes())
+        starts = tuple(Pose.parse(p) for p in info.starts)
+        return info, parse_layout(info.layout_toml, f"the mission's layout "
+                                  f"{info.layout}"), starts
+    except ValueError as exc:  # a LayoutError too
+        raise UserError(f"the dispatcher's mission: {exc}") from None
+
+
+def _believed(payload: bytes, key: str) -> MissionInfo | None:
+    """The run's description in a reply or a sample, believed only from the dispatcher."""
+    try:
+        envelope = decode(payload)
     except ProtocolError as exc:
-        log.warning("rejected a reply on %s: %s", reply.ok.key_expr, exc)
+        log.warning("rejected a message on %s: %s", key, exc)
         return None
-    if not (isinstance(envelope.message, MissionInfo) and
-            genuine(str(reply.ok.key_expr), envelope)):
+    if not (isinstance(envelope.message, MissionInfo) and genuine(key, envelope)):
         log.warning("ignored a %s from %r on %s: only the dispatcher says what the mission "
-                    "is", envelope.message.TYPE, envelope.sender, reply.ok.key_expr)
+                    "is", envelope.message.TYPE, envelope.sender, key)
         return None
     return envelope.message
