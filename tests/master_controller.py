@@ -27,6 +27,7 @@ from typing import Any
 import pytest
 
 from fleet.vda5050.map import Node, edge_id, node_position, nodes
+from fleet.vda5050.messages import serial_number
 from fleet.world.layout_file import load_layout
 
 MASTER_DIR = Path(__file__).parent / "vda5050_master"
@@ -41,7 +42,7 @@ def map_nodes(layout: str) -> dict[str, Node]:
 
 
 def serial(vehicle: int, kind: str = "forklift") -> str:
-    return f"{kind}-{vehicle}"
+    return serial_number(kind, vehicle)
 
 
 def order(order_id: str, path: list[str], *, update: int = 0, first_sequence: int = 0,

@@ -44,7 +44,7 @@ from fleet.mission.spec import ClockMode, MissionKind
 from fleet.params import DispatchParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, Reservation
-from fleet.planning.trajectory import FailureReason, Pose
+from fleet.planning.trajectory import FailureReason, Pose, Trajectory
 from fleet.runtime.argtypes import mqtt_host_port
 from fleet.runtime.bus import Requester, RequestFailed, Stream, open_session, wait_alive
 from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
@@ -121,8 +121,8 @@ class _Postponed:
     """Another AGV's commit postponed this one's leg, which its agent now drives."""
 
     vehicle: int
-    leg: WireLeg
-    arrival: float
+    wire: WireLeg
+    leg: Trajectory
     revision: int
 
 
@@ -330,13 +330,13 @@ class Gateway:
                 self._publish_state(vehicle)
             case _State(vehicle, state, t):
                 self._observed(vehicle, state, t)
-            case _Postponed(vehicle, wire, arrival, revision):
+            case _Postponed(vehicle, wire, leg, revision):
                 execution = self.executions[vehicle]
                 if execution.driving is not None:  # published as the leg it now drives
-                    execution.driving.arrival = arrival
+                    execution.driving.arrival = leg.t_end
                     self.legs[vehicle].put(LegCommitted(
                         vehicle, execution.book.order_id, execution.driving.sequence_id,
-                        revision, wire), leg_from_wire(wire, "postponed").t_start)
+                        revision, wire), leg.t_start)
             case _Planned(vehicle, leg, arrival, why, wall_s, late):
                 execution = self.executions[vehicle]
                 speed = self.clock.tick.speed if self.clock.tick else 1.0
@@ -479,7 +479,8 @@ class Gateway:
         orders are its plans: it knows its goods to the instant, the gateway a little later."""
         if self.ours:
             return True
-        planner = self.planners.get(self._static(frozenset(self.filled))[0])
+        planner = self.planners.get(frozenset(self.filled) if self.goods_block
+                                    else frozenset())
         here, there = planner.component(start), planner.component(goal)
         return here is not None and here == there
 
@@ -507,8 +508,6 @@ class Gateway:
             if not isinstance(reply, TaskResult) or reply.task_id != request.task_id:
                 raise ProtocolError(f"{self.kind.noun} {vehicle} answered with {reply}")
             result = result_from_wire(reply)
-            for wire in reply.amended if reply.ok else ():
-                self._amend(wire, leg.t_i)
         except (RequestFailed, ProtocolError) as exc:
             self.inbox.put(_Planned(vehicle, leg, None, f"{self.kind.noun} {vehicle}: {exc}"))
             return
@@ -525,6 +524,8 @@ class Gateway:
                                                 reply.revision, leg_to_wire(result)),
                                    result.t_start)
             self.inbox.put(_Planned(vehicle, leg, result.t_end, "", wall_s))
+            for wire in reply.amended:
+                self._amend(wire, leg.t_i)
         else:
             self.inbox.put(_Planned(vehicle, leg, None, f"no way to {leg.goal} now: "
                                     f"{reply.failure}: {reply.detail}", wall_s,
@@ -533,15 +534,19 @@ class Gateway:
     def _amend(self, wire: WireLeg, t: float) -> None:
         """Another AGV's committed leg, postponed by a commit (seed 002's collision rules):
         its agent drives it so from now on, as it does when the dispatcher tells it."""
-        postponed = leg_from_wire(wire, "TaskResult.amended")
-        reply = self.tasks.request(self.keys.vehicle_task(postponed.vehicle), AmendRequest(
-            self.tasks.next_id(), postponed.vehicle, wire), t).message
-        if not (isinstance(reply, Reply) and reply.ok):
-            raise ProtocolError(f"{self.kind.noun} {postponed.vehicle} did not take its "
-                                f"postponed leg: {getattr(reply, 'reason', reply)}")
+        try:
+            postponed = leg_from_wire(wire, "TaskResult.amended")
+            reply = self.tasks.request(self.keys.vehicle_task(postponed.vehicle), AmendRequest(
+                self.tasks.next_id(), postponed.vehicle, wire), t).message
+        except (RequestFailed, ProtocolError) as exc:
+            reply = exc
+        if not (isinstance(reply, Reply) and reply.ok):  # its own leg stands: only say so
+            log.error("%s: a postponed leg was not taken: %s", self.kind.noun,
+                      getattr(reply, "reason", reply))
+            return
         log.info("%s %d: its leg postponed, now arriving at t=%.2f", self.kind.noun,
                  postponed.vehicle, postponed.t_end)
-        self.inbox.put(_Postponed(postponed.vehicle, wire, postponed.t_end, reply.revision))
+        self.inbox.put(_Postponed(postponed.vehicle, wire, postponed, reply.revision))
 
     def _hold_goods(self, goods) -> None:
         """The store holds a stack's goods from the instant they are put there, so no plan

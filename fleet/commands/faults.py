@@ -14,12 +14,9 @@ from fleet.mission.faults import (
     shipped_source,
 )
 from fleet.mission.faults004 import KINDS004, check_faults004
-from fleet.mission.order_work import order_fleet
-from fleet.mission.orders004 import fleet004
+from fleet.runtime.args import fleet_of
 from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
-from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
-from fleet.world.reachability import fleet_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -83,15 +80,6 @@ def run(args: argparse.Namespace) -> int:
     for fault in sorted(scenario.faults, key=lambda f: f.at):
         print(f"  {fault.describe()}")
     return 0
-
-
-def fleet_of(layout: Layout, vehicles: int | None) -> int:
-    """The fleet a run on the layout has: `vehicles` or its default, checked against the
-    places its vehicles start on (forklift parks; the piles of a lane layout's AGVs; a
-    seed-004 floor's parking)."""
-    if layout.floor is not None:
-        return fleet004(layout.floor, vehicles)
-    return order_fleet(layout, vehicles) if layout.has_lanes else fleet_size(layout, vehicles)
 
 
 def _fits004(scenario: Scenario) -> bool:

@@ -11,13 +11,12 @@ import signal
 import sys
 from pathlib import Path
 
-from fleet.commands.faults import fleet_of
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
 from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
-from fleet.runtime.args import mission_from_args
+from fleet.runtime.args import fleet_of, mission_from_args
 from fleet.runtime.bus import free_port
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.runtime.mqtt_broker import mosquitto_binary

@@ -14,7 +14,8 @@ from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.battery import BATTERY_KEYS
 from fleet.mission.engine import EngineOptions
-from fleet.mission.order_work import DEFAULT_ORDERS
+from fleet.mission.order_work import DEFAULT_ORDERS, order_fleet
+from fleet.mission.orders004 import fleet004
 from fleet.mission.spec import Mission, MissionKind
 from fleet.runtime.argtypes import (
     battery_arg,
@@ -29,6 +30,7 @@ from fleet.runtime.argtypes import (
 )
 from fleet.runtime.bus import DEFAULT_ROUTER, BusConfig
 from fleet.world.layout import Layout
+from fleet.world.reachability import fleet_size
 
 CONNECT_TIMEOUT_S = 60.0  # a process started alone waits this long for its router
 
@@ -147,6 +149,15 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--weights", type=text_file, metavar="FILE",
                    help="MLP weights for --strategy ann (default: the weights shipped for the "
                    "layout)")
+
+
+def fleet_of(layout: Layout, vehicles: int | None) -> int:
+    """The fleet a run on the layout has: `vehicles` or its default, checked against the
+    places its vehicles start on (forklift parks; the piles of a lane layout's AGVs; a
+    seed-004 floor's parking)."""
+    if layout.floor is not None:
+        return fleet004(layout.floor, vehicles)
+    return order_fleet(layout, vehicles) if layout.has_lanes else fleet_size(layout, vehicles)
 
 
 def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) -> Mission:
