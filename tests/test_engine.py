@@ -7,7 +7,8 @@ import pytest
 
 from fleet.dispatching.decision import STACK_STRATEGIES, Strategy, TaskKind
 from fleet.errors import UserError
-from fleet.mission.engine import Engine, EngineOptions, lower_bound, run_mission
+from fleet.mission.engine import Engine, EngineOptions, run_mission
+from fleet.mission.lower_bound import lower_bound
 from fleet.mission.record import digest
 from fleet.mission.spec import STACK_KINDS, Mission, MissionKind
 from fleet.world.layout_file import load_layout

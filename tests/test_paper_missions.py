@@ -12,7 +12,8 @@ import pytest
 
 from fleet.dispatching.decision import STACK_STRATEGIES, Strategy
 from fleet.dispatching.scorer import load_scorer
-from fleet.mission.engine import EngineOptions, lower_bound, run_mission
+from fleet.mission.engine import EngineOptions, run_mission
+from fleet.mission.lower_bound import lower_bound
 from fleet.mission.spec import STACK_KINDS, Mission, MissionKind
 from fleet.world.layout_file import load_layout
 

@@ -48,12 +48,10 @@ from fleet.mission.step_aside import SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.params import DispatchParams
 from fleet.planning.blockage import Blockage
-from fleet.planning.geometry import Cell
-from fleet.planning.reservations import ReservationTable
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planner
 from fleet.wire.protocol import DeadlockSeen, DecisionFailure, Message, StackDone
-from fleet.world.layout import Layout, LayoutError
+from fleet.world.layout import Layout
 from fleet.world.layout_file import load_layout
 from fleet.world.site import planners_for
 
@@ -574,43 +572,3 @@ class Engine:
 def run_mission(mission: Mission, options: EngineOptions | None = None,
                 layout: Layout | None = None) -> MissionRecord:
     return Engine(mission, options, layout).run()
-
-
-def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
-                params: DispatchParams | None = None,
-                progress: Callable[[int, int], None] | None = None) -> float:
-    """A lower bound on the mission end time: every subtask at its unobstructed shortest time
-    (an empty reservation table, the best station for each stack), shared ideally among the
-    vehicles: sum over stacks of (trip from the station + handling + trip back + handling),
-    divided by the number of vehicles. Two searches per stack and station: `progress` hears
-    (stacks done, stacks) after each stack, since a large floor takes minutes."""
-    p = params or DispatchParams()
-    fill = kind is MissionKind.FILL
-    total = 0.0
-    present: set[Cell] = set() if fill else {s.cell for s in layout.stacks}
-    order = sorted(layout.stacks, key=lambda s: (s.cluster, s.index if fill else -s.index))
-    empty = ReservationTable()
-    planners = planners_for(layout)
-    for done, stack in enumerate(order, 1):
-        key = frozenset(present - {stack.cell})
-        planner = planners.get(key)
-        goals = layout.unload_poses(stack.cell, key)
-        best = math.inf
-        for st in layout.stations:
-            out = planner.plan(1, st.dock, 0.0, goals, empty)
-            if isinstance(out, Trajectory):
-                back = planner.plan(1, out.goal, 0.0, [st.dock], empty)
-                if isinstance(back, Trajectory):
-                    best = min(best, out.t_end + back.t_end)
-        if best == math.inf:
-            raise LayoutError(f"layout {layout.name}: stack {stack.cluster}#{stack.index} cannot "
-                              f"be served from any station, even on an empty floor (fleet "
-                              f"layout check lists every such stack)")
-        total += best + p.t_claim + p.t_unload
-        if fill:
-            present.add(stack.cell)
-        else:
-            present.discard(stack.cell)
-        if progress:
-            progress(done, len(order))
-    return total / vehicles

@@ -305,12 +305,10 @@ class HybridAStar:
 
     def _deadline_reachable(self, vehicle: int, start: Pose, t_start: float,
                             goal_set: set[tuple[Cell, int]], store: ReservationView) -> bool:
-        """A relaxation that can only say too much: earliest arrivals over the static pose
-        graph with every maneuver at its shortest duration, where a cell may be used only if
-        the maneuver ends before another vehicle parks on it for good. Other reservations are
-        ignored (waiting can outlast them). False proves that no trajectory exists, since a real
-        one departs no earlier and moves no faster."""
-        shortest = self._shortest
+        """Whether any goal is reached in the relaxation of `earliest_arrivals`, where a cell
+        may be used only if the maneuver ends before another vehicle parks on it for good.
+        Other reservations are ignored (waiting can outlast them). False proves that no
+        trajectory exists."""
         deadline: dict[Cell, float] = {}
 
         def usable_until(cell: Cell) -> float:
@@ -319,25 +317,41 @@ class HybridAStar:
                 t = deadline[cell] = store.parked_from(vehicle, cell)
             return t
 
+        arrivals = self.earliest_arrivals(start, t_start, usable_until, goal_set)
+        return any(((x, y), heading) in goal_set for x, y, heading in arrivals)
+
+    def earliest_arrivals(self, start: Pose, t_start: float = 0.0,
+                          usable_until: Callable[[Cell], float] | None = None,
+                          stop_at: Collection[tuple[Cell, int]] = (),
+                          ) -> dict[tuple[int, int, int], float]:
+        """A relaxation that can only say too soon: the earliest arrival at each pose (x, y,
+        heading) over the static pose graph with every maneuver at its shortest duration, a
+        cell usable until `usable_until` says (default: for ever). No trajectory arrives
+        sooner, since a real one departs no earlier and moves no faster. Stops once a pose of
+        `stop_at` is settled."""
+        shortest = self._shortest
         best = {(start.cell[0], start.cell[1], start.heading): t_start}
+        settled: dict[tuple[int, int, int], float] = {}
         heap = [(t_start, start.cell[0], start.cell[1], start.heading)]
         while heap:
             t, x, y, heading = heapq.heappop(heap)
             if best[x, y, heading] < t:
                 continue
-            if ((x, y), heading) in goal_set:
-                return True
+            settled[x, y, heading] = t
+            if ((x, y), heading) in stop_at:
+                break
             for edge in self.edges(x, y, heading):
                 if edge.kind is Kind.STOP:
                     continue
                 t_end = t + shortest[edge.kind]
-                if any(usable_until(c) < t_end for c in edge.end_cells + edge.body_cells):
+                if usable_until is not None and any(
+                        usable_until(c) < t_end for c in edge.end_cells + edge.body_cells):
                     continue
                 key = (edge.x, edge.y, edge.heading)
                 if t_end < best.get(key, INF):
                     best[key] = t_end
                     heapq.heappush(heap, (t_end, *key))
-        return False
+        return settled
 
     def rest_cells(self, pose: Pose) -> list[Cell]:
         """The cells the body covers at rest at `pose`."""
