@@ -70,7 +70,7 @@ def refusal(scores: Sequence[Score]) -> str:
     parts = [f"no preliminary path to {_names(unreached)}"] if unreached else []
     if found:
         best = max(found, key=lambda s: s.value)
-        parts.append(f"best {best.target.name} scored S0={best.S0:.2f}, not above 0")
+        parts.append(f"best {best.target.name} scored {best.value:.2f}, not above 0")
     return "; ".join(parts)
 
 
@@ -137,7 +137,7 @@ class Algorithm1:
                                    p.dt_entry)
                 travel = pre.t_find - t_i
                 i_d = -travel + (p.C5 if target.far else 0.0)
-                j0 = -cover + p.C2 * i_d + p.C3
+                j0 = -p.cover_weight * cover + p.C2 * i_d + p.C3
             else:
                 cover, i_d, j0 = 0.0, -float(p.iter_pre), p.C4
             s0 = p.C1 * target.remaining + j0
@@ -178,7 +178,7 @@ class Algorithm1:
             return None
         best = max(found, key=lambda s: s.value)  # first of equals: targets are ordered
         if kind is TaskKind.RETURN or self.strategy in (Strategy.COMPREHENSIVE, Strategy.ANN):
-            return best if best.S0 > 0 else None
+            return best if best.value > 0 else None  # S_r, S_d,0, or Equation 9's S_d
         return best
 
     def decide(self, vehicles: Sequence[VehicleView], failed: Sequence[int],
