@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from fleet.commands.progress import ProgressBar
-from fleet.runtime.argtypes import integer, layout_arg, positive_int, writable_file
+from fleet.runtime.argtypes import integer, layout_arg, png_file, positive_int, writable_file
 from fleet.world.layout_file import load_layout
 
 
@@ -14,7 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train the ANN strategy's MLP over filling cycles",
                        description="Cycle 1 fills with the comprehensive strategy, later "
                        "cycles with the ANN strategy; after each, the per-cluster networks are "
-                       "refitted by Levenberg-Marquardt on every sample so far.")
+                       "refitted by Levenberg-Marquardt on every sample so far; the networks "
+                       "of the last fit are written (a rule fixed before any mission judges "
+                       "them, docs/dispatching.md).")
     p.add_argument("--layout", default="paper", type=layout_arg,
                    help="layout name or TOML file (default paper)")
     p.add_argument("--cycles", type=positive_int, default=3, help="filling cycles (default 3)")
@@ -24,11 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="Levenberg-Marquardt steps per fit (default 50)")
     p.add_argument("--out", type=writable_file, metavar="FILE", help="weights file to write "
                    "(default LAYOUT.weights.json in the current directory)")
+    p.add_argument("--plot", type=png_file, metavar="FILE.png", help="the loss and end time "
+                   "per cycle (default: beside the weights, NAME.training.png)")
     p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from fleet.mission.training import train
+    from fleet.views.training_plot import training_figure
 
     layout = load_layout(args.layout)
     out = args.out or Path(f"{layout.name}.weights.json")
@@ -50,12 +55,9 @@ def run(args: argparse.Namespace) -> int:
     for r in reports:
         print(f"{r.cycle:>5} {r.strategy:<14} {r.end_time:>10.2f} {r.decision_failures:>8} "
               f"{r.samples:>7} {r.loss_before:>11.4f} {r.loss_after:>8.4f}")
-    ann = [r for r in reports if r.strategy == "ann"]
-    if ann:
-        best = min(ann, key=lambda r: r.end_time)
-        print(f"keeping the networks that filled in cycle {best.cycle} "
-              f"(end time {best.end_time:.2f} s)")
     mlps.save(out)
-    print(f"wrote {out}; use it with: fleet run --layout {args.layout} --strategy ann "
-          f"--weights {out}")
+    plot = args.plot or out.with_name(f"{out.stem}.training.png")
+    training_figure(reports, layout.name, args.seed, plot)
+    print(f"wrote {out} (the networks of the last fit) and {plot}; use them with: "
+          f"fleet run --layout {args.layout} --strategy ann --weights {out}")
     return 0
