@@ -300,7 +300,7 @@ def test_a_snapshot_has_legend_entries_for_filled_and_empty_stacks(tmp_path, kin
             forklift_color(v))
 
 
-@pytest.mark.parametrize("name", ["small", "paper", "hall"])
+@pytest.mark.parametrize("name", ["small", "paper", "paper-cut", "paper-firewall", "hall"])
 def test_cluster_names_hide_no_stack(name):
     layout = load_layout(name)
     fig, ax = map_figure(layout)

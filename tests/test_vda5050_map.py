@@ -12,7 +12,7 @@ from fleet.vda5050.map import vda_map
 from fleet.world.layout_file import load_layout
 
 
-@pytest.mark.parametrize("name", ["small", "paper"])
+@pytest.mark.parametrize("name", ["small", "paper", "paper-cut", "paper-firewall"])
 def test_every_node_is_a_pose_a_forklift_works_at_on_the_empty_floor(name):
     layout = load_layout(name)
     found = vda_map(layout)

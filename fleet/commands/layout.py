@@ -73,14 +73,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_list(args: argparse.Namespace) -> int:
-    for name in builtin_names():
+    names = builtin_names()
+    width = max(map(len, names))
+    for name in names:
         layout = load_layout(name)
         if layout.has_lanes or layout.floor is not None:
             slots, piles = ((len(layout.slots), len(layout.piles)) if layout.floor is None
                             else (len(layout.floor.slots), len(layout.floor.piles)))
-            print(f"{name:13} {slots:5} slots   {piles:3} piles     {layout.description}")
+            print(f"{name:{width}} {slots:5} slots   {piles:3} piles     {layout.description}")
             continue
-        print(f"{name:13} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
+        print(f"{name:{width}} {len(layout.stacks):5} stacks  {len(layout.vehicle_starts):3} "
               f"vehicles  {layout.description}")
     return 0
 
