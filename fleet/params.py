@@ -78,3 +78,6 @@ class DispatchParams:
     dt_entry: float = 20.0
     t_claim: float = 5.0
     t_unload: float = 5.0
+    # Not from the seed: the weight of H in J_d,0 (the seed's is 1; 0 switches the term off in
+    # the ablation of `fleet bench strategies`, as C1 = 0 does G_d and C2 = 0 does I_d).
+    cover_weight: float = 1.0

@@ -215,7 +215,9 @@ def test_train_writes_weights_the_run_can_use(tmp_path, capsys):
     weights = tmp_path / "small.json"
     assert main(["train", "--layout", "small", "--cycles", "1", "--lm-steps", "5",
                  "--out", str(weights)]) == 0
-    assert "comprehensive" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "comprehensive" in out and "the networks of the last fit" in out
+    assert (tmp_path / "small.training.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["run", "--layout", "small", "--weights", str(weights),
                  "--out", str(tmp_path / "run")]) == 0  # not under the repository's runs/
     assert "strategy ann" in capsys.readouterr().out
@@ -223,14 +225,30 @@ def test_train_writes_weights_the_run_can_use(tmp_path, capsys):
 
 def test_bench_strategies_json(capsys):
     assert main(["bench", "strategies", "--layout", "small", "--mission", "fill",
-                 "--json"]) == 0
+                 "--ann-seeds", "2", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert set(result["fill"]) == {"ann", "comprehensive", "greedy", "traffic", "balance"}
     bound = result["lower_bound_s"]["fill"]
-    for row in result["fill"].values():
+    rows = [*result["fill"].values(), *result["ablation"]["fill"].values()]
+    for row in rows:
         assert {"end_time_s", "failures", "wait_s", "wall_s"} <= row.keys()
         assert row["end_time_s"] >= bound > 0
         assert row["ratio_to_bound"] == pytest.approx(row["end_time_s"] / bound, abs=1e-3)
+        assert sum(row["gap"].values()) == pytest.approx(2 * row["end_time_s"], abs=0.1)
+    assert list(result["ablation"]["fill"]) == [
+        "all terms", "without G_d", "without H", "without I_d", "without J_d,0 (H, I_d)"]
+    assert result["ablation"]["fill"]["all terms"] == result["fill"]["comprehensive"]
+    solo = result["solo"]["fill"]  # the first forklift alone never beats the pair
+    assert solo["end_time_s"] >= result["fill"]["comprehensive"]["end_time_s"]
+    assert solo["per_forklift_s"] == pytest.approx(solo["end_time_s"] / 2, abs=0.01)
+    assert sum(solo["gap"].values()) == pytest.approx(solo["end_time_s"], abs=0.1)
+    seeds = result["ann_seeds"]
+    assert seeds["seeds"] == [0, 1] and [r["seed"] for r in seeds["fill"]["runs"]] == [0, 1]
+    ends = [r["end_time_s"] for r in seeds["fill"]["runs"]]
+    assert min(ends) >= bound
+    assert seeds["fill"]["end_time_s"]["mean"] == pytest.approx(sum(ends) / 2, abs=0.01)
+    assert seeds["fill"]["mean_vs_comprehensive"] == pytest.approx(
+        sum(ends) / 2 / result["fill"]["comprehensive"]["end_time_s"] - 1, abs=1e-4)
 
 
 def test_bench_runtime_json(capsys):

@@ -63,7 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                   "(Table 4 of seed 000) with a lower bound",
                                   description="Run every strategy in process on the fill "
                                   "and empty missions and compare their end times with a "
-                                  "lower bound (Table 4 of seed 000).",
+                                  "lower bound (Table 4 of seed 000); train the ANN "
+                                  "strategy over several seeds; switch the comprehensive "
+                                  "strategy's terms off in turn (docs/experiment.md).",
                                   epilog=strategies_epilog())
     strategies.add_argument("--layout", default="paper", type=layout_arg,
                             help="layout name or TOML file (default paper)")
@@ -71,6 +73,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                             help="which missions (default both)")
     strategies.add_argument("--weights", type=text_file, metavar="FILE",
                             help="MLP weights for the ANN strategy (default: shipped)")
+    strategies.add_argument("--ann-seeds", type=non_negative_int, default=5, metavar="N",
+                            help="train the ANN strategy's networks with seeds 0 .. N-1 "
+                            "(3 cycles each) and report its end time over them (default 5)")
     strategies.add_argument("--json", action="store_true", help="print one JSON object")
     strategies.set_defaults(handler=run_strategies)
     seed002 = which.add_parser("seed002", help="seed 002's Figures 17-19: bidirectional "
@@ -330,10 +335,11 @@ def run_strategies(args: argparse.Namespace) -> int:
         if label not in bars:
             for bar in bars.values():
                 bar.close()
-            bars[label] = ProgressBar(total, label, unit="stacks")
+            bars[label] = ProgressBar(total, label,
+                                      unit="stacks" if "bound" in label else "jobs")
         bars[label].update(done)
 
-    result = strategies.run(args.layout, kinds, args.weights, progress)
+    result = strategies.run(args.layout, kinds, args.weights, args.ann_seeds, progress)
     for bar in bars.values():
         bar.close()
     if not emitted_json(result, args.json):
