@@ -74,6 +74,7 @@ class DispatchParams:
     iter_pre: int = 500
     iter_dispatch: int = 10
     dt_postpone: float = 10.0  # Δt_i
+    # Table 3's "time period to evaluate H"; cover_time's window is dt_entry, as long.
     dt_cover: float = 20.0
     dt_entry: float = 20.0
     t_claim: float = 5.0

@@ -28,6 +28,8 @@ from fleet.runtime.argtypes import (
 )
 from fleet.runtime.helptext import strategies_epilog
 
+ANN_SEEDS = 5  # training seeds of `fleet bench strategies`
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run a benchmark",
@@ -73,9 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                             help="which missions (default both)")
     strategies.add_argument("--weights", type=text_file, metavar="FILE",
                             help="MLP weights for the ANN strategy (default: shipped)")
-    strategies.add_argument("--ann-seeds", type=non_negative_int, default=5, metavar="N",
-                            help="train the ANN strategy's networks with seeds 0 .. N-1 "
-                            "(3 cycles each) and report its end time over them (default 5)")
+    strategies.add_argument("--ann-seeds", type=non_negative_int, default=ANN_SEEDS,
+                            metavar="N", help="train the ANN strategy's networks with seeds "
+                            f"0 .. N-1 (3 cycles each) and report its end time over them "
+                            f"(default {ANN_SEEDS})")
     strategies.add_argument("--json", action="store_true", help="print one JSON object")
     strategies.set_defaults(handler=run_strategies)
     seed002 = which.add_parser("seed002", help="seed 002's Figures 17-19: bidirectional "

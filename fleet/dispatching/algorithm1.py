@@ -30,7 +30,6 @@ from fleet.dispatching.decision import (
 )
 from fleet.dispatching.prelim import cover_time, preliminary_astar
 from fleet.params import DispatchParams
-from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
 
@@ -118,7 +117,6 @@ class Algorithm1:
     params: DispatchParams = field(default_factory=DispatchParams)
     cluster_names: tuple[str, ...] = ()
     mlp: MlpFn | None = None
-    entrance_cells: Callable[[Target], tuple[Cell, ...]] = lambda t: ()
 
     def score_clusters(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
                        u: list[float]) -> list[Score]:
@@ -132,9 +130,7 @@ class Algorithm1:
             pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
                                     cells, p.iter_pre)
             if pre.found:
-                cover = cover_time(self.store, vehicle.vehicle,
-                                   self.entrance_cells(target) or cells, pre.t_find,
-                                   p.dt_entry)
+                cover = cover_time(self.store, vehicle.vehicle, cells, pre.t_find, p.dt_entry)
                 travel = pre.t_find - t_i
                 i_d = -travel + (p.C5 if target.far else 0.0)
                 j0 = -p.cover_weight * cover + p.C2 * i_d + p.C3

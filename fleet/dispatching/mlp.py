@@ -41,6 +41,11 @@ def _finite(value: object) -> bool:
         return False
 
 
+def one_thread() -> None:
+    """Let torch use one core: for a process among others that each have theirs."""
+    torch.set_num_threads(1)
+
+
 def make_net(inputs: int, hidden: int = HIDDEN) -> torch.nn.Sequential:
     return torch.nn.Sequential(torch.nn.Linear(inputs, hidden), torch.nn.Tanh(),
                                torch.nn.Linear(hidden, 1)).double()

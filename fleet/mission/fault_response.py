@@ -167,7 +167,7 @@ class FaultResponse:
             before = self.before[undone[0]]
             v.next_task, v.linked_cluster, v.linked_kind = \
                 before.next_task, before.linked_cluster, before.linked_kind
-            v.busy_s, v.wait_s = before.busy_s, before.wait_s
+            v.busy_s, v.wait_s, v.postponed_s = before.busy_s, before.wait_s, before.postponed_s
             # Not before it was free for the first subtask undone: one decided ahead, not
             # started by t, waited for the handling before it to end.
             v.t_free = max(freeze.t_stand, before.t_free)

@@ -19,6 +19,9 @@ class VehicleSlot:
     linked_kind: TaskKind | None = None
     busy_s: float = 0.0  # driving (maneuvers other than stop)
     wait_s: float = 0.0  # stop maneuvers and postponements
+    # Postponed since its last subtask: waiting once a subtask follows; a forklift postponed
+    # after its last one stood idle, as its recording shows.
+    postponed_s: float = 0.0
     t_still: float = 0.0  # from when it stands at `pose`, driven and handled (t_free may be later)
 
     def view(self) -> VehicleView:
@@ -26,8 +29,9 @@ class VehicleSlot:
                            self.linked_cluster, self.linked_kind)
 
     def wait_until(self, t: float) -> None:
-        """Free only from t on (a pacer's or a postponement's later instant): waiting."""
-        self.wait_s += t - self.t_free
+        """Free only from t on (a pacer's or a postponement's later instant): waiting, if a
+        subtask follows."""
+        self.postponed_s += t - self.t_free
         self.t_free = t
 
     def amended(self, delay: float, t_done: float) -> None:
@@ -40,7 +44,8 @@ class VehicleSlot:
         postponed beyond): it stands at the siding from the arrival on, with the same subtask
         next (and the goods it carried)."""
         self.busy_s += traj.t_end - traj.t_start - waited
-        self.wait_s += waited - max(0.0, self.t_free - traj.t_start)  # postponed no longer
+        self.wait_s += waited + self.postponed_s - max(0.0, self.t_free - traj.t_start)
+        self.postponed_s = 0.0  # (postponed beyond the start no longer)
         self.pose = traj.goal
         self.t_free = self.t_still = traj.t_end
 
@@ -49,7 +54,8 @@ class VehicleSlot:
         """A subtask committed (`waited`: the seconds of its steps that wait in place): it
         stands at the goal from t_done on, and does `next_task` next."""
         self.busy_s += traj.t_end - traj.t_start - waited
-        self.wait_s += waited
+        self.wait_s += waited + self.postponed_s
+        self.postponed_s = 0.0
         self.pose = traj.goal
         self.t_free = self.t_still = t_done
         self.next_task = next_task
