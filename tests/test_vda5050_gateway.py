@@ -280,7 +280,10 @@ def test_lane_agvs_take_a_masters_orders_and_swap_two_shelves(agv_session):
 
 @pytest.fixture
 def fast_agv_session(tmp_path, broker) -> Iterator[Session]:
-    with external_session(tmp_path, broker, "paper002", 2, "agv", "--speed", "6") as running:
+    # Speed 3: the crossing below needs AGV 2's leg 0.5 to 3 s of sim time after AGV 1's
+    # start, 0.17 to 1 s of wall time; at speed 6 (0.08 to 0.5 s) the whole suite's load
+    # once let it start too late, and nothing was postponed.
+    with external_session(tmp_path, broker, "paper002", 2, "agv", "--speed", "3") as running:
         yield running
 
 
