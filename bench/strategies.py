@@ -16,6 +16,7 @@ from pathlib import Path
 from bench.pool import run_all
 from fleet.dispatching.decision import Strategy
 from fleet.dispatching.scorer import load_scorer, shipped_weights
+from fleet.errors import UserError
 from fleet.mission.engine import EngineOptions, run_mission
 from fleet.mission.lower_bound import Bound, gap, relaxed_bound, stack_trips
 from fleet.mission.record import MissionRecord
@@ -110,6 +111,12 @@ def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = STACK_KI
         weights: Path | None = None, ann_seeds: int = 0,
         progress: Callable[[str, int, int], None] | None = None) -> dict:
     layout = load_layout(layout_name)
+    if not layout.stacks or not layout.vehicle_starts:
+        raise UserError(f"layout {layout.name} has no stacks or no forklift starts: the Table 4 "
+                        f"experiment fills and empties stacks (seed 000's layouts: paper, "
+                        f"paper-cut, paper-firewall, small, hall)")
+    if weights is not None:
+        load_scorer(layout, weights)  # a bad file is named before anything runs
     starts = layout.vehicle_starts
     result: dict = {"layout": layout.name, "vehicles": len(starts), "lower_bound_s": {},
                     "relaxed_bound_s": {}}
@@ -120,7 +127,7 @@ def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = STACK_KI
         result["lower_bound_s"][kind.value] = round(bounds[kind.value].value, 2)
         result["relaxed_bound_s"][kind.value] = round(relaxed_bound(layout, kind, starts), 2)
     if weights is not None or shipped_weights(layout.name) is not None:
-        load_scorer(layout, weights)  # a bad file is named before anything runs
+        load_scorer(layout, weights)  # shipped ones must fit the layout too
         ann = Job(layout_name, missions, Strategy.ANN, str(weights) if weights else None)
         result["ann_weights"] = str(weights) if weights else "shipped"
     else:  # as they would ship: `fleet train` with seed 0

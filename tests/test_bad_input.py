@@ -169,6 +169,10 @@ BAD = [
     ("bench faults --speed nan", "argument --speed: 'nan' is not a finite number"),
     ("bench faults --scenarios nosuch", "--scenarios: 'nosuch' is not a shipped scenario"),
     ("bench strategies --weights {BINARY}", "'{BINARY}' is not UTF-8 text"),
+    ("bench strategies --layout paper002 --ann-seeds 0", "layout paper002 has no stacks or no "
+     "forklift starts: the Table 4 experiment fills and empties stacks"),
+    ("bench strategies --ann-seeds -1", "argument --ann-seeds: '-1' must not be negative"),
+    ("train --layout small --plot weights.txt", "'weights.txt' must end in .png"),
     ("bench campaign --runs 0", "argument --runs: '0' must be at least 1"),
     ("bench campaign --seed -1", "argument --seed: '-1' must not be negative"),
     ("bench campaign --kind sideways", "argument --kind: invalid choice: 'sideways'"),
