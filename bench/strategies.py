@@ -18,7 +18,7 @@ from fleet.dispatching.decision import Strategy
 from fleet.dispatching.scorer import load_scorer, shipped_weights
 from fleet.errors import UserError
 from fleet.mission.engine import EngineOptions, run_mission
-from fleet.mission.lower_bound import Bound, gap, relaxed_bound, stack_trips
+from fleet.mission.lower_bound import Bound, gap, relaxed_trips, stack_trips
 from fleet.mission.record import MissionRecord
 from fleet.mission.spec import STACK_KINDS, Mission, MissionKind
 from fleet.params import DispatchParams
@@ -122,10 +122,12 @@ def run(layout_name: str = "paper", missions: tuple[MissionKind, ...] = STACK_KI
                     "relaxed_bound_s": {}}
     trips = stack_trips(layout, starts, None if progress is None else
                         lambda done, total: progress("lower bound", done, total))
+    relaxed = relaxed_trips(layout, starts)
     bounds = {kind.value: Bound.of(trips, kind, starts, DispatchParams()) for kind in missions}
     for kind in missions:
         result["lower_bound_s"][kind.value] = round(bounds[kind.value].value, 2)
-        result["relaxed_bound_s"][kind.value] = round(relaxed_bound(layout, kind, starts), 2)
+        result["relaxed_bound_s"][kind.value] = round(
+            Bound.of(relaxed, kind, starts, DispatchParams()).value, 2)
     if weights is not None or shipped_weights(layout.name) is not None:
         load_scorer(layout, weights)  # shipped ones must fit the layout too
         ann = Job(layout_name, missions, Strategy.ANN, str(weights) if weights else None)

@@ -174,10 +174,9 @@ def lower_bound(layout: Layout, kind: MissionKind, vehicles: int,
     return bound(layout, kind, layout.vehicle_starts[:vehicles], params, progress).value
 
 
-def relaxed_bound(layout: Layout, kind: MissionKind, starts: Sequence[Pose],
-                  params: DispatchParams | None = None) -> float:
-    """The same arithmetic with every trip at its relaxed arrival time: a bound by proof, on
-    any planner, and far below any real schedule."""
+def relaxed_trips(layout: Layout, starts: Sequence[Pose]) -> Trips:
+    """Every stack's trips at their relaxed arrival times (`earliest_arrivals`): with them
+    `Bound.of` gives a bound by proof, on any planner, and far below any real schedule."""
     docks = [st.dock for st in layout.stations]
     planners = planners_for(layout)
     floors = _turn_floors(layout)
@@ -190,7 +189,12 @@ def relaxed_bound(layout: Layout, kind: MissionKind, starts: Sequence[Pose],
             min(_relaxed(planner, d, goals) for d in docks),
             min(_relaxed(planner, g, docks) for g in goals),
             {p: _relaxed(planner, p, goals) for p in starts if p not in docks})
-    return Bound.of(Trips(stacks, frozenset(docks)), kind, starts,
+    return Trips(stacks, frozenset(docks))
+
+
+def relaxed_bound(layout: Layout, kind: MissionKind, starts: Sequence[Pose],
+                  params: DispatchParams | None = None) -> float:
+    return Bound.of(relaxed_trips(layout, starts), kind, starts,
                     params or DispatchParams()).value
 
 
