@@ -159,23 +159,36 @@ def analyze004(recording: Recording) -> Report004:
     if floor is None:
         raise UserError(f"{recording.path}: layout {info.layout} is no seed-004 floor")
     events, unreadable = recorded_events(recording, floor)
-    starts = {v: _xy(floor, Pose.parse(p)) for v, p in enumerate(info.starts, 1)}
-    verdict = judge(floor, events, starts)
+    verdict = judge(floor, events, recorded_starts(recording, floor))
     picked = [e for e in events if isinstance(e, Picked)]
-    done = [m for _, m in recording.of(MissionDone)]
-    stopped = recording.of(MissionStopped)
     counts: Counter[str] = Counter(e.kind.value for e in events if isinstance(e, Met))
     counts["replans"] = sum(isinstance(e, Replanned) for e in events)
     counts["turns"] = sum(isinstance(e, Turned) for e in events)
     counts["cells"] = sum(isinstance(e, Moved) for e in events)
-    ends = [getattr(e, "t1", getattr(e, "t", 0.0)) for e in events]
     return Report004(str(recording.path), info.layout, info.clock, info.vehicles, info.seed,
                      info.orders, len(picked), max((e.t for e in picked), default=0.0),
-                     max(ends, default=0.0), dict(sorted(counts.items())), verdict,
-                     shelf_slips(floor, events), unreadable,
-                     bool(done) and done[-1].ok and not stopped, info.heat_w,
+                     end_time_s(events), dict(sorted(counts.items())), verdict,
+                     shelf_slips(floor, events), unreadable, mission_finished(recording),
+                     info.heat_w,
                      sum(isinstance(e, BrokeDown | ZoneClosed) for e in events),
                      fault_breaches(events))
+
+
+def recorded_starts(recording: Recording, floor: Floor004) -> dict[int, tuple[int, int]]:
+    """Each AGV's start cell, as the recording's mission description says."""
+    starts = recording.info.starts if recording.info is not None else []
+    return {v: _xy(floor, Pose.parse(p)) for v, p in enumerate(starts, 1)}
+
+
+def end_time_s(events: list[Event]) -> float:
+    """The last event's end (the last move, lift or drop, as a rule)."""
+    return max((getattr(e, "t1", getattr(e, "t", 0.0)) for e in events), default=0.0)
+
+
+def mission_finished(recording: Recording) -> bool:
+    """The dispatcher's result is recorded and says done (and nobody stopped the mission)."""
+    done = [m for _, m in recording.of(MissionDone)]
+    return bool(done) and done[-1].ok and not recording.of(MissionStopped)
 
 
 def _xy(floor: Floor004, pose: Pose) -> tuple[int, int]:

@@ -1,8 +1,9 @@
 """`fleet plot RUN.mcap`: the filling sequence, a Gantt chart, a heat map of occupancy and
 snapshots as PNG files, and an animation of the run, all from its recording; of an order
 mission (seed 002) the orders completed over time instead of the filling sequence, and the
-lane layout with its shelves, stations and piles. `fleet plot RESULT.json` draws the makespan
-curves of a `fleet bench seed002` result (seed 002's Figures 17-19)."""
+lane layout with its shelves, stations and piles; of a seed-004 run its heat maps and
+snapshots of its floor. `fleet plot RESULT.json` draws the makespan curves of a `fleet bench
+seed002` result (seed 002's Figures 17-19)."""
 
 from __future__ import annotations
 
@@ -43,7 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "each cell and the congestion (heatmap.png), and the lanes, shelves, "
                        "packing stations and piles in the snapshots and the animation. Of a "
                        "seed-004 run: its heat maps in the style of the seed's Figures 10-11 "
-                       "(heat.png). Of a "
+                       "(heat.png) and snapshots of its floor (snapshot_T.png: the shelves "
+                       "home or away, each AGV with its number and heading, loaded or "
+                       "empty). Of a "
                        "`fleet bench seed002 --json` result: the makespan curves of seed "
                        "002's Figures 17-19 (fig17.png, fig18.png, fig19.png).")
     p.add_argument("recording", type=Path,
@@ -156,12 +159,7 @@ def run(args: argparse.Namespace) -> int:
     last = max(record.end_time_s, tl.makespan if tl is not None else 0.0)
     # A mission that did not finish is drawn up to where its recording ends: the wedge.
     end = last if finished else max(last, record.all_parked_s, recording.last_sim_time)
-    late = [t for t in args.at if t > end]
-    if late:  # a snapshot after the end would show the end under another time's name
-        ended = "the run ended" if finished else \
-            "the mission did not finish; its recording ends"
-        raise UserError(f"--at {late[0]:.10g}: {ended} at {end:.2f} s; snapshots are drawn "
-                        f"from 0 to {end:.2f} s")
+    refuse_late(args.at, end, finished)
     out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)
     if tl is not None:
@@ -174,29 +172,64 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def refuse_late(at: list[float], end: float, finished: bool) -> None:
+    """A snapshot after the end would show the end under another time's name: refused."""
+    late = [t for t in at if t > end]
+    if late:
+        ended = "the run ended" if finished else \
+            "the mission did not finish; its recording ends"
+        raise UserError(f"--at {late[0]:.10g}: {ended} at {end:.2f} s; snapshots are drawn "
+                        f"from 0 to {end:.2f} s")
+
+
+def snapshot_times(at: list[float], end: float) -> list[float]:
+    """The instants given, or a quarter, half and three quarters of the end time."""
+    return at or [end / 4, end / 2, 3 * end / 4]
+
+
+def snapshot_path(out: Path, t: float) -> Path:
+    return out / f"snapshot_{t:08.2f}.png"
+
+
 def plot004(args: argparse.Namespace, recording: Recording, floor: Floor004) -> int:
-    """A seed-004 run: its heat in the style of the seed's Figures 10-11 (heat.png)."""
-    from fleet.analysis.analyze004 import recorded_events
+    """A seed-004 run: its heat in the style of the seed's Figures 10-11 (heat.png) and its
+    floor at some instants (snapshot_T.png), from its tracking events."""
+    from fleet.analysis.analyze004 import (
+        end_time_s,
+        mission_finished,
+        recorded_events,
+        recorded_starts,
+    )
     from fleet.mission.heat004 import heat_counts, t_values
     from fleet.views.drawing import save_figure
     from fleet.views.heat004 import heat_maps
+    from fleet.views.snapshot004 import snapshot
+    from fleet.views.state004 import floor_at
 
-    if args.at:
-        raise UserError("--at: snapshots of a seed-004 run are not drawn yet; fleet plot "
-                        "draws its heat maps (heat.png)")
     events, _ = recorded_events(recording, floor)
+    finished = mission_finished(recording)
+    # A mission that did not finish is drawn up to where its recording ends.
+    end = end_time_s(events) if finished else \
+        max(end_time_s(events), recording.last_sim_time)
+    refuse_late(args.at, end, finished)
     counts = heat_counts(events)
     info = recording.info
     out = args.out or recording.path.parent
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "heat.png"
+    heading = f"{info.layout}: {info.orders} orders, {info.vehicles} lifting AGVs, seed " \
+        f"{info.seed}"
+    written = [out / "heat.png"]
     save_figure(heat_maps(floor, [
         ("T_value of this run (Equation 6, scaled to 0..1)", t_values(counts.heat())),
         ("cells entered", {xy: float(n) for xy, n in counts.passes.items()})],
-        f"{info.layout}: {info.orders} orders, {info.vehicles} lifting AGVs, seed "
-        f"{info.seed}; the brighter, the hotter"), str(path))
+        f"{heading}; the brighter, the hotter"), str(written[0]))
+    starts = recorded_starts(recording, floor)
+    for t in snapshot_times(args.at, end):
+        written.append(snapshot_path(out, t))
+        save_figure(snapshot(floor, floor_at(events, starts, t), heading), str(written[-1]))
     print(f"{sum(counts.passes.values())} cells entered, {len(counts.passes)} cells used")
-    print(f"wrote {path}")
+    for path in written:
+        print(f"wrote {path}")
     return 0
 
 
@@ -234,8 +267,8 @@ def plot_stacks(args: argparse.Namespace, recording: Recording, record: MissionS
     if states := states_of(recording):
         written.append(out / "heatmap.png")
         save_figure(plots.heat_map(layout, record, states), str(written[-1]))
-    for t in args.at or [end / 4, end / 2, 3 * end / 4]:
-        path = out / f"snapshot_{t:08.2f}.png"
+    for t in snapshot_times(args.at, end):
+        path = snapshot_path(out, t)
         save_figure(plots.snapshot(layout, record, t), str(path))
         written.append(path)
     if args.gif or args.mp4:
@@ -258,8 +291,8 @@ def plot_orders(args: argparse.Namespace, recording: Recording, record: MissionS
     if states := states_of(recording):
         written.append(out / "heatmap.png")
         save_figure(order_plots.heat_map(layout, record, states, orders), str(written[-1]))
-    for t in args.at or [end / 4, end / 2, 3 * end / 4]:
-        path = out / f"snapshot_{t:08.2f}.png"
+    for t in snapshot_times(args.at, end):
+        path = snapshot_path(out, t)
         save_figure(order_plots.snapshot(layout, record, t, tl, orders), str(path))
         written.append(path)
     if args.gif or args.mp4:

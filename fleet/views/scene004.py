@@ -12,10 +12,11 @@ two cells is drawn where it is at that instant.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from foxglove.messages import ArrowPrimitive, KeyValuePair, Pose, SceneEntity, SceneUpdate, Vector3
 
+from fleet.mission.record004 import NotAnEvent, event_from_wire
+from fleet.mission.tracking004 import ZoneClosed
 from fleet.planning.rules004 import XY, Direction, Kind
 from fleet.views.palette import PILE_COLOR, RACK_COLOR, SHELF_COLOR, STATION_COLOR, forklift_color
 from fleet.views.scene import (
@@ -39,6 +40,7 @@ from fleet.views.scene import (
     _stamp,
     _yaw,
 )
+from fleet.views.state004 import AgvTrack, closed_at
 from fleet.wire.protocol import AgvEvent, Message, MissionDone
 from fleet.world.floor004 import Floor004
 from fleet.world.layout import Layout
@@ -54,46 +56,38 @@ YAW = {Direction.UP: math.pi / 2, Direction.LEFT: math.pi, Direction.DOWN: -math
        Direction.RIGHT: 0.0}
 
 
-@dataclass
-class _Agv:
-    cell: XY
-    heading: Direction = Direction.DOWN
-    to: XY | None = None  # moving from `cell` to `to` over [t0, t1)
-    t0: float = 0.0
-    t1: float = 0.0
-    shelf: XY | None = None  # the home of the shelf it carries (from the lift's end)
-    lift_at: tuple[float, XY] | None = None  # a lift under way: it carries from then
-    drop_at: float | None = None  # a drop under way: it carries until then
-    down: tuple[float, float] = (0.0, 0.0)  # broken down over [t0, t1)
-
-
 class Scene004Views(SceneViews):
     def __init__(self, layout: Layout, base_ns: int, kind: str = "orders",
                  vehicles: int = 1) -> None:
         super().__init__(layout, base_ns, kind, vehicles)
         assert layout.floor is not None
         self.floor: Floor004 = layout.floor
-        self.agvs = {v: _Agv(xy) for v, xy in enumerate(self.floor.parking[:vehicles], 1)}
+        self.agvs = {v: AgvTrack(xy) for v, xy in enumerate(self.floor.parking[:vehicles], 1)}
         self.entered: dict[XY, int] = {}
         self.next_frame = 0.0
-        self.zones: list[tuple[float, float, tuple[XY, ...]]] = []  # closed: t0, t1, cells
+        self.zones: list[ZoneClosed] = []
         self.zones_shown: frozenset[XY] = frozenset()
+        self.away_shown: frozenset[XY] = frozenset()  # the shelves last shown away
 
     # -- entry points (SceneViews') ----------------------------------------------------------
     def on_message(self, key: str, message: Message, sim_time: float) -> list[View]:
         if isinstance(message, MissionDone):  # the last moves, to where they end
             end = max((a.t1 for a in self.agvs.values()), default=0.0)
             return self._frames_before(end + FRAME_S) if _plausible(end) else []
-        if isinstance(message, AgvEvent) and message.kind == "zone_closed" and \
-                _plausible(message.t0):
-            views = self._frames_before(message.t0)
-            self.zones.append((message.t0, message.t1, tuple(message.cells)))
-            return views
         if not isinstance(message, AgvEvent) or not _plausible(message.t0) or \
-                message.vehicle not in self.agvs:
+                (message.kind != "zone_closed" and message.vehicle not in self.agvs):
             return []
         views = self._frames_before(message.t0)
-        self._apply(message)
+        try:
+            event = event_from_wire(message, self.floor)
+        except NotAnEvent:
+            return views  # (fleet analyze names it)
+        if isinstance(event, ZoneClosed):
+            self.zones.append(event)
+        else:
+            self.agvs[message.vehicle].apply(event)
+            if message.kind == "moved" and message.to is not None:
+                self.entered[message.to] = self.entered.get(message.to, 0) + 1
         return views
 
     def _frames_before(self, t: float) -> list[View]:
@@ -107,31 +101,6 @@ class Scene004Views(SceneViews):
             self.next_frame += FRAME_S
         return views
 
-    def _apply(self, m: AgvEvent) -> None:
-        agv = self.agvs[m.vehicle]
-        if m.kind == "moved" and m.to is not None:
-            self._settle(agv, m.t0)
-            agv.cell, agv.to, agv.t0, agv.t1 = m.at, m.to, m.t0, m.t1
-            self.entered[m.to] = self.entered.get(m.to, 0) + 1
-        elif m.kind == "turned" and m.heading in YAW:
-            agv.heading = Direction(m.heading)
-        elif m.kind == "paused" and m.label == "lift":
-            agv.lift_at = (m.t1, m.at)
-        elif m.kind == "paused" and m.label == "drop":
-            agv.drop_at = m.t1
-        elif m.kind == "broke_down":
-            agv.down = (m.t0, m.t1)
-
-    @staticmethod
-    def _settle(agv: _Agv, t: float) -> None:
-        """What has ended by `t`: a move, a lift, a drop."""
-        if agv.to is not None and agv.t1 <= t:
-            agv.cell, agv.to = agv.to, None
-        if agv.lift_at is not None and agv.lift_at[0] <= t:
-            agv.shelf, agv.lift_at = agv.lift_at[1], None
-        if agv.drop_at is not None and agv.drop_at <= t:
-            agv.shelf, agv.drop_at = None, None
-
     def _frame004(self, t: float) -> list[View]:
         ns = self.log_ns(t)
         views: list[View] = []
@@ -139,14 +108,13 @@ class Scene004Views(SceneViews):
             self.static_at = t
             views += [(topic, message, ns) for topic, message, _ in self._static(ns)]
             views.append((HEAT, self._heat(ns), ns))
-        away = {a.shelf for a in self.agvs.values()}
         for agv in self.agvs.values():
-            self._settle(agv, t)
-        if away != {a.shelf for a in self.agvs.values()}:
+            agv.settle(t)
+        if self._away() != self.away_shown:
             views.append((GOODS_TOPIC, self._goods_update(ns), ns))
         views.append((FORKLIFTS, SceneUpdate(entities=[
             self._lifting_agv(v, agv, t, ns) for v, agv in sorted(self.agvs.items())]), ns))
-        closed = frozenset(xy for t0, t1, cells in self.zones if t0 <= t < t1 for xy in cells)
+        closed = closed_at(self.zones, t)
         if closed != self.zones_shown:
             self.zones_shown = closed
             side = self.layout.cell_size * 0.95
@@ -160,10 +128,10 @@ class Scene004Views(SceneViews):
     def _xy(self, cell: XY) -> tuple[float, float]:
         return self.layout.cell_center(self.floor.cell(cell))
 
-    def _lifting_agv(self, v: int, agv: _Agv, t: float, ns: int) -> SceneEntity:
+    def _lifting_agv(self, v: int, agv: AgvTrack, t: float, ns: int) -> SceneEntity:
         x, y = self._xy(agv.cell)
         if agv.to is not None and agv.t1 > agv.t0:
-            share = min(max((t - agv.t0) / (agv.t1 - agv.t0), 0.0), 1.0)
+            share = agv.share(t)
             x2, y2 = self._xy(agv.to)
             x, y = x + (x2 - x) * share, y + (y2 - y) * share
         side = self.layout.cell_size * 0.8
@@ -180,19 +148,22 @@ class Scene004Views(SceneViews):
             timestamp=_stamp(ns), frame_id=FRAME, id=f"agv/{v}", cubes=cubes,
             arrows=[arrow], texts=[_label(str(v), x, y, AGV_H + SHELF_H + 0.6)],
             metadata=[KeyValuePair(key="cell", value=f"{agv.cell[0]},{agv.cell[1]}"),
-                      KeyValuePair(key="down", value=str(agv.down[0] <= t < agv.down[1]).lower()),
+                      KeyValuePair(key="down", value=str(agv.broken(t)).lower()),
                       KeyValuePair(key="heading", value=agv.heading.name.lower()),
                       KeyValuePair(key="shelf", value="" if agv.shelf is None else
                                    f"{agv.shelf[0]},{agv.shelf[1]}")])
 
     def _goods_update(self, ns: int) -> SceneUpdate:
         """The shelves standing home: every slot whose shelf no AGV carries."""
-        away = {a.shelf for a in self.agvs.values()}
+        away = self.away_shown = self._away()
         side = self.layout.cell_size * 0.8
         cubes = [self._cell_box(self.floor.cell(s.xy), side, 0.0, SHELF_H, _color(SHELF_COLOR))
                  for s in self.floor.slots if s.xy not in away]
         return SceneUpdate(entities=[SceneEntity(timestamp=_stamp(ns), frame_id=FRAME,
                                                  id="shelves", cubes=cubes)])
+
+    def _away(self) -> frozenset[XY]:
+        return frozenset(a.shelf for a in self.agvs.values() if a.shelf is not None)
 
     def _warehouse(self, ns: int) -> list[SceneEntity]:
         """The floor, the slots (low racks), the walls and station structure, each station's
