@@ -31,6 +31,7 @@ from fleet.runtime.bus import RELIABLE, BusConfig, free_port, wait_alive
 from fleet.wire.topics import (
     CLOCK,
     DISPATCHER,
+    GATEWAY,
     INJECTOR,
     RECORDER,
     RESERVATION,
@@ -104,16 +105,18 @@ def ask(session: zenoh.Session, key: str, payload: str = "") -> list[str]:
 
 class Fleet:
     """The router process, a session per principal, and the servers the tests talk to: the
-    reservation service (answers any request key), forklift 2's agent (task and inject),
-    the dispatcher's mission queryable."""
+    reservation service (answers any request key), forklift 2's agent (task and inject; a
+    lifting AGV's serves its task key only), the dispatcher's mission queryable. `lifting`:
+    the rules of a seed-004 run."""
 
-    def __init__(self, tmp: Path) -> None:
-        self.keys = Keys(f"acl{os.getpid()}")
+    def __init__(self, tmp: Path, lifting: bool = False) -> None:
+        self.lifting = lifting
+        self.keys = Keys(f"acl{os.getpid()}{'l' if lifting else ''}")
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.credentials = generate_credentials(self.keys.run, VEHICLES)
         dictionary = write_dictionary(self.credentials, tmp / "users.txt")
         acl = tmp / "acl.json"
-        acl.write_text(json.dumps(router_acl(self.keys.root, VEHICLES)))
+        acl.write_text(json.dumps(router_acl(self.keys.root, VEHICLES, lifting)))
         self.log = tmp / "router.log"
         with open(self.log, "wb") as log:
             self.router = subprocess.Popen(
@@ -134,7 +137,8 @@ class Fleet:
         self.declared.append(self[RESERVATION].liveliness().declare_token(
             keys.reservation_alive))
         self.serve(vehicle_sender(2), keys.vehicle_task(2))
-        self.serve(vehicle_sender(2), keys.vehicle_inject(2))
+        if not self.lifting:
+            self.serve(vehicle_sender(2), keys.vehicle_inject(2))
         self.declared.append(self[vehicle_sender(2)].liveliness().declare_token(
             keys.vehicle_alive(2)))
         self.serve(DISPATCHER, keys.dispatch_mission)
@@ -183,15 +187,31 @@ class Fleet:
         assert self.router.wait(timeout=30) == 0
 
 
-@pytest.fixture(scope="module")
-def fleet(tmp_path_factory):
-    fleet = Fleet(tmp_path_factory.mktemp("access"))
+def _running(tmp_path_factory, lifting: bool):
+    fleet = Fleet(tmp_path_factory.mktemp("access"), lifting)
     try:
         fleet.start()
         yield fleet
     finally:
         if fleet.router.poll() is None:
             fleet.stop()
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    yield from _running(tmp_path_factory, lifting=False)
+
+
+@pytest.fixture(scope="module")
+def lifting_fleet(tmp_path_factory):
+    """The rules of a seed-004 run: lifting AGVs and their dispatcher."""
+    yield from _running(tmp_path_factory, lifting=True)
+
+
+@pytest.fixture(params=["forklifts", "lifting"])
+def either_fleet(request):
+    """What holds for a forklift's and a lifting AGV's login alike, proven on both rules."""
+    return request.getfixturevalue("fleet" if request.param == "forklifts" else "lifting_fleet")
 
 
 def test_credentials_and_acl_shape(tmp_path):
@@ -216,7 +236,8 @@ def test_credentials_and_acl_shape(tmp_path):
     json.dumps(acl)  # JSON-able
 
 
-def test_no_or_wrong_credentials_cannot_connect(fleet):
+def test_no_or_wrong_credentials_cannot_connect(either_fleet):
+    fleet = either_fleet
     with pytest.raises(zenoh.ZError):
         fleet.open(None, timeout_ms=1000)
     with pytest.raises(zenoh.ZError):  # a user with another's password
@@ -242,7 +263,8 @@ def test_vehicle_publishes_only_its_own_state(fleet):
         subscriber.undeclare()
 
 
-def test_vehicle_commits_only_under_its_own_name(fleet):
+def test_vehicle_commits_only_under_its_own_name(either_fleet):
+    fleet = either_fleet
     keys, v1 = fleet.keys, fleet[vehicle_sender(1)]
     asked = fleet.asked[RESERVATION]
     asked.clear()
@@ -268,16 +290,56 @@ def test_only_the_dispatcher_assigns_tasks_and_only_the_operator_injects(fleet):
     assert asked == [(keys.vehicle_task(2), "task"), (keys.vehicle_inject(2), "fault")]
 
 
-def test_vehicle_asks_what_the_mission_is(fleet):
-    """A forklift takes its layout from the dispatcher's description of the run."""
+def test_only_the_dispatcher_asks_a_lifting_agv(lifting_fleet):
+    """Seed 004: AGV 2's agent takes and lets go of its cells and plans its legs only when
+    the dispatcher asks (CellRequest, RouteRequest on its task key); AGV 1, the gateway
+    (which may ask a forklift for legs), the operator, the recorder and the service ask it
+    in vain."""
+    fleet, keys = lifting_fleet, lifting_fleet.keys
+    asked = fleet.asked[vehicle_sender(2)]
+    asked.clear()
+    for principal in (vehicle_sender(1), GATEWAY, OPERATOR, RECORDER, RESERVATION):
+        assert ask(fleet[principal], keys.vehicle_task(2), "forged take") == [], principal
+    assert ask(fleet[DISPATCHER], keys.vehicle_task(2), "take") == ["vehicle-2 answers take"]
+    # Each forged get ended (no reply) before the next get was sent.
+    assert asked == [(keys.vehicle_task(2), "take")]
+
+
+def test_a_lifting_agv_serves_no_fault_injection(lifting_fleet):
+    """A lifting AGV's agent takes no injected fault: its inject queryable never reaches the
+    router, so the operator's get finds nobody (a forklift's would be answered)."""
+    fleet, keys = lifting_fleet, lifting_fleet.keys
+    v2 = fleet[vehicle_sender(2)]
+    heard: list[str] = []
+
+    def answer(query: zenoh.Query) -> None:
+        heard.append(str(query.key_expr))
+        query.reply(keys.vehicle_inject(2), "vehicle 2 takes the fault")
+
+    queryable = v2.declare_queryable(keys.vehicle_inject(2), answer)
+    try:
+        fleet.sync(vehicle_sender(2))  # the router has handled the declaration
+        assert ask(fleet[OPERATOR], keys.vehicle_inject(2), "fault") == []
+        assert heard == []
+    finally:
+        queryable.undeclare()
+
+
+def test_vehicle_asks_what_the_mission_is(either_fleet):
+    """A forklift (or lifting AGV) takes its layout from the dispatcher's description of the
+    run."""
+    fleet = either_fleet
     keys = fleet.keys
     assert ask(fleet[vehicle_sender(1)], keys.dispatch_mission, "info") == \
         ["dispatcher answers info"]
 
 
-def test_vehicle_cannot_pose_as_another(fleet):
+def test_vehicle_cannot_pose_as_another(either_fleet):
     """Forklift 1 serves forklift 3's task key, declares its token and answers as it: none of
-    it reaches the dispatcher, while forklift 1's own queryable, token and reply do."""
+    it reaches the dispatcher, while forklift 1's own queryable, token and reply do (so a
+    lifting AGV's login cannot answer the dispatcher's CellRequest or RouteRequest for
+    another AGV)."""
+    fleet = either_fleet
     keys, v1 = fleet.keys, fleet[vehicle_sender(1)]
 
     def answer(query: zenoh.Query) -> None:
@@ -375,13 +437,14 @@ def test_clock_and_acks(fleet):
 LOGIN_OF = {CLOCK: DISPATCHER, INJECTOR: OPERATOR}
 
 
-def test_every_catalogued_topic_is_granted_to_its_sender():
-    """The router's rules are written beside the catalogue (fleet/wire/topics.py): each topic's
-    sender may put its publications, ask its queryables and hold its tokens on the run's keys
-    of it, so a row added to Keys without its grant fails here, not silently in a --secure
-    run."""
-    run, vehicles = "fleet/acl", 2
-    acl = router_acl(run, vehicles)
+# What a seed-004 run has no use for: a lifting AGV sends no state, fault or clock ack and
+# takes no injected fault; no VDA 5050 gateway runs on its floor.
+NOT_SEED004 = {Keys.vehicle_state, Keys.vehicle_fault, Keys.vehicle_inject, Keys.clock_ack,
+               Keys.vda5050_mqtt, Keys.vda5050_leg, Keys.vda5050_alive}
+
+
+def permissions(acl: dict):
+    """Whether `login` may send `message` on `key` by these rules (what the router does)."""
     rules = {r["id"]: r for r in acl["rules"]}
     allowed = {p["id"]: [rules[i] for i in p["rules"] if rules[i]["flows"] == ["ingress"]]
                for p in acl["policies"]}
@@ -391,8 +454,20 @@ def test_every_catalogued_topic_is_granted_to_its_sender():
             zenoh.KeyExpr(expr).includes(zenoh.KeyExpr(key)) for expr in r["key_exprs"])
             for r in allowed[login])
 
+    return may
+
+
+@pytest.mark.parametrize("lifting", [False, True], ids=["forklifts", "lifting"])
+def test_every_catalogued_topic_is_granted_to_its_sender(lifting):
+    """The router's rules are written beside the catalogue (fleet/wire/topics.py): each topic's
+    sender may put its publications, ask its queryables and hold its tokens on the run's keys
+    of it, so a row added to Keys without its grant fails here, not silently in a --secure
+    run (on a seed-004 floor: each topic such a run uses)."""
+    run, vehicles = "fleet/acl", 2
+    may = permissions(router_acl(run, vehicles, lifting))
+    topics = [t for t in TOPICS if not (lifting and t in NOT_SEED004)]
     checked = 0
-    for topic in TOPICS:
+    for topic in topics:
         if topic.sender is None:
             continue
         if topic.fields == ("vehicle",):
@@ -410,5 +485,45 @@ def test_every_catalogued_topic_is_granted_to_its_sender():
                                                TopicKind.PUBLICATION in topic.kind):
                     assert may(login, message, key), f"{login} may not {message} on {key}"
                     checked += 1
-    assert checked > len(TOPICS)
+    assert checked > len(topics)
     assert not may(vehicle_sender(1), "put", Keys("acl").vehicle_state(2))  # and no more
+
+
+def test_a_lifting_agvs_login_may_do_what_its_agent_does_and_no_more():
+    """Seed 004's rules against the forklifts': what a lifting AGV's agent and its
+    dispatcher do stays granted, what only a forklift's run needs is not, and nothing on
+    another AGV's keys."""
+    keys, v1 = Keys("acl"), vehicle_sender(1)
+    forklifts = permissions(router_acl(keys.root, 2))
+    lifting = permissions(router_acl(keys.root, 2, lifting=True))
+    used = [(v1, "declare_queryable", keys.vehicle_task(1)), (v1, "reply", keys.vehicle_task(1)),
+            (v1, "liveliness_token", keys.vehicle_alive(1)),
+            (v1, "query", keys.reservation_request(v1)), (v1, "query", keys.dispatch_claim),
+            (v1, "query", keys.dispatch_mission),
+            (v1, "declare_subscriber", keys.dispatch_mission),
+            (v1, "declare_subscriber", keys.dispatch_done),
+            (v1, "declare_liveliness_subscriber", keys.reservation_alive),
+            (DISPATCHER, "query", keys.vehicle_task(2)),
+            (DISPATCHER, "query", keys.reservation_request(DISPATCHER)),
+            (DISPATCHER, "put", keys.dispatch_agv), (DISPATCHER, "put", keys.dispatch_done),
+            (DISPATCHER, "declare_subscriber", keys.reservation_change),
+            (DISPATCHER, "declare_liveliness_subscriber", keys.vehicle_alive("*"))]
+    for grant in used:
+        assert lifting(*grant), grant
+    forklift_only = [
+        (v1, "put", keys.vehicle_state(1)), (v1, "put", keys.vehicle_fault(1)),
+        (v1, "put", keys.clock_ack(1)), (v1, "declare_queryable", keys.vehicle_inject(1)),
+        (v1, "declare_subscriber", keys.clock), (v1, "declare_subscriber",
+                                                 keys.reservation_change),
+        (DISPATCHER, "declare_subscriber", keys.vehicle_state("*")),
+        (DISPATCHER, "declare_subscriber", keys.vehicle_fault("*")),
+        (GATEWAY, "query", keys.vehicle_task(1)),
+        (GATEWAY, "query", keys.reservation_request(GATEWAY)),
+        (GATEWAY, "put", keys.vda5050_leg(1))]
+    for grant in forklift_only:
+        assert forklifts(*grant) and not lifting(*grant), grant
+    for grant in [(v1, "declare_queryable", keys.vehicle_task(2)),
+                  (v1, "reply", keys.vehicle_task(2)), (v1, "query", keys.vehicle_task(2)),
+                  (v1, "query", keys.reservation_request(vehicle_sender(2))),
+                  (v1, "liveliness_token", keys.vehicle_alive(2))]:
+        assert not lifting(*grant), grant

@@ -13,17 +13,24 @@ import pytest
 
 from dispatcher.claims import Roster
 from fleet.analysis.analyze import analyze
-from fleet.cli import build_parser
+from fleet.cli import build_parser, main
+from fleet.commands import service as service_command
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.access import generate_credentials, read_dictionary
+from fleet.runtime.access import generate_credentials, read_dictionary, router_acl
 from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
-from fleet.runtime.deploy import DeployConfig, config_from_env, secret_files, service_config
+from fleet.runtime.deploy import (
+    MAX_VEHICLES,
+    DeployConfig,
+    config_from_env,
+    secret_files,
+    service_config,
+)
 from fleet.wire.protocol import MissionDone
 from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout
@@ -185,6 +192,28 @@ def test_a_secure_deployment_logs_every_service_in_with_its_own_secret():
             (login, f"/run/secrets/fleet_{login}_password")
     vehicle = parser.parse_args(service_config("vehicle", config).argv())
     assert str(vehicle.logins) == "/run/secrets/fleet_vehicle_logins" and not vehicle.user
+
+
+@pytest.mark.parametrize("layout,lifting", [
+    ("paper004", True), ("paper", False),
+    ("/nowhere/004.toml", False),  # a file only the dispatcher's container holds
+])
+def test_a_secure_router_writes_the_rules_of_its_layouts_vehicles(layout, lifting, tmp_path,
+                                                                   monkeypatch, capsys):
+    """A seed-004 floor's router grants the lifting AGVs and their dispatcher only what a
+    seed-004 run uses (fleet/runtime/access.py); one that cannot read the layout, the
+    forklifts' rules, saying so."""
+    for var in ("FLEET_RUN", "FLEET_LAYOUT", "FLEET_SECURE"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("FLEET_SECURE", "1")
+    monkeypatch.setenv("FLEET_LAYOUT", layout)
+    monkeypatch.setattr(service_command, "ACL_FILE", str(tmp_path / "acl.json"))
+    monkeypatch.setattr(service_command, "serve", lambda process: 0)  # no router started
+    assert main(["service", "router"]) == 0
+    written = json.loads((tmp_path / "acl.json").read_text())
+    assert written == router_acl(Keys("default").root, MAX_VEHICLES, lifting)
+    assert ("the vehicles get a forklift's grants" in capsys.readouterr().err) == \
+        layout.endswith(".toml")
 
 
 def test_the_secrets_give_the_router_every_login_and_the_forklifts_only_theirs(tmp_path):

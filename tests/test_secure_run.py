@@ -2,17 +2,22 @@
 process, and a rogue process that tries what it must not (tests/test_access.py proves every
 rule against a bare router; this proves them in a running mission)."""
 
+import json
+
 import pytest
 import zenoh
 
+from fleet.cli import main
+from fleet.commands import run004 as run004_command
 from fleet.dispatching.decision import Strategy
 from fleet.mission.engine import run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.bus import BusConfig, Requester, free_port, open_session
+from fleet.runtime.bus import BusConfig, Requester, free_port, open_session, wait_alive
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import (
+    CellRequest,
     CommitRequest,
     MissionDone,
     TaskRequest,
@@ -71,3 +76,68 @@ def test_a_secure_mission_refuses_a_rogue_with_no_or_a_forklifts_credentials(tmp
     assert not any(r.envelope.seq == 999_999 for r, _ in recording.of(VehicleState))
     assert all(m.digest != "FORGED" for _, m in recording.of(MissionDone))
     assert recording.foreign == [] and len(list(recording.of(MissionDone))) == 1
+
+
+def test_a_secure_seed004_run_gives_the_in_process_record_and_refuses_a_rogue_agv(
+        tmp_path, capsys, monkeypatch):
+    """`fleet run --layout paper004 --secure`: the lifting AGVs and their dispatcher behind
+    access control with the grants of a seed-004 run. A rogue with AGV 1's login asks AGV 2's
+    agent to take a cell, commits as AGV 2 and serves AGV 2's task key: nobody is reached,
+    the service refuses under AGV 1's own key a change to AGV 2's cells, and the mission ends
+    with the in-process run's record, every verdict passing."""
+    tried: dict[str, object] = {}
+    rogue_asked: list[str] = []
+    rogue: dict[str, object] = {}  # its session and queryable, closed once the run is over
+
+    def on_ready(session, keys, launcher):
+        assert wait_alive(session, keys.vehicle_alive(2), 60.0)  # the agent a get would reach
+        password = (tmp_path / "run" / "secrets" / "vehicle-1.password").read_text()
+        session = rogue["session"] = open_session(BusConfig(
+            "client", (f"tcp/127.0.0.1:{port}",), connect_timeout_ms=30_000, user="vehicle-1",
+            password=password))
+        take = CellRequest("rogue:1", 2, (0, 0), 0.0, True)  # AGV 2 told to take a cell
+        tried["task"] = list(session.get(keys.vehicle_task(2), timeout=5,
+                                         payload=encode(take, "dispatcher", 1, 0.0)))
+        commit = CommitRequest("rogue:2", 2, [(0, 0, 0.0, 1e9)])
+        tried["commit"] = list(session.get(keys.reservation_request("vehicle-2"), timeout=5,
+                                           payload=encode(commit, "vehicle-2", 1, 0.0)))
+        tried["own_key"] = Requester(session, "vehicle-1").request(
+            keys.reservation_request("vehicle-1"),
+            CommitRequest("rogue:3", 2, [(0, 0, 0.0, 1e9)])).message
+        # Declared after its own gets (a session's queryable hears that session's gets):
+        # the dispatcher's requests to AGV 2 from now on would reach it, were it let through.
+        rogue["queryable"] = session.declare_queryable(
+            keys.vehicle_task(2), lambda query: rogue_asked.append(str(query.key_expr)))
+
+    def with_rogue(spec, progress):
+        return run_processes(spec, progress, on_ready=on_ready)
+
+    port = free_port()
+    monkeypatch.setattr(run004_command, "run_processes", with_rogue)
+    small = ["run", "--layout", "paper004", "--orders", "6", "--vehicles", "3", "--json"]
+    try:
+        assert main([*small, "--secure", "--port", str(port), "--out",
+                     str(tmp_path / "run")]) == 0
+    finally:
+        if "queryable" in rogue:
+            rogue["queryable"].undeclare()
+        if "session" in rogue:
+            rogue["session"].close()
+    secure = json.loads(capsys.readouterr().out)
+    assert main([*small, "--inprocess", "--out", str(tmp_path / "inprocess")]) == 0
+    reference = json.loads(capsys.readouterr().out)
+    assert secure["finished"] and secure["verdicts"]["passed"], secure["verdicts"]
+    assert all(secure["verdicts"].values()) and secure["picked"] == 6
+    assert secure["digest"] == reference["digest"]  # the record of the run in one process
+    assert tried["task"] == [] and tried["commit"] == [] and rogue_asked == []
+    assert not tried["own_key"].ok
+    assert "vehicle-1 may change only its own reservations" in tried["own_key"].reason
+    ids = [c.request_id for c in Journal(tmp_path / "run" / "reservation.journal")
+           .replay().changes]
+    assert not any(i.startswith("rogue") for i in ids)
+    # The router ran a seed-004 run's rules: an AGV's login may put nothing at all.
+    acl = json.loads((tmp_path / "run" / "secrets" / "acl.json").read_text())
+    rules = {r["id"]: r for r in acl["rules"]}
+    (agv1,) = [p for p in acl["policies"] if p["id"] == "vehicle-1"]
+    assert not any("put" in rules[i]["messages"] for i in agv1["rules"]
+                   if rules[i]["flows"] == ["ingress"])

@@ -59,11 +59,20 @@ def run_service(args: argparse.Namespace) -> int:
     if args.name == "router" and config.secure:  # the run's rules; the logins are secrets
         import json
 
+        from fleet.errors import UserError
         from fleet.runtime.access import router_acl
         from fleet.wire.topics import Keys
+        from fleet.world.layout_file import load_layout
 
+        try:  # a seed-004 floor's lifting AGVs get their own, narrower grants
+            lifting = load_layout(config.layout).floor is not None
+        except UserError as exc:  # a layout file only the dispatcher's container holds
+            print(f"fleet service router: {exc}; the vehicles get a forklift's grants",
+                  file=sys.stderr)
+            lifting = False
         Path(ACL_FILE).parent.mkdir(parents=True, exist_ok=True)
-        Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES)))
+        Path(ACL_FILE).write_text(json.dumps(router_acl(Keys(config.run).root, MAX_VEHICLES,
+                                                        lifting)))
     return serve(process)
 
 

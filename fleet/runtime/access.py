@@ -32,6 +32,21 @@ watch its own liveliness token: a container's health check logs in as the servic
 - `operator`, `fleet run` with its fault injector: injects faults (get on vehicle/*/inject),
   acks the clock as the injector, reads everything, liveliness included.
 
+On a seed-004 floor (`lifting`: vehicle_agent/lifting.py, dispatcher/remote004.py) the
+vehicles, the dispatcher and the gateway get only what that run uses:
+- `vehicle-N`, a lifting AGV's agent, publishes nothing: it serves its own task key only (the
+  dispatcher's CellRequest and RouteRequest), holds its token, asks the reservation service
+  only on reservation/request/vehicle-N (where, as for a forklift, the service lets it take
+  and let go of its own cells only) and the dispatcher for an id and what the run is; it
+  reads the run's description and end and the service's token (it follows neither the
+  table's changes nor the clock).
+- `dispatcher`: asks the AGVs on vehicle/*/task and the service under its own name (a closed
+  zone is its commit, as ZONE), publishes dispatch/** and the clock (which ticks only for
+  the fault injector, at an agent's fault), serves dispatch/mission and dispatch/claim,
+  reads the acks, the table's changes, the recorder's status and everyone's liveliness; no
+  states or faults (a lifting AGV sends none).
+- `vda5050`: nothing (no gateway runs on a seed-004 floor).
+
 What the router sends to a client (flow "egress") is allowed for everyone on the whole run:
 a client only gets what it subscribed to or asked for, which ingress already decides. It
 must be allowed: a publisher sends nothing until the router has told it of a matching
@@ -134,8 +149,14 @@ def read_dictionary(path: Path) -> dict[str, str]:
     return logins
 
 
-def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], list[str]]]]:
-    """Per principal, what it may send the router: (messages, key expressions) pairs."""
+Grants = dict[str, list[tuple[tuple[str, ...], list[str]]]]
+
+
+def _grants(root: str, vehicles: int, lifting: bool = False) -> Grants:
+    """Per principal, what it may send the router: (messages, key expressions) pairs
+    (`lifting`: the fleet is seed 004's lifting AGVs)."""
+    if lifting:
+        return _lifting_grants(root, vehicles)
     grants = {
         DISPATCHER: [
             (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
@@ -182,15 +203,39 @@ def _grants(root: str, vehicles: int) -> dict[str, list[tuple[tuple[str, ...], l
     return grants
 
 
-def router_acl(keys_root: str, vehicles: int) -> dict:
+def _lifting_grants(root: str, vehicles: int) -> Grants:
+    """A seed-004 run's grants: the services' as on any run, the vehicles', the dispatcher's
+    and the gateway's cut to what that run uses (the module's docstring says why)."""
+    grants = _grants(root, 0)
+    grants[DISPATCHER] = [
+        (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
+        (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
+        (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
+        (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/reservation/change",
+                     f"{root}/recorder/status"]),
+        (TOKEN, [f"{root}/dispatch/alive"]),
+        (WATCH, [f"{root}/**"])]
+    grants[GATEWAY] = []
+    for v in range(1, vehicles + 1):
+        grants[vehicle_sender(v)] = [
+            (TOKEN, [f"{root}/vehicle/{v}/alive"]),
+            (SERVE, [f"{root}/vehicle/{v}/task"]),
+            (ASK, [f"{root}/reservation/request/{vehicle_sender(v)}", f"{root}/dispatch/claim",
+                   f"{root}/dispatch/mission"]),
+            (SUBSCRIBE, [f"{root}/dispatch/done", f"{root}/dispatch/mission"]),
+            (WATCH, [f"{root}/reservation/alive", f"{root}/vehicle/{v}/alive"])]
+    return grants
+
+
+def router_acl(keys_root: str, vehicles: int, lifting: bool = False) -> dict:
     """The router's `access_control` section for one run (keys_root: `fleet/<run>`): deny
     by default; each principal's user name may send what `_grants` lists, and receive
-    anything of the run."""
+    anything of the run. `lifting`: the vehicles are seed 004's lifting AGVs."""
     rules = [{"id": "egress", "messages": list(MESSAGES), "flows": ["egress"],
               "permission": "allow", "key_exprs": [f"{keys_root}/**"]}]
     subjects = []
     policies = []
-    for principal, grants in _grants(keys_root, vehicles).items():
+    for principal, grants in _grants(keys_root, vehicles, lifting).items():
         ids = []
         for i, (messages, key_exprs) in enumerate(grants):
             ids.append(f"{principal}/{i}")
