@@ -271,11 +271,10 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
     if config.dispatch == "external":
         return dispatch_external(session, keys, setup, liveness)
     if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
-        faults = load_scenario(config.faults, setup.layout.name).faults if config.faults \
-            else ()
+        scenario = load_scenario(config.faults, setup.layout.name) if config.faults else None
         return dispatch_mission004(session, keys, setup.mission, setup.layout.floor, vehicles,
                                    liveness, config.startup_timeout_s, publish,
-                                   tracking_params(info), config.clock, config.speed, faults)
+                                   tracking_params(info), config.clock, config.speed, scenario)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

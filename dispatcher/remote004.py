@@ -13,6 +13,12 @@ store. Before the next instant every answer of this one is in; a store that refu
 the mirror said it would give (someone outside the mission holds the cell) ends the mission,
 saying so. A plan waits for every answer. So every take finds its cell as it would in
 process, and a run of processes gives the in-process events, move for move.
+
+A killed agent (a `kill_vehicle` fault) is killed when the tracker strikes it: the fault
+clock stops the fault injector at that instant and waits for its ack, then for the agent's
+liveliness token to go; until the injector's new agent is up, the dispatcher lets go of the
+AGV's cells itself (the AGV stands; only its last move's cell behind it is let go), and
+asks the agent nothing.
 """
 
 from __future__ import annotations
@@ -23,22 +29,26 @@ import math
 import statistics
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import ExitStack
+from contextlib import ExitStack, closing
 from typing import TypeVar
 
 import zenoh
 
+from dispatcher.clock import FastClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
 from fleet.errors import UserError
-from fleet.mission.faults import Fault
+from fleet.mission.faults import DETECT_TIMEOUT_S, Scenario
+from fleet.mission.faults004 import injected004
+from fleet.mission.freeze import BREAKDOWN
 from fleet.mission.record004 import Publish, run_mission004
 from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
 from fleet.planning.geometry import Cell
-from fleet.planning.reservations import INF, Interval
+from fleet.planning.reservations import INF, Interval, WriteResult
 from fleet.planning.rules004 import XY
 from fleet.runtime.bus import Requester, RequestFailed
+from fleet.wire.convert import held_to_wire
 from fleet.wire.protocol import (
     ZONE,
     CellReply,
@@ -57,14 +67,19 @@ REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
 SYNC_TIMEOUT_S = 30.0
 ASKING_AT_ONCE = 16  # requests in flight: more than a 2-core machine's processes can serve
 LATE_S = 0.3  # an instant handled this much wall time after it came is late
+AGENT_BACK_S = 60.0  # for a restarted agent to come up (a fresh process on a busy machine)
 Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
 class RemoteVehicles:
     def __init__(self, session: zenoh.Session, keys: Keys, floor: Floor004, mirror: TableMirror,
-                 liveness: Liveness, reservations: ReservationClient) -> None:
+                 liveness: Liveness, reservations: ReservationClient,
+                 fault_clock: FastClock | None = None) -> None:
         self.keys, self.floor, self.mirror, self.liveness = keys, floor, mirror, liveness
-        self.reservations = reservations  # the dispatcher's own writes: closed zones
+        # the dispatcher's own writes: closed zones, and the cells of AGVs without an agent
+        self.reservations = reservations
+        self.fault_clock = fault_clock  # stops the fault injector at an agent's fault
+        self.absent: set[int] = set()  # AGVs whose agent a fault took, not back yet
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
@@ -77,7 +92,10 @@ class RemoteVehicles:
         self.settle(cell)  # the cell's last holder has let it go first, as in process
         if self.mirror.table.conflict(vehicle, cell, t, INF) is not None:
             return False  # the store holds what the mirror holds: it would refuse
-        self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
+        if vehicle in self.absent:
+            self._write(self.reservations.commit(vehicle, [Interval(cell, t, INF)]), t)
+        else:
+            self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
         return True
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
@@ -86,7 +104,37 @@ class RemoteVehicles:
         (`settle`), and each decision sees what it would see in process."""
         cell = self.floor.cell(xy)
         self.settle(cell)  # its take is in first
-        self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
+        if vehicle in self.absent:
+            self._write(self.reservations.release(vehicle, t, [cell]), t)
+        else:
+            self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
+
+    def down(self, vehicle: int, t: float, cause: str) -> None:
+        """A killed agent is killed now: every request so far answered first, then the
+        injector stopped at t (it kills), then its token seen gone."""
+        if cause == BREAKDOWN:
+            return  # its agent stands the AGV still and goes on answering
+        self.settle()
+        self.absent.add(vehicle)
+        self._fault_instant(t)
+        if not self.liveness.wait_gone(vehicle, DETECT_TIMEOUT_S):
+            raise ParticipantLost(f"AGV {vehicle}'s agent was to be gone at t={t:g} "
+                                  f"({cause}), but its liveliness token stayed for "
+                                  f"{DETECT_TIMEOUT_S:g} s")
+
+    def up(self, vehicle: int, t: float) -> None:
+        """The injector starts the AGV's new agent at t; it is asked again once it is up."""
+        if vehicle not in self.absent:
+            return
+        self._fault_instant(t)
+        self.liveness.wait_for([vehicle], AGENT_BACK_S)
+        self.absent.discard(vehicle)
+
+    def _fault_instant(self, t: float) -> None:
+        if self.fault_clock is None:
+            raise ParticipantLost(f"a fault of an agent at t={t:g} with no fault injector to "
+                                  f"apply it")
+        self.fault_clock.advance(t)  # returns once the injector has applied what is due
 
     def _ask_cell(self, vehicle: int, xy: XY, t: float, take: bool) -> None:
         request = CellRequest(self.requester.next_id(), vehicle, xy, t, take)
@@ -120,17 +168,21 @@ class RemoteVehicles:
         request = RouteRequest(
             self.requester.next_id(), query.vehicle, query.t, query.task.value, query.start,
             query.goal, int(query.heading), self.mirror.revision, query.home, query.relaxed,
-            sorted(query.blocked), sorted(query.moving), sorted(query.stagnant))
+            sorted(query.blocked), sorted(query.moving), sorted(query.stagnant),
+            held_to_wire(self.mirror.table.reservations_after(query.t)))
         reply = self._ask(query.vehicle, request, RouteReply, query.t)
         return Routed(tuple(reply.cells) if reply.found else None, reply.planning_s)
 
     def close(self, xys: list[XY], t0: float, t1: float) -> None:
         self.settle()
-        written = self.reservations.commit(
-            ZONE, [Interval(self.floor.cell(xy), t0, t1) for xy in xys])
+        self._write(self.reservations.commit(
+            ZONE, [Interval(self.floor.cell(xy), t0, t1) for xy in xys]), t0)
+
+    def _write(self, written: WriteResult, t: float) -> None:
+        """One of the dispatcher's own writes, in its mirror before the tracker goes on."""
         if not written.ok:
-            raise ParticipantLost(f"the reservation service refused to close a zone at "
-                                  f"t={t0}: {written.reason}")
+            raise ParticipantLost(f"the reservation service refused the dispatcher's write "
+                                  f"at t={t:g}: {written.reason}")
         self._sync(written.revision)
 
     def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
@@ -211,7 +263,7 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                         vehicles: list[int], liveness: Liveness, startup_timeout_s: float,
                         publish: Publish, tracking: TrackingParams,
                         clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
-                        faults: tuple[Fault, ...] = ()) -> MissionDone:
+                        scenario: Scenario | None = None) -> MissionDone:
     """Wait for the reservation service and the AGVs, then run the mission through them on
     the fast or the real-time clock (never raises for a mission that could not finish: the
     error goes into the result)."""
@@ -225,7 +277,13 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
             liveness.wait_for(vehicles, startup_timeout_s)
             log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
             pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
-            fleet = RemoteVehicles(session, keys, floor, mirror, liveness, reservations)
+            injected = injected004(scenario) if scenario is not None else None
+            # ticked at an agent's fault alone, on either clock: the tracker's instant then
+            # waits for the injector as the fast clock does (the real-time one is there)
+            fault_clock = scope.enter_context(closing(FastClock(
+                session, keys, [], liveness, injected))) if injected is not None else None
+            fleet = RemoteVehicles(session, keys, floor, mirror, liveness, reservations,
+                                   fault_clock)
             scope.callback(fleet.close_down)
 
             def next_instant(t: float) -> None:
@@ -234,7 +292,7 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                     pace(t)
 
             done = run_mission004(mission, floor, len(vehicles), fleet, publish, next_instant,
-                                  tracking, faults)
+                                  tracking, scenario.faults if scenario is not None else ())
             fleet.settle()  # the last cells let go: the store ends as the fleet stands
             if pace is None:
                 return done

@@ -19,7 +19,6 @@ from fleet.planning.reservations import (
     INF,
     Amendment,
     Interval,
-    ReservationTable,
     TimedRoute,
     WriteResult,
 )
@@ -28,7 +27,6 @@ from fleet.wire.convert import (
     amends_to_wire,
     intervals_to_wire,
     route_to_wire,
-    snapshot_from_wire,
 )
 from fleet.wire.protocol import (
     CommitRequest,
@@ -113,13 +111,6 @@ class ReservationClient:
         """Catch up: a diff when the copy is synced, else the whole table."""
         mirror.load(self._ask(SnapshotRequest(mirror.revision if mirror.synced else -1),
                               WireSnapshot))
-
-    def table_after(self, t: float) -> ReservationTable:
-        """The table as a plan made at `t` reads it: the reservations that hold after `t`,
-        one query whose answer stays small however long the run (a copy that catches up only
-        to plan would otherwise read every change since its last plan)."""
-        return ReservationTable.from_snapshot(snapshot_from_wire(
-            self._ask(SnapshotRequest(held_after=t), WireSnapshot)))
 
     def _ask(self, request: Message, expected: type[Answer]) -> Answer:
         """The service's answer, of the type a request of this kind gets (RequestFailed if

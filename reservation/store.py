@@ -13,6 +13,7 @@ from fleet.wire.convert import (
     amends_from_wire,
     change_from_wire,
     change_to_wire,
+    held_to_wire,
     intervals_from_wire,
     route_from_wire,
     route_to_wire,
@@ -174,9 +175,8 @@ class ReservationStore:
                                 diff=True)
         held = self.table.reservations() if held_after is None else \
             self.table.reservations_after(held_after)
-        rows = [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1) for r in held]
         snap = self.table.snapshot()
-        return WireSnapshot(self.revision, rows,
+        return WireSnapshot(self.revision, held_to_wire(held),
                             routes=[(v, route_to_wire(r)) for v, r in snap.routes])
 
     def close(self) -> None:

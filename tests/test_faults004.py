@@ -5,7 +5,7 @@ import dataclasses
 
 import pytest
 
-from fleet.analysis.analyze004 import fault_breaches
+from fleet.analysis.analyze004 import fault_breaches, recorded_events
 from fleet.analysis.verdicts004 import judge
 from fleet.cli import main
 from fleet.mission.faults import Fault, FaultKind, ScenarioError, load_scenario
@@ -13,6 +13,7 @@ from fleet.mission.faults004 import check_faults004
 from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.tracking004 import BrokeDown, Moved, Repaired, Turned, ZoneClosed
 from fleet.planning.rules004 import Kind
+from fleet.recording.reader import read_recording
 from fleet.wire.protocol import ZONE
 from fleet.world.floor004 import Floor004Shape, build, paper004
 
@@ -90,7 +91,10 @@ def test_the_shipped_mixed_scenario_runs_on_paper004():
 
 
 @pytest.mark.parametrize("fault,named", [
-    (Fault(FaultKind.KILL_VEHICLE, 10.0, vehicle=1), "only vehicle_breakdown and close_zone"),
+    (Fault(FaultKind.STALL_VEHICLE, 10.0, vehicle=1, duration=5.0),
+     "only vehicle_breakdown, close_zone, kill_vehicle"),
+    (Fault(FaultKind.KILL_SERVICE, 10.0, service="reservation"),
+     "only vehicle_breakdown, close_zone, kill_vehicle"),
     (Fault(FaultKind.VEHICLE_BREAKDOWN, 10.0, vehicle=9), "the run has AGVs 1 to 6"),
     (Fault(FaultKind.CLOSE_ZONE, 10.0, duration=5.0, cells=((0, 0),)),
      "cell 0,0 is not floor an AGV of small004 drives on"),
@@ -101,14 +105,31 @@ def test_faults_a_seed004_run_cannot_take_are_refused_naming_them(fault, named):
 
 
 def test_fleet_run_refuses_a_scenario_of_another_kind_before_starting(tmp_path, capsys):
-    assert main(["run", "--layout", "paper004", "--faults", "kill_vehicle", "--inprocess",
+    assert main(["run", "--layout", "paper004", "--faults", "stall_vehicle", "--inprocess",
                  "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err
-    assert "kill_vehicle" in err and "only vehicle_breakdown and close_zone" in err
+    assert "stall_vehicle" in err and "only vehicle_breakdown, close_zone, kill_vehicle" in err
+    assert "Traceback" not in err
     assert not (tmp_path / "r").exists()
     assert main(["faults", "list", "--layout", "paper004"]) == 0
     listed = capsys.readouterr().out.split("shipped scenarios")[1]
-    assert "mixed" in listed and "kill_vehicle" not in listed
+    assert "mixed" in listed and "kill_vehicle" in listed and "stall_vehicle" not in listed
+
+
+def test_a_killed_agent_in_process_is_a_stop_told_by_its_cause(tmp_path, capsys):
+    """The shipped kill_vehicle of paper004 strikes AGV 3 mid-leg; in one process the
+    AGV stands as a broken-down one does, the recording says why, and every verdict
+    passes (tests/test_runtime004.py runs it as processes, with the injector's kill)."""
+    out = tmp_path / "r"
+    assert main(["run", "--layout", "paper004", "--faults", "kill_vehicle", "--inprocess",
+                 "--orders", "30", "--vehicles", "6", "--out", str(out)]) == 0
+    assert "faults             pass: 1 struck" in capsys.readouterr().out
+    events, problems = recorded_events(read_recording(out), paper004())
+    struck = [e for e in events if isinstance(e, BrokeDown)]
+    assert problems == [] and [(e.vehicle, e.t, e.until, e.cause) for e in struck] == [
+        (3, 100.5, 145.5, "agent killed")]
+    assert any(getattr(e, "vehicle", 0) == 3 and getattr(e, "t0", 0) >= 145.5
+               for e in events)  # it went on once its new agent was up
 
 
 

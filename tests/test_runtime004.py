@@ -12,17 +12,26 @@ from fleet.analysis.analyze004 import analyze004
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
 from fleet.mission.faults import load_scenario
+from fleet.mission.faults004 import injected004
 from fleet.mission.heat004 import history_heat
 from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.record import digest_of
 from fleet.mission.record004 import event_from_wire, event_to_wire, record_of
 from fleet.mission.spec import ClockMode, Mission, MissionKind
-from fleet.mission.tracking004 import MadeWay, Met, Replanned, TrackingParams
+from fleet.mission.tracking004 import (
+    BrokeDown,
+    MadeWay,
+    Met,
+    Moved,
+    Replanned,
+    TrackingParams,
+)
 from fleet.planning.astar004 import Costs
+from fleet.planning.reservations import INF
 from fleet.recording.reader import read_recording
 from fleet.runtime.bus import wait_alive
 from fleet.runtime.local_run import RunSpec, run_processes
-from fleet.wire.protocol import CellRequest, encode
+from fleet.wire.protocol import CellRequest, RouteRequest, encode
 from fleet.world.floor004 import Floor004Shape, build
 from fleet.world.layout_file import load_layout
 
@@ -63,14 +72,17 @@ def test_fast_mode_processes_equal_the_inprocess_run_and_the_recording_is_judged
         assert wait_alive(session, keys.vehicle_alive(1), 60.0)
         for payload in (b"\x93garbage", encode(CellRequest("x1", 1, (999, 3), 0.0, True),
                                                   "dispatcher", 1, 0.0),
-                        encode(CellRequest("x2", 2, (1, 1), 0.0, True), "dispatcher", 2, 0.0)):
+                        encode(CellRequest("x2", 2, (1, 1), 0.0, True), "dispatcher", 2, 0.0),
+                        encode(RouteRequest("x3", 1, 0.0, "M1", (1, 1), (2, 2), 1, 0,
+                                            held=[(2, 1, 1, 5.0, 1.0)]), "dispatcher", 3, 0.0)):
             for reply in session.get(keys.vehicle_task(1), payload=payload, timeout=10.0):
                 assert reply.ok is None
                 refusals.append(reply.err.payload.to_string())
 
     outcome = run_processes(RunSpec(mission, vehicles, run_dir), on_ready=intrude)
     assert [r.split(":")[0] for r in refusals] == ["rejected", "refused", "a request for AGV 2 "
-                                                   "sent to AGV 1"], refusals
+                                                   "sent to AGV 1", "refused"], refusals
+    assert "must have t0 < t1" in refusals[-1]  # the table a plan was sent, not one
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)  # move for move: the events' digest
     assert outcome.done.digest == digest_of(record_of(reference))
@@ -126,13 +138,59 @@ def test_the_real_time_clock_paces_the_instants_and_gives_the_fast_runs_events(t
     assert report.faults == 2 and report.fault_breaches == []
 
 
+KILL = """
+[[fault]]
+kind = "kill_vehicle"
+at = 40.5
+vehicle = 2
+duration = 30.0
+"""
+
+
+@pytest.mark.parametrize("clock,speed", [(ClockMode.FAST, 1.0), (ClockMode.REALTIME, 40.0)])
+def test_a_killed_agent_dies_at_its_instant_and_its_restart_gives_the_inprocess_run(
+        clock, speed, tmp_path):
+    """The injector kills AGV 2's agent when the tracker strikes it (t = 40.5, mid-mission)
+    and starts a new one 30 s later; meanwhile the AGV stands holding its cell, the
+    dispatcher lets go of the cell its last move left, and nobody asks the dead agent
+    anything: the events are the in-process run's, where the kill is a stop told by its
+    cause."""
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    (tmp_path / "kill.toml").write_text(KILL)
+    faults = load_scenario(tmp_path / "kill.toml").faults
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run()
+    down = [e for e in reference.events if isinstance(e, BrokeDown)]
+    assert [(e.vehicle, e.t, e.until, e.cause) for e in down] == [(2, 40.5, 70.5,
+                                                                   "agent killed")]
+    # AGV 2 was on a leg when it was struck, and drove on after its agent came back
+    assert any(isinstance(e, Moved) and e.vehicle == 2 and e.t0 < 40.5 for e in reference.events)
+    assert any(isinstance(e, Moved) and e.vehicle == 2 and e.t0 >= 70.5
+               for e in reference.events)
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
+    outcome = run_processes(RunSpec(
+        mission, 4, tmp_path / "run", clock, speed, faults=injected004(load_scenario(
+            tmp_path / "kill.toml")), faults_source=str(tmp_path / "kill.toml"),
+        clocked_agents=False))
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)
+    assert [(a.what, a.t) for a in outcome.injected] == [("kill agent-2", 40.5),
+                                                        ("restart agent-2", 70.5)]
+    logs = sorted(p.name for p in (tmp_path / "run" / "logs").iterdir())
+    assert "agent-2-2.log" in logs  # the new agent, which answered from t = 70.5 on
+    report = analyze004(read_recording(tmp_path / "run"))
+    assert report.passed and report.faults == 1 and report.fault_breaches == []
+    assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
+
+
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():
     floor = build(Floor004Shape(**SHAPE), "small004")
     events = Mission004(floor, 8, generate_orders(floor, 20, 2)).run().events
     kinds = {type(e).__name__ for e in events}
     assert {"Moved", "Turned", "Paused", "Met", "Replanned", "Picked", "LegDone"} <= kinds
-    extra = MadeWay(3.0, 1, 2, (4, 5), (6, 7))  # rarer kinds, made by hand
-    for e in [*events, extra]:
+    extra = [MadeWay(3.0, 1, 2, (4, 5), (6, 7)),  # rarer kinds, made by hand
+             BrokeDown(4.0, 2, (1, 1), 9.0), BrokeDown(5.0, 3, (2, 2), INF, "agent killed")]
+    for e in [*events, *extra]:
         assert event_from_wire(event_to_wire(e), floor) == e
 
 
@@ -156,8 +214,10 @@ def test_fleet_run_on_paper004_in_process_then_analyze(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("flags,named", [
-    (["--secure"], "without --secure yet"), (["--order-area", "lower-left"], "--order-area"),
-    (["--faults", "kill_vehicle"], "only vehicle_breakdown and close_zone are built yet"),
+    (["--battery", "n_op=6"], "without --battery yet"),
+    (["--order-area", "lower-left"], "--order-area"),
+    (["--faults", "stall_vehicle"],
+     "only vehicle_breakdown, close_zone, kill_vehicle are built yet"),
     (["--mission", "fill"], "runs order missions, not --mission fill"),
     (["--vehicles", "500"], "--vehicles 500: the AGVs of paper004 start on its 96 parking"),
 ])

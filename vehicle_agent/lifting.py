@@ -7,10 +7,11 @@ the cell's value allows"), let the cell behind go, and plan the leg's path with 
 A* on the grid values derived from its copy of the store's table (fleet/mission/tracking004.py,
 `route`).
 
-The copy is read from the service when a plan needs it (the reservations that hold from the
-plan's instant on, one query), not kept by following every change: a hundred AGVs each
-decoding every take and let-go of the fleet cost more than the fleet's driving
-(docs/benchmarks.md, runtime004).
+The table a plan reads comes with the request: the reservations that hold from the plan's
+instant on, as the dispatcher's copy of the store has them with every request so far
+answered. The agent keeps no copy of its own: a hundred AGVs each decoding every take and
+let-go of the fleet cost more than the fleet's driving, and asking the store at each plan
+doubled a plan's round trips (docs/benchmarks.md, runtime004).
 
 Zenoh callbacks only enqueue; one worker thread answers, in arrival order.
 """
@@ -25,10 +26,11 @@ from contextlib import ExitStack
 import zenoh
 
 from fleet.mission.tracking004 import RouteQuery, TrackingParams, route
-from fleet.planning.reservations import INF, Interval
+from fleet.planning.reservations import INF, Interval, ReservationTable, Snapshot
 from fleet.planning.rules004 import Direction, Task
 from fleet.runtime.bus import Requester, RequestFailed, asked, received
 from fleet.runtime.lifecycle import Stopped
+from fleet.wire.convert import held_from_wire
 from fleet.wire.protocol import (
     CellReply,
     CellRequest,
@@ -125,10 +127,8 @@ class LiftingAgent:
 
     def _route(self, request: RouteRequest) -> RouteReply:
         self._on_floor(request.start, request.goal, request.home, *request.blocked)
-        table = self.reservations.table_after(request.t)
-        if table.revision < request.revision:  # the service is never behind its asker
-            raise RequestFailed(f"the reservation service answered with revision "
-                                f"{table.revision}, older than {request.revision}")
+        table = ReservationTable.from_snapshot(
+            Snapshot(request.revision, held_from_wire(request.held)))
         query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
                            request.goal, Direction(request.heading), request.home,
                            request.relaxed, frozenset(request.blocked),

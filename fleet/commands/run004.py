@@ -16,7 +16,7 @@ from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.runs import write_summary
 from fleet.errors import UserError
 from fleet.mission.faults import Fault, load_scenario
-from fleet.mission.faults004 import check_faults004
+from fleet.mission.faults004 import check_faults004, injected004
 from fleet.mission.orders004 import fleet004, generate_orders
 from fleet.mission.record004 import run_mission004, tracking_params
 from fleet.mission.spec import ClockMode, Mission, MissionKind
@@ -33,8 +33,7 @@ from fleet.world.layout import Layout
 
 # What runs on seed 000's and 002's missions but not yet on a seed-004 floor, each refused by
 # name rather than ignored (docs/agv-004.md, "As processes").
-NOT_YET = (("--secure", lambda a: a.secure),
-           ("--battery", lambda a: a.battery), ("--order-area", lambda a: a.order_area),
+NOT_YET = (("--battery", lambda a: a.battery), ("--order-area", lambda a: a.order_area),
            ("--weights", lambda a: a.weights is not None),
            ("--orders SHELF,...", lambda a: isinstance(a.orders, tuple)))
 
@@ -53,11 +52,10 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     n = fleet004(floor, mission.vehicles)
     mission = dataclasses.replace(mission, vehicles=n)
     generate_orders(floor, mission.orders, mission.seed)  # a bad count: refused at once
-    faults: tuple[Fault, ...] = ()
-    if args.faults:
-        scenario = load_scenario(args.faults, layout.name)
+    scenario = load_scenario(args.faults, layout.name) if args.faults else None
+    if scenario is not None:
         check_faults004(scenario.faults, floor, n, scenario.name)
-        faults = scenario.faults
+    faults = scenario.faults if scenario is not None else ()
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(mission.orders, f"orders on {layout.name}", unit="orders",
@@ -70,7 +68,9 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
         else:
             spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, command=command,
                            port=args.port, foxglove=args.foxglove,
-                           faults_source=args.faults or "")
+                           faults_source=args.faults or "", secure=args.secure,
+                           faults=injected004(scenario) if scenario is not None else None,
+                           clocked_agents=False)
             progress.status(f"starting the router, recorder, reservation service, {n} AGV "
                             f"agents and the dispatcher")
             outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))

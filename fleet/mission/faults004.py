@@ -1,20 +1,25 @@
-"""Faults on a seed-004 floor (docs/faults.md, "Seed 004"): the two kinds its tracker takes,
-applied at their sim times in the tracker's event order, so a faulty run is the same in one
-process and as processes. A broken-down AGV stands, holding its cell, which reads stagnant:
-empty AGVs go round it, loaded ones wait; a closed zone is held by ZONE in the store, and
-the same holds for its cells. The other kinds act on processes and services, which a
-seed-004 run does not recover from yet: they are refused by name."""
+"""Faults on a seed-004 floor (docs/faults.md, "Seed 004"), applied at their sim times in the
+tracker's event order, so a faulty run is the same in one process and as processes. A
+broken-down AGV stands, holding its cell, which reads stagnant: empty AGVs go round it,
+loaded ones wait; a closed zone is held by ZONE in the store, and the same holds for its
+cells. An AGV whose agent is killed stands the same way, from the instant the injector kills
+the agent to the one it starts a new agent (if ever): the tracker strikes it as a breakdown
+told by its cause, and its seam asks the injector to kill when it strikes
+(dispatcher/remote004.py). The other kinds act on services, and on agents in ways seed 004's
+runs do not recover from yet (stalled, cut off, slowed): they are refused by name."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from fleet.mission.faults import Fault, FaultKind, ScenarioError
+from fleet.mission.faults import Fault, FaultKind, Scenario, ScenarioError
+from fleet.mission.freeze import CAUSES
 from fleet.mission.tracking004 import Tracker
 from fleet.planning.rules004 import XY, Kind
 from fleet.world.floor004 import Floor004
 
-KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE)
+KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VEHICLE)
+INJECTED004 = (FaultKind.KILL_VEHICLE,)  # what the injector does to the run's processes
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
 
 
@@ -31,7 +36,7 @@ def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
         where = f"scenario {scenario}: fault {i + 1} ({fault.describe()})"
         if fault.kind not in KINDS004:
             raise ScenarioError(f"{where}: on a seed-004 floor only "
-                                f"{' and '.join(k.value for k in KINDS004)} are built yet")
+                                f"{', '.join(k.value for k in KINDS004)} are built yet")
         if fault.vehicle is not None and not 1 <= fault.vehicle <= vehicles:
             raise ScenarioError(f"{where}: the run has AGVs 1 to {vehicles}")
         for cell in fault.cells:
@@ -43,12 +48,19 @@ def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
                                     f"and station lanes)")
 
 
+def injected004(scenario: Scenario) -> Scenario | None:
+    """The part of a seed-004 scenario the fault injector applies (None: nothing)."""
+    faults = tuple(f for f in scenario.faults if f.kind in INJECTED004)
+    return Scenario(scenario.name, scenario.description, faults) if faults else None
+
+
 def apply_faults(tracker: Tracker, faults: Sequence[Fault]) -> None:
     """Schedule each fault in the tracker (checked already: check_faults004)."""
     for fault in faults:
-        if fault.kind is FaultKind.VEHICLE_BREAKDOWN:
+        if fault.kind in (FaultKind.VEHICLE_BREAKDOWN, FaultKind.KILL_VEHICLE):
             assert fault.vehicle is not None
-            tracker.break_down(fault.vehicle, fault.at, fault.until)
+            tracker.break_down(fault.vehicle, fault.at, fault.until,
+                               CAUSES[fault.kind])
         else:
             tracker.close_zone([floor_xy(tracker.floor, c) for c in fault.cells], fault.at,
                                fault.until)

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from typing import Any
 
 from fleet.mission.faults import Fault
+from fleet.mission.freeze import BREAKDOWN
 from fleet.mission.orders004 import Mission004, Result004, generate_orders
 from fleet.mission.record import digest_of
 from fleet.mission.spec import Mission
@@ -58,8 +59,9 @@ def event_to_wire(e: Event) -> AgvEvent:
             return AgvEvent("made_way", e.vehicle, e.t, e.t, e.at, e.to, other=e.idle)
         case Picked():
             return AgvEvent("picked", e.vehicle, e.t, e.t, label=e.station)
-        case BrokeDown():
-            return AgvEvent("broke_down", e.vehicle, e.t, e.until, e.at)
+        case BrokeDown():  # a breakdown's label stays empty, as before causes were told
+            return AgvEvent("broke_down", e.vehicle, e.t, e.until, e.at,
+                            label="" if e.cause == BREAKDOWN else e.cause)
         case Repaired():
             return AgvEvent("repaired", e.vehicle, e.t, e.t, e.at)
         case ZoneClosed():
@@ -109,7 +111,7 @@ def _event(m: AgvEvent, floor: Floor004) -> Event:
         case "picked":
             return Picked(m.t0, m.vehicle, m.label)
         case "broke_down":
-            return BrokeDown(m.t0, m.vehicle, m.at, m.t1)
+            return BrokeDown(m.t0, m.vehicle, m.at, m.t1, m.label or BREAKDOWN)
         case "repaired":
             return Repaired(m.t0, m.vehicle, m.at)
         case "zone_closed":

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
 
+from fleet.mission.freeze import BREAKDOWN
 from fleet.planning.astar004 import Costs, heading_of, plan
 from fleet.planning.reservations import INF, Interval, ReservationTable, ReservationView
 from fleet.planning.rules004 import (
@@ -172,6 +173,15 @@ class Vehicles(Protocol):
         """Close cells (a fault): held by ZONE over [t0, t1); none of them is held then."""
         ...
 
+    def down(self, vehicle: int, t: float, cause: str) -> None:
+        """A fault stops the AGV at t (`cause`: BREAKDOWN, or what befell its agent); until
+        `up` nobody asks it anything but to let go of the cell its last move left."""
+        ...
+
+    def up(self, vehicle: int, t: float) -> None:
+        """The AGV goes on from t (repaired, or its agent back)."""
+        ...
+
 
 class LocalVehicles:
     """Every AGV in this process, against one `ReservationTable`."""
@@ -199,6 +209,12 @@ class LocalVehicles:
         started = time.perf_counter()
         cells = route(self.floor, self.table, query, self.params.costs, self.params.heap)
         return Routed(cells, time.perf_counter() - started)
+
+    def down(self, vehicle: int, t: float, cause: str) -> None:
+        pass  # in this process every AGV is the tracker's own: a fault is its down_until
+
+    def up(self, vehicle: int, t: float) -> None:
+        pass
 
 
 class StageKind(Enum):
@@ -335,6 +351,7 @@ class BrokeDown:
     vehicle: int
     at: XY
     until: float
+    cause: str = BREAKDOWN  # or the process fault that stopped it: "agent killed"
 
 
 @dataclass(frozen=True)
@@ -464,17 +481,21 @@ class Tracker:
             self._wake(vehicle, self.t)  # (moving: its arrival acts)
 
     # -- faults --------------------------------------------------------------------------------
-    def break_down(self, vehicle: int, t: float, until: float = INF) -> None:
+    def break_down(self, vehicle: int, t: float, until: float = INF,
+                   cause: str = BREAKDOWN) -> None:
         """At t the AGV stops: the move, turn or lift it is in ends, then it stands, holding
-        its cell, until `until`."""
+        its cell, until `until`. A killed agent's AGV does the same (`cause`): the tracker
+        decides alike, and its seam keeps away from the agent until it is back."""
         def strike() -> None:
             agv = self.agvs[vehicle]
             agv.down_until = until
-            self._log(BrokeDown(t, vehicle, agv.moving_to or agv.cell, until))
+            self.vehicles.down(vehicle, t, cause)
+            self._log(BrokeDown(t, vehicle, agv.moving_to or agv.cell, until, cause))
             if until < INF:
                 self._at(until, repair)
 
         def repair() -> Repaired:
+            self.vehicles.up(vehicle, until)
             agv = self.agvs[vehicle]
             agv.down_until = 0.0
             agv.standing_since = until  # it stood for a reason: stagnant only from now on

@@ -67,6 +67,7 @@ class Injector:
     restart_args: Callable[[str], list[str]]  # fleet arguments to start a process kind again
     proxies: dict[int, LinkProxy] = field(default_factory=dict)
     applied: list[Applied] = field(default_factory=list)
+    clocked_agents: bool = True  # they ack each tick: a stop waits until theirs is in
 
     def __post_init__(self) -> None:
         self.actions = sorted(((a, f) for f in self.scenario.faults for a in self._actions(f)),
@@ -114,7 +115,8 @@ class Injector:
             now = last.t if fast else last.t + last.speed * max(0.0, time.time() - last.wall)
             while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
-                if action.vehicle is not None and fast:  # what it said is on its way first
+                if action.vehicle is not None and fast and self.clocked_agents:
+                    # what it said is on its way first
                     self._wait_ack(action.vehicle, last.tick)
                 started = time.time()  # the fault's moment: applying it may take a while
                 try:

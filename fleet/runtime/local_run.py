@@ -64,6 +64,7 @@ from fleet.wire.topics import (
     published_by,
     vehicle_sender,
 )
+from fleet.world.layout_file import load_layout
 
 DISPATCHER_JOURNAL = "dispatcher.journal"  # an order mission's book, for a restarted one
 ROUTER_TIMEOUT_MS = 30_000
@@ -88,9 +89,12 @@ class RunSpec:
     foxglove: int | None = None  # serve the live Foxglove view on this port
     record: bool = True  # start the recorder (benchmarks measure the run without it)
     faults: Scenario | None = None  # applied by an injector in this process
-    # The scenario's name or file, for the dispatcher (alone, without `faults`: a seed-004
-    # run's dispatcher applies its faults itself)
+    # The scenario's name or file, for the dispatcher (a seed-004 run's dispatcher applies
+    # most of its faults itself; `faults` holds only what the injector does)
     faults_source: str = ""
+    # Whether the agents follow the clock (seed 004's do not: the injector waits for no ack
+    # of theirs before it strikes them)
+    clocked_agents: bool = True
     secure: bool = False  # access control and a login per process (fleet/runtime/access.py)
     # DISPATCH_MODES: "vda5050" and "external" run the VDA 5050 gateway on `mqtt`
     dispatch: str = "internal"
@@ -129,16 +133,18 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
 
 class Secrets:
     """A secure run's logins (fleet/runtime/access.py), kept in the run directory readable by its
-    owner only: the router's dictionary and access control, one password file each."""
+    owner only: the router's dictionary and access control, one password file each
+    (`lifting`: the access control of seed 004's lifting AGVs)."""
 
-    def __init__(self, folder: Path, run: str, root: str, vehicles: int) -> None:
+    def __init__(self, folder: Path, run: str, root: str, vehicles: int,
+                 lifting: bool = False) -> None:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         self.folder = folder
         credentials = generate_credentials(run, vehicles)
         self.logins = credentials.logins
         self.users = write_dictionary(credentials, folder / "users.txt")
         self.acl = folder / "acl.json"
-        self.acl.write_text(json.dumps(router_acl(root, vehicles), indent=1))
+        self.acl.write_text(json.dumps(router_acl(root, vehicles, lifting), indent=1))
         for name, login in self.logins.items():
             write_private(folder / f"{name}.password", login.password)
 
@@ -166,7 +172,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     # A forklift whose link a fault cuts reaches the router through its own forwarder.
     proxies = {f.vehicle: LinkProxy("127.0.0.1", port) for f in
                (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
-    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles) \
+    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles,
+                      lifting=load_layout(spec.mission.layout).floor is not None) \
         if spec.secure else None
     recorded = threading.Event()  # the recorder holds the mission's result
 
@@ -226,7 +233,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
         if spec.faults is not None:
             injector = Injector(spec.faults, session, keys, launcher,
-                                lambda kind: args_of(kind, again=True), proxies)
+                                lambda kind: args_of(kind, again=True), proxies,
+                                clocked_agents=spec.clocked_agents)
         launcher.start("dispatcher", args_of("dispatcher"))
         if spec.dispatch != "internal":
             launcher.start("vda5050", args_of("vda5050"))

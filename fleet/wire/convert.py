@@ -22,6 +22,7 @@ from fleet.wire.protocol import (
     ProtocolError,
     WireAmend,
     WireChange,
+    WireHeld,
     WireInterval,
     WireLeg,
     WireRoute,
@@ -77,10 +78,17 @@ def route_from_wire(wire: WireRoute | None) -> TimedRoute | None:
     return TimedRoute(tuple((c, r) for c, r in cells), tuple(arrivals), tuple(dwells))
 
 
+def held_to_wire(held: Iterable[Reservation]) -> list[WireHeld]:
+    return [(r.vehicle, r.cell[0], r.cell[1], r.t0, r.t1) for r in held]
+
+
+def held_from_wire(wire: Iterable[WireHeld]) -> tuple[Reservation, ...]:
+    return tuple(Reservation(v, (c, r), t0, t1) for v, c, r, t0, t1 in wire)
+
+
 def snapshot_from_wire(wire: WireSnapshot) -> Snapshot:
     """A whole table as the service sends it (not a diff: that is `changes`)."""
-    return Snapshot(wire.revision, tuple(Reservation(v, (c, r), t0, t1)
-                                         for v, c, r, t0, t1 in wire.reservations),
+    return Snapshot(wire.revision, held_from_wire(wire.reservations),
                     tuple((v, route) for v, w in wire.routes
                           if (route := route_from_wire(w)) is not None))
 

@@ -159,13 +159,16 @@ class WireChange(Message):
     route: WireRoute | None = None  # the vehicle's route in time from now on (seed 002)
 
 
+WireHeld = tuple[int, int, int, float, float]  # one reservation: vehicle, col, row, t0, t1
+
+
 @dataclass(frozen=True)
 class WireSnapshot(Message):
     """The table, or the changes since a revision (the reply to a `SnapshotRequest`)."""
 
     TYPE: ClassVar[str] = "reservation.snapshot"
     revision: int
-    reservations: list[tuple[int, int, int, float, float]]  # vehicle, col, row, t0, t1
+    reservations: list[WireHeld]
     changes: list[dict] = field(default_factory=list)  # encoded WireChange bodies, for diffs
     diff: bool = False  # `changes` since the revision asked for (maybe none), not a table
     routes: list[tuple[int, WireRoute]] = field(default_factory=list)  # vehicle, its route
@@ -603,7 +606,10 @@ class CellReply(Message):
 @dataclass(frozen=True)
 class RouteRequest(Message):
     """Seed 004, to a lifting AGV's agent: plan the leg's path from `start` on the grid as it
-    is at `t` (fleet/mission/tracking004.py, RouteQuery), on no older table than `revision`."""
+    is at `t` (fleet/mission/tracking004.py, RouteQuery), on the table `held`: the
+    reservations that hold after `t` in the store at `revision`, as the dispatcher's copy
+    has them once every request so far is answered (sent along, the agent plans without a
+    second query of its own)."""
 
     TYPE: ClassVar[str] = "agv004.route"
     request_id: str
@@ -619,6 +625,7 @@ class RouteRequest(Message):
     blocked: list[XY004] = field(default_factory=list)
     moving: list[int] = field(default_factory=list)
     stagnant: list[int] = field(default_factory=list)
+    held: list[WireHeld] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
