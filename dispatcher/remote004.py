@@ -4,15 +4,15 @@ through it.
 
 The dispatcher keeps the mission and the tracker's events, as the engine does for seed 000;
 each AGV takes and lets go of its cells in the reservation service and plans its own paths,
-on request, in the events' fixed order. Requests about one cell reach the store one after
-the other: each waits until the last one about that cell is answered and its change is in the
-dispatcher's mirror. Requests about different cells overlap: the store holds, for a cell
-whose requests are all answered, exactly what the mirror holds, so whether a take will be
-given is known before it is asked, and the tracker goes on while the AGVs' agents ask the
-store. Before the next instant every answer of this one is in; a store that refuses a take
-the mirror said it would give (someone outside the mission holds the cell) ends the mission,
-saying so. A plan waits for every answer. So every take finds its cell as it would in
-process, and a run of processes gives the in-process events, move for move.
+on request, in the events' fixed order. The tracker reads and changes its own table, as in
+process (so every decision is the in-process one); each change is told to the store by the
+AGV's agent in the background: requests about one cell one after the other (a take after
+the let-go before it), about different cells at once. The store holds what the table holds
+once every request so far is answered, which is so before the next instant (on the
+real-time clock, while the tracker waits for it) and before a fault strikes; a store that
+refuses a take the table gave (someone outside the mission holds the cell) ends the
+mission, saying so. A plan is made by the AGV's agent on the table sent with the request,
+and waits for no answer. So a run of processes gives the in-process events, move for move.
 
 A killed agent (a `kill_vehicle` fault) is killed when the tracker strikes it: the fault
 clock stops the fault injector at that instant and waits for its ack, then for the agent's
@@ -45,7 +45,7 @@ from fleet.mission.record004 import Publish, run_mission004
 from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
 from fleet.planning.geometry import Cell
-from fleet.planning.reservations import INF, Interval, WriteResult
+from fleet.planning.reservations import INF, Interval, ReservationTable, ReservationView
 from fleet.planning.rules004 import XY
 from fleet.runtime.bus import Requester, RequestFailed
 from fleet.wire.convert import held_to_wire
@@ -60,11 +60,9 @@ from fleet.wire.protocol import (
 from fleet.wire.topics import DISPATCHER, Keys
 from fleet.world.floor004 import Floor004
 from reservation.client import ReservationClient
-from reservation.mirror import TableMirror
 
 log = logging.getLogger("fleet.dispatcher")
 REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
-SYNC_TIMEOUT_S = 30.0
 ASKING_AT_ONCE = 16  # requests in flight: more than a 2-core machine's processes can serve
 LATE_S = 0.3  # an instant handled this much wall time after it came is late
 AGENT_BACK_S = 60.0  # for a restarted agent to come up (a fresh process on a busy machine)
@@ -72,10 +70,13 @@ Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
 class RemoteVehicles:
-    def __init__(self, session: zenoh.Session, keys: Keys, floor: Floor004, mirror: TableMirror,
+    def __init__(self, session: zenoh.Session, keys: Keys, floor: Floor004,
                  liveness: Liveness, reservations: ReservationClient,
                  fault_clock: FastClock | None = None) -> None:
-        self.keys, self.floor, self.mirror, self.liveness = keys, floor, mirror, liveness
+        self.keys, self.floor, self.liveness = keys, floor, liveness
+        # The table as the tracker changes it, in its order: the in-process table, which the
+        # store holds too once every request so far is answered.
+        self.table = ReservationTable()
         # the dispatcher's own writes: closed zones, and the cells of AGVs without an agent
         self.reservations = reservations
         self.fault_clock = fault_clock  # stops the fault injector at an agent's fault
@@ -83,31 +84,50 @@ class RemoteVehicles:
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
-        # the store's cells asked about, not yet answered
+        # the last request about each cell the store was asked about, not yet settled
         self.pending: dict[Cell, Future[None]] = {}
-        self.view = _SettledView(self)
+
+    @property
+    def view(self) -> ReservationView:
+        return self.table
 
     def take(self, vehicle: int, xy: XY, t: float) -> bool:
         cell = self.floor.cell(xy)
-        self.settle(cell)  # the cell's last holder has let it go first, as in process
-        if self.mirror.table.conflict(vehicle, cell, t, INF) is not None:
-            return False  # the store holds what the mirror holds: it would refuse
-        if vehicle in self.absent:
-            self._write(self.reservations.commit(vehicle, [Interval(cell, t, INF)]), t)
-        else:
-            self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, True)
+        if not self.table.commit(vehicle, [Interval(cell, t, INF)]).ok:
+            return False  # held: the store, told all the table was, would refuse too
+        self._tell(cell, vehicle, xy, t, take=True)
         return True
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
-        """Let the cell go without waiting for it: what a decision depends on is whether a
-        cell is free when taken, so only a take of that cell, a read of it and a plan wait
-        (`settle`), and each decision sees what it would see in process."""
         cell = self.floor.cell(xy)
-        self.settle(cell)  # its take is in first
-        if vehicle in self.absent:
-            self._write(self.reservations.release(vehicle, t, [cell]), t)
+        self.table.release(vehicle, t, [cell])
+        self._tell(cell, vehicle, xy, t, take=False)
+
+    def _tell(self, cell: Cell, vehicle: int, xy: XY, t: float, take: bool) -> None:
+        """Tell the store in the background, after the last request about the cell is
+        answered (a take of a cell after its let-go by the AGV before)."""
+        before = self.pending.get(cell)
+        self.pending[cell] = self.asking.submit(self._in_turn, before, vehicle, xy, t, take,
+                                                vehicle in self.absent)
+
+    def _in_turn(self, before: Future[None] | None, vehicle: int, xy: XY, t: float,
+                 take: bool, absent: bool) -> None:
+        if before is not None:
+            before.result()  # asked earlier, so running or done: the pool takes tasks in turn
+        if absent:  # the dispatcher writes for an AGV whose agent is gone
+            cells = [self.floor.cell(xy)]
+            written = self.reservations.commit(vehicle, [Interval(cells[0], t, INF)]) \
+                if take else self.reservations.release(vehicle, t, cells)
+            ok, reason = written.ok, written.reason
         else:
-            self.pending[cell] = self.asking.submit(self._ask_cell, vehicle, xy, t, False)
+            request = CellRequest(self.requester.next_id(), vehicle, xy, t, take)
+            reply = self._ask(vehicle, request, CellReply, t)
+            ok, reason = reply.ok, reply.reason
+        if not ok:
+            what = "take" if take else "let go of"
+            raise ParticipantLost(f"AGV {vehicle} could not {what} {xy} at t={t}, which the "
+                                  f"mission's table had {'free' if take else 'held by it'} "
+                                  f"(held by someone outside the mission?): {reason}")
 
     def down(self, vehicle: int, t: float, cause: str) -> None:
         """A killed agent is killed now: every request so far answered first, then the
@@ -126,6 +146,7 @@ class RemoteVehicles:
         """The injector starts the AGV's new agent at t; it is asked again once it is up."""
         if vehicle not in self.absent:
             return
+        self.settle()  # what the dispatcher wrote for it is in first
         self._fault_instant(t)
         self.liveness.wait_for([vehicle], AGENT_BACK_S)
         self.absent.discard(vehicle)
@@ -136,26 +157,16 @@ class RemoteVehicles:
                                   f"apply it")
         self.fault_clock.advance(t)  # returns once the injector has applied what is due
 
-    def _ask_cell(self, vehicle: int, xy: XY, t: float, take: bool) -> None:
-        request = CellRequest(self.requester.next_id(), vehicle, xy, t, take)
-        reply = self._ask(vehicle, request, CellReply, t)
-        if not reply.ok:
-            what = "take" if take else "let go of"
-            raise ParticipantLost(f"AGV {vehicle} could not {what} {xy} at t={t}, which this "
-                                  f"dispatcher's copy of the store had "
-                                  f"{'free' if take else 'held by it'}: {reply.reason}")
-        self._sync(reply.revision)
-
-    def settle(self, cell: Cell | None = None) -> None:
-        """Wait until every request about the store's cell (None: every cell) is answered
-        and its change is in this mirror; a refusal or an agent's failure is raised here."""
-        for asked in [cell] if cell is not None else list(self.pending):
-            done = self.pending.pop(asked, None)
-            if done is not None:
-                done.result()
+    def settle(self) -> None:
+        """Wait until every request so far is answered: the store holds the table; a
+        refusal or an agent's failure is raised here."""
+        pending, self.pending = self.pending, {}
+        for done in pending.values():
+            done.result()
 
     def next_instant(self) -> None:
-        """Every answer of this instant in before the tracker moves on."""
+        """Every answer of this instant in before the tracker moves on (on the real-time
+        clock, while the next instant is not due yet)."""
         self.settle()
 
     def close_down(self) -> None:
@@ -164,26 +175,27 @@ class RemoteVehicles:
         self.asking.shutdown(wait=True, cancel_futures=True)
 
     def route(self, query: RouteQuery) -> Routed:
-        self.settle()  # the plan is made on a table holding every change so far
+        """The AGV's agent plans on the table sent along: the store's once every request so
+        far is answered (so the plan waits for none of them)."""
         request = RouteRequest(
             self.requester.next_id(), query.vehicle, query.t, query.task.value, query.start,
-            query.goal, int(query.heading), self.mirror.revision, query.home, query.relaxed,
-            sorted(query.blocked), sorted(query.moving), sorted(query.stagnant),
-            held_to_wire(self.mirror.table.reservations_after(query.t)))
+            query.goal, int(query.heading), query.home, query.relaxed, sorted(query.blocked),
+            sorted(query.moving), sorted(query.stagnant),
+            held_to_wire(self.table.reservations_after(query.t)))
         reply = self._ask(query.vehicle, request, RouteReply, query.t)
         return Routed(tuple(reply.cells) if reply.found else None, reply.planning_s)
 
     def close(self, xys: list[XY], t0: float, t1: float) -> None:
+        """Closed by the dispatcher itself, once the store holds the table (a cell let go
+        a moment ago is free in both)."""
+        intervals = [Interval(self.floor.cell(xy), t0, t1) for xy in xys]
+        written = self.table.commit(ZONE, intervals)
+        assert written.ok, written.reason  # the tracker closes only the cells nobody holds
         self.settle()
-        self._write(self.reservations.commit(
-            ZONE, [Interval(self.floor.cell(xy), t0, t1) for xy in xys]), t0)
-
-    def _write(self, written: WriteResult, t: float) -> None:
-        """One of the dispatcher's own writes, in its mirror before the tracker goes on."""
+        written = self.reservations.commit(ZONE, intervals)
         if not written.ok:
-            raise ParticipantLost(f"the reservation service refused the dispatcher's write "
-                                  f"at t={t:g}: {written.reason}")
-        self._sync(written.revision)
+            raise ParticipantLost(f"the reservation service refused to close a zone at "
+                                  f"t={t0:g}: {written.reason}")
 
     def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
              expected: type[Answer], t: float) -> Answer:
@@ -197,28 +209,6 @@ class RemoteVehicles:
             raise ParticipantLost(f"AGV {vehicle} answered {message.TYPE} "
                                   f"{message.request_id} with {reply}")
         return reply
-
-    def _sync(self, revision: int) -> None:
-        if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):
-            raise ParticipantLost(f"the reservation table did not reach revision {revision} "
-                                  f"within {SYNC_TIMEOUT_S:g} s")
-
-
-class _SettledView:
-    """The store as the tracker reads it: a cell is read once every request about it is
-    answered and in the mirror (the tracker reads the cells it asks about, so the requests
-    about other cells stay in flight)."""
-
-    def __init__(self, fleet: RemoteVehicles) -> None:
-        self.fleet = fleet
-
-    def conflict(self, vehicle: int, cell: Cell, t0: float, t1: float) -> int | None:
-        self.fleet.settle(cell)
-        return self.fleet.mirror.table.conflict(vehicle, cell, t0, t1)
-
-    def parked_from(self, vehicle: int, cell: Cell) -> float:
-        self.fleet.settle(cell)
-        return self.fleet.mirror.table.parked_from(vehicle, cell)
 
 
 class RealtimePace:
@@ -271,9 +261,7 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
     with ExitStack() as scope:
         try:
             liveness.wait_for_service(startup_timeout_s)
-            mirror = TableMirror()
             reservations = ReservationClient(session, keys, Requester(session, DISPATCHER))
-            scope.enter_context(reservations.follow(mirror))
             liveness.wait_for(vehicles, startup_timeout_s)
             log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
             pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
@@ -282,8 +270,7 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
             # waits for the injector as the fast clock does (the real-time one is there)
             fault_clock = scope.enter_context(closing(FastClock(
                 session, keys, [], liveness, injected))) if injected is not None else None
-            fleet = RemoteVehicles(session, keys, floor, mirror, liveness, reservations,
-                                   fault_clock)
+            fleet = RemoteVehicles(session, keys, floor, liveness, reservations, fault_clock)
             scope.callback(fleet.close_down)
 
             def next_instant(t: float) -> None:

@@ -73,7 +73,7 @@ def test_fast_mode_processes_equal_the_inprocess_run_and_the_recording_is_judged
         for payload in (b"\x93garbage", encode(CellRequest("x1", 1, (999, 3), 0.0, True),
                                                   "dispatcher", 1, 0.0),
                         encode(CellRequest("x2", 2, (1, 1), 0.0, True), "dispatcher", 2, 0.0),
-                        encode(RouteRequest("x3", 1, 0.0, "M1", (1, 1), (2, 2), 1, 0,
+                        encode(RouteRequest("x3", 1, 0.0, "M1", (1, 1), (2, 2), 1,
                                             held=[(2, 1, 1, 5.0, 1.0)]), "dispatcher", 3, 0.0)):
             for reply in session.get(keys.vehicle_task(1), payload=payload, timeout=10.0):
                 assert reply.ok is None

@@ -8,8 +8,8 @@ A* on the grid values derived from its copy of the store's table (fleet/mission/
 `route`).
 
 The table a plan reads comes with the request: the reservations that hold from the plan's
-instant on, as the dispatcher's copy of the store has them with every request so far
-answered. The agent keeps no copy of its own: a hundred AGVs each decoding every take and
+instant on, as the mission's table has them (the store's, once every request so far is
+answered). The agent keeps no copy of its own: a hundred AGVs each decoding every take and
 let-go of the fleet cost more than the fleet's driving, and asking the store at each plan
 doubled a plan's round trips (docs/benchmarks.md, runtime004).
 
@@ -127,8 +127,8 @@ class LiftingAgent:
 
     def _route(self, request: RouteRequest) -> RouteReply:
         self._on_floor(request.start, request.goal, request.home, *request.blocked)
-        table = ReservationTable.from_snapshot(
-            Snapshot(request.revision, held_from_wire(request.held)))
+        table = ReservationTable.from_snapshot(  # (a revision of its own: none)
+            Snapshot(0, held_from_wire(request.held)))
         query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
                            request.goal, Direction(request.heading), request.home,
                            request.relaxed, frozenset(request.blocked),

@@ -607,9 +607,9 @@ class CellReply(Message):
 class RouteRequest(Message):
     """Seed 004, to a lifting AGV's agent: plan the leg's path from `start` on the grid as it
     is at `t` (fleet/mission/tracking004.py, RouteQuery), on the table `held`: the
-    reservations that hold after `t` in the store at `revision`, as the dispatcher's copy
-    has them once every request so far is answered (sent along, the agent plans without a
-    second query of its own)."""
+    reservations that hold after `t`, as the mission's table has them (the store's, once
+    every request so far is answered; sent along, the plan waits for no answer and the
+    agent asks nothing of its own)."""
 
     TYPE: ClassVar[str] = "agv004.route"
     request_id: str
@@ -619,7 +619,6 @@ class RouteRequest(Message):
     start: XY004
     goal: XY004
     heading: DirectionCode
-    revision: int
     home: XY004 | None = None
     relaxed: bool = False
     blocked: list[XY004] = field(default_factory=list)
