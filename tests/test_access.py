@@ -506,7 +506,8 @@ def test_a_lifting_agvs_login_may_do_what_its_agent_does_and_no_more():
             (DISPATCHER, "query", keys.vehicle_task(2)),
             (DISPATCHER, "query", keys.reservation_request(DISPATCHER)),
             (DISPATCHER, "put", keys.dispatch_agv), (DISPATCHER, "put", keys.dispatch_done),
-            (DISPATCHER, "declare_subscriber", keys.reservation_change),
+            (DISPATCHER, "put", keys.clock),  # for the fault injector, at a killed agent
+            (DISPATCHER, "declare_subscriber", keys.clock_ack("*")),
             (DISPATCHER, "declare_liveliness_subscriber", keys.vehicle_alive("*"))]
     for grant in used:
         assert lifting(*grant), grant
@@ -517,6 +518,7 @@ def test_a_lifting_agvs_login_may_do_what_its_agent_does_and_no_more():
                                                  keys.reservation_change),
         (DISPATCHER, "declare_subscriber", keys.vehicle_state("*")),
         (DISPATCHER, "declare_subscriber", keys.vehicle_fault("*")),
+        (DISPATCHER, "declare_subscriber", keys.reservation_change),  # it keeps the table
         (GATEWAY, "query", keys.vehicle_task(1)),
         (GATEWAY, "query", keys.reservation_request(GATEWAY)),
         (GATEWAY, "put", keys.vda5050_leg(1))]

@@ -74,15 +74,19 @@ def test_fast_mode_processes_equal_the_inprocess_run_and_the_recording_is_judged
                                                   "dispatcher", 1, 0.0),
                         encode(CellRequest("x2", 2, (1, 1), 0.0, True), "dispatcher", 2, 0.0),
                         encode(RouteRequest("x3", 1, 0.0, "M1", (1, 1), (2, 2), 1,
-                                            held=[(2, 1, 1, 5.0, 1.0)]), "dispatcher", 3, 0.0)):
+                                            held=[(2, 1, 1, 5.0, 1.0)]), "dispatcher", 3, 0.0),
+                        encode(RouteRequest("x4", 1, 0.0, "M1", (1, 1), (2, 2), 1,
+                                            held=[(2, 1, 1, k, k + 0.5) for k in range(5)]),
+                               "dispatcher", 4, 0.0)):
             for reply in session.get(keys.vehicle_task(1), payload=payload, timeout=10.0):
                 assert reply.ok is None
                 refusals.append(reply.err.payload.to_string())
 
     outcome = run_processes(RunSpec(mission, vehicles, run_dir), on_ready=intrude)
     assert [r.split(":")[0] for r in refusals] == ["rejected", "refused", "a request for AGV 2 "
-                                                   "sent to AGV 1", "refused"], refusals
-    assert "must have t0 < t1" in refusals[-1]  # the table a plan was sent, not one
+                                                   "sent to AGV 1", "refused", "refused"], refusals
+    assert "must have t0 < t1" in refusals[-2]  # the tables a plan was sent, not ones
+    assert "holds cell (1, 1) more than 4 times" in refusals[-1]  # of this floor
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)  # move for move: the events' digest
     assert outcome.done.digest == digest_of(record_of(reference))

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import queue
 import time
+from collections import Counter
 from contextlib import ExitStack
 
 import zenoh
@@ -45,6 +46,7 @@ from fleet.world.floor004 import Floor004
 from reservation.client import ReservationClient, wait_for_service
 
 log = logging.getLogger("fleet.agent")
+MAX_HOLDS_A_CELL = 4  # after a plan's instant: its holder, maybe a zone closing it, ...
 
 
 class LiftingAgent:
@@ -125,10 +127,21 @@ class LiftingAgent:
             written = self.reservations.release(self.vehicle, request.t, [cell])
         return CellReply(request.request_id, written.ok, written.revision, written.reason)
 
+    def _held_table(self, request: RouteRequest) -> ReservationTable:
+        """The table a plan reads, as the request brings it: a cell is held by one AGV (or
+        a closed zone) at a time, so a cell held more often is no table of this floor (and a
+        table of thousands of holds of one cell would take the agent seconds to load)."""
+        held = held_from_wire(request.held)
+        crowded = [cell for cell, n in Counter(r.cell for r in held).items()
+                   if n > MAX_HOLDS_A_CELL]
+        if crowded:
+            raise ValueError(f"the table sent holds cell {crowded[0]} more than "
+                             f"{MAX_HOLDS_A_CELL} times")
+        return ReservationTable.from_snapshot(Snapshot(0, held))  # (no revision of its own)
+
     def _route(self, request: RouteRequest) -> RouteReply:
         self._on_floor(request.start, request.goal, request.home, *request.blocked)
-        table = ReservationTable.from_snapshot(  # (a revision of its own: none)
-            Snapshot(0, held_from_wire(request.held)))
+        table = self._held_table(request)
         query = RouteQuery(self.vehicle, request.t, Task(request.task), request.start,
                            request.goal, Direction(request.heading), request.home,
                            request.relaxed, frozenset(request.blocked),

@@ -41,10 +41,11 @@ vehicles, the dispatcher and the gateway get only what that run uses:
   reads the run's description and end and the service's token (it follows neither the
   table's changes nor the clock).
 - `dispatcher`: asks the AGVs on vehicle/*/task and the service under its own name (a closed
-  zone is its commit, as ZONE), publishes dispatch/** and the clock (which ticks only for
-  the fault injector, at an agent's fault), serves dispatch/mission and dispatch/claim,
-  reads the acks, the table's changes, the recorder's status and everyone's liveliness; no
-  states or faults (a lifting AGV sends none).
+  zone is its commit, as ZONE; so are the cells of an AGV whose agent a fault killed, until
+  its new one is up), publishes dispatch/** and the clock (which ticks only for the fault
+  injector, at an agent's fault), serves dispatch/mission and dispatch/claim, reads the
+  acks, the recorder's status and everyone's liveliness; not the table's changes (it keeps
+  the mission's table itself), no states or faults (a lifting AGV sends none).
 - `vda5050`: nothing (no gateway runs on a seed-004 floor).
 
 What the router sends to a client (flow "egress") is allowed for everyone on the whole run:
@@ -211,8 +212,7 @@ def _lifting_grants(root: str, vehicles: int) -> Grants:
         (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
         (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
         (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
-        (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/reservation/change",
-                     f"{root}/recorder/status"]),
+        (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/recorder/status"]),
         (TOKEN, [f"{root}/dispatch/alive"]),
         (WATCH, [f"{root}/**"])]
     grants[GATEWAY] = []
