@@ -217,11 +217,16 @@ class _Shelves:
 
     def drop(self, vehicle: int, cell: Cell, t: float) -> None:
         occupant, self.slots[cell] = self.slots[cell], None
+        own = self.carried[vehicle]
+        home = [s for s in self.astray if self.homes.get(s) == cell]
         if occupant is not None:  # it was lifted unseen: the AGV's own unknown one first
-            own = self.carried[vehicle]
             unknown = own if own in self.unknown else self.unknown[0]
             self.unknown.remove(unknown)
             self._name(unknown, occupant)
+        elif own in self.unknown and home:  # an unknown one put down at an astray one's home
+            self.unknown.remove(own)
+            self.astray.remove(home[0])
+            self._name(own, home[0])
         shelf = self.carried.pop(vehicle)
         self.slots[cell] = shelf
         self.done_at[shelf] += [t] * len(self.packed.pop(shelf, []))
@@ -267,7 +272,11 @@ class _Shelves:
                 self.on_word.add(shelf)  # put down where no state or trip says
                 self.astray.append(self.carried.pop(vehicle))
             elif shelf is not None and unsaid and event.span >= self.min_dwell:
-                self.on_word.add(shelf)  # carried through: it may have been packed unseen
+                self.on_word.add(shelf)  # carried through: it may have been packed unseen,
+                if event.loaded:  # or put down, and another taken up: known no longer
+                    self.astray.append(shelf)
+                    self.carried[vehicle] = f"an unseen shelf (AGV {vehicle}, t={event.t:.2f} s)"
+                    self.unknown.append(self.carried[vehicle])
 
     def _name(self, unknown: str, shelf: str) -> None:
         """The unknown shelf is `shelf`: it is where the unknown one is, with its history."""
