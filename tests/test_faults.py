@@ -23,9 +23,12 @@ from fleet.world.layout_file import load_layout
 def test_every_shipped_scenario_loads_and_fits_paper_with_four_forklifts():
     names = builtin_scenarios()
     kinds = {f.kind for name in names for f in load_scenario(name).faults}
-    assert kinds == set(FaultKind)  # one scenario at least per kind
+    # one scenario at least per kind a run on one host has (a host cut needs several hosts:
+    # tests/test_multi_host.py)
+    one_host = set(FaultKind) - {FaultKind.CUT_HOST}
+    assert kinds == one_host
     mixed = load_scenario("mixed")
-    assert len({f.kind for f in mixed.faults}) == len(FaultKind)
+    assert {f.kind for f in mixed.faults} == one_host
     for name in names:
         check_against(load_scenario(name), load_layout("paper"), 4)
 

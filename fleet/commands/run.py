@@ -42,6 +42,7 @@ from fleet.runtime.argtypes import (
 )
 from fleet.runtime.bus import free_port
 from fleet.runtime.helptext import strategies_epilog
+from fleet.runtime.hosts import Hosts, cut_links, hosts_for
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.runtime.process_configs import DISPATCH_MODES
 from fleet.vehicles import registry
@@ -87,6 +88,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "credentials made for this run (kept in OUT/secrets): a forklift may "
                    "publish only as itself and commit only its own reservations, only the "
                    "dispatcher assigns tasks, the recorder only reads (docs/faults.md)")
+    p.add_argument("--hosts", type=Path, metavar="FILE",
+                   help="spread the processes over several hosts, a zenoh router on each, "
+                   "linked: a TOML file naming each host's address, how a process is started "
+                   "there and what it runs (docs/deployment.md; default: this machine alone)")
     p.add_argument("--faults", metavar="SCENARIO", type=scenario_arg,
                    help="inject the faults of a scenario: a shipped one by name (see fleet "
                    "faults list) or a TOML file (docs/faults.md; default: no faults)")
@@ -236,7 +241,8 @@ def run(args: argparse.Namespace) -> int:
         n = fleet_size(layout, mission.vehicles)
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
-    scenario = fault_scenario(args.faults, layout, n) if args.faults else None
+    hosts = hosts_for(args.hosts, n, args.secure)
+    scenario = fault_scenario(args.faults, layout, n, hosts) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     orders = mission.kind is MissionKind.ORDERS
@@ -253,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
                 done = _run_inprocess(mission, layout, args.weights, progress, out, scenario,
                                       stop)
         else:
-            done = _run_processes(mission, n, args, progress, out, scenario)
+            done = _run_processes(mission, n, args, progress, out, scenario, hosts)
     except KeyboardInterrupt:  # every child stopped, the dispatcher's last word recorded
         stop.set()
         done = MissionDone(False, error="interrupted")
@@ -281,11 +287,15 @@ def _check_run_flags(args: argparse.Namespace) -> None:
     process_only = [flag for flag, given in (
         ("--clock realtime", args.clock == ClockMode.REALTIME.value),
         ("--port", args.port is not None),
-        ("--foxglove", args.foxglove is not None), ("--secure", args.secure)) if given]
+        ("--foxglove", args.foxglove is not None), ("--secure", args.secure),
+        ("--hosts", args.hosts is not None)) if given]
     if args.inprocess and process_only:
         raise UserError(f"--inprocess runs the fast clock in this one process, without a "
                         f"router, a live view or logins: it takes no "
                         f"{' and no '.join(process_only)}")
+    if args.hosts is not None and args.port is not None:
+        raise UserError(f"--hosts {args.hosts} gives each host's router its port; --port is "
+                        f"the router's port of a run on this machine alone")
     for flag, number in (("--port", args.port), ("--foxglove", args.foxglove)):
         busy = port_problem(number) if number is not None else None
         if busy:
@@ -343,11 +353,13 @@ def _report(out: Path, recording: Recording | None = None) -> Report:
     return report
 
 
-def fault_scenario(source: str, layout: Layout, vehicles: int) -> Scenario:
+def fault_scenario(source: str, layout: Layout, vehicles: int,
+                   hosts: Hosts | None = None) -> Scenario:
     """The scenario of --faults (a shipped one in the layout's own version, where it ships
-    one), checked against the run before anything starts."""
+    one), checked against the run before anything starts (a host it cuts among `hosts`)."""
     scenario = load_scenario(source, layout.name)
     check_against(scenario, layout, vehicles)
+    cut_links(scenario, hosts)
     return scenario
 
 
@@ -365,16 +377,17 @@ def _run_inprocess(mission: Mission, layout: Layout, weights: Path | None,
 
 def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
                    progress: MissionProgress, out: Path,
-                   scenario: Scenario | None) -> MissionDone:
+                   scenario: Scenario | None, hosts: Hosts | None) -> MissionDone:
     """The mission's result (not ok: why it failed, the dispatcher's or a dead child's)."""
     def interrupted(*_) -> None:
         raise KeyboardInterrupt  # SIGTERM stops the run like Ctrl-C: every child stopped
 
     signal.signal(signal.SIGTERM, interrupted)
     port = args.port or free_port()
+    router = hosts.first.endpoint if hosts else f"tcp/127.0.0.1:{port}"
     if not (args.quiet or args.json):
-        print(f"fleet run: router on tcp/127.0.0.1:{port}; watch the table with\n"
-              f"  fleet table --connect tcp/127.0.0.1:{port} --follow", file=sys.stderr)
+        print(f"fleet run: router on {router}; watch the table with\n"
+              f"  fleet table --connect {router} --follow", file=sys.stderr)
         if args.foxglove is not None:
             print(f"fleet run: live view for Foxglove on ws://localhost:{args.foxglove}",
                   file=sys.stderr)
@@ -382,7 +395,7 @@ def _run_processes(mission: Mission, n: int, args: argparse.Namespace,
     spec = RunSpec(mission, n, out, ClockMode(args.clock), args.speed, args.weights, port,
                    foxglove=args.foxglove, command=command_line(), faults=scenario,
                    faults_source=args.faults or "", secure=args.secure,
-                   dispatch=args.dispatch, mqtt=url, own_broker=own_broker)
+                   dispatch=args.dispatch, mqtt=url, own_broker=own_broker, hosts=hosts)
     forklifts = f"{n} forklift agent{'s' if n > 1 else ''}"
     progress.status(f"starting the router, recorder, reservation service, {forklifts} and "
                     "dispatcher")

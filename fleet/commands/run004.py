@@ -26,6 +26,7 @@ from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.recording.writer import mission_info
 from fleet.runtime.args import mission_from_args
+from fleet.runtime.hosts import hosts_for
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Message, MissionDone, Progress
 from fleet.wire.topics import DISPATCHER, Keys, published_by
@@ -56,6 +57,7 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     if scenario is not None:
         check_faults004(scenario.faults, floor, n, scenario.name)
     faults = scenario.faults if scenario is not None else ()
+    hosts = hosts_for(args.hosts, n, args.secure)
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(mission.orders, f"orders on {layout.name}", unit="orders",
@@ -70,7 +72,7 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
                            port=args.port, foxglove=args.foxglove,
                            faults_source=args.faults or "", secure=args.secure,
                            faults=injected004(scenario) if scenario is not None else None,
-                           clocked_agents=False)
+                           clocked_agents=False, hosts=hosts)
             progress.status(f"starting the router, recorder, reservation service, {n} AGV "
                             f"agents and the dispatcher")
             outcome = run_processes(spec, lambda p: progress(p.done, p.t, p.failures))

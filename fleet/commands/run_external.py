@@ -18,6 +18,7 @@ from fleet.recording.reader import read_recording
 from fleet.recording.rundir import choose
 from fleet.runtime.args import fleet_of, mission_from_args
 from fleet.runtime.bus import free_port
+from fleet.runtime.hosts import hosts_for
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.runtime.mqtt_broker import mosquitto_binary
 from fleet.runtime.process_configs import GatewayConfig
@@ -72,7 +73,8 @@ def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
     url, own_broker = broker_of(args)
     spec = RunSpec(mission, n, out, ClockMode.REALTIME, args.speed,
                    port=args.port or free_port(), command=command, foxglove=args.foxglove,
-                   dispatch="external", mqtt=url, own_broker=own_broker, secure=args.secure)
+                   dispatch="external", mqtt=url, own_broker=own_broker, secure=args.secure,
+                   hosts=hosts_for(args.hosts, n, args.secure))
     g, kind = GatewayConfig, layout.vehicle_kind
     say(f"{n} {kind.noun}s as VDA 5050 2.0.0 AGVs on {url}, topics "
         f"{g.interface}/v2/{g.manufacturer}/{serial_number(kind.name, 1)} .. "

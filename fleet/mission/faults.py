@@ -30,6 +30,7 @@ class FaultKind(StrEnum):
     KILL_VEHICLE = "kill_vehicle"
     STALL_VEHICLE = "stall_vehicle"
     CUT_LINK = "cut_link"
+    CUT_HOST = "cut_host"
     SLOW_PLANNER = "slow_planner"
     KILL_SERVICE = "kill_service"
     CLOSE_ZONE = "close_zone"
@@ -56,6 +57,10 @@ KINDS: dict[FaultKind, KindSpec] = {
     FaultKind.CUT_LINK: KindSpec(
         "the agent loses its zenoh link silently for `duration` sim seconds; its process "
         "keeps running", ("vehicle", "duration")),
+    FaultKind.CUT_HOST: KindSpec(
+        "a run on several hosts (--hosts): the link between `host` and the first host goes "
+        "silent for `duration` sim seconds, every forklift there cut off at once",
+        ("host", "duration")),
     FaultKind.SLOW_PLANNER: KindSpec(
         "the agent's planning takes `factor` times longer for `duration` sim seconds",
         ("vehicle", "duration", "factor")),
@@ -86,6 +91,7 @@ class Fault:
     service: str | None = None
     downtime: float = DEFAULT_DOWNTIME_S  # wall seconds a killed service stays down
     cells: tuple[Cell, ...] = ()
+    host: str | None = None  # a host of a run on several (fleet/runtime/hosts.py)
 
     @property
     def until(self) -> float:
@@ -100,6 +106,7 @@ class Fault:
 
     def describe(self) -> str:
         who = f"forklift {self.vehicle}" if self.vehicle is not None else \
+            f"host {self.host}" if self.host is not None else \
             self.service or f"{len(self.cells)} cells"
         span = f" for {self.duration:g} s" if self.duration is not None else ""
         return f"{self.kind.value} of {who} at {self.at:g} s{span}"
@@ -161,7 +168,7 @@ def parse_scenario(source: str, where: str) -> Scenario:
     if not isinstance(raw, list) or not all(isinstance(f, dict) for f in raw):
         raise ScenarioError(f"{where}: faults must be [[fault]] tables")
     faults = tuple(_fault(f, f"{where}: fault {i + 1}") for i, f in enumerate(raw))
-    _check_overlaps(faults, where)
+    check_overlaps(faults, where)
     return Scenario(name, description, faults)
 
 
@@ -205,6 +212,8 @@ def _fault(data: dict, where: str) -> Fault:
         fields["service"] = data["service"]
     if "cells" in data:
         fields["cells"] = _cells(data["cells"], f"{where}: cells")
+    if "host" in data:
+        fields["host"] = _text(data["host"], f"{where}: host")
     return Fault(**fields)
 
 
@@ -246,13 +255,14 @@ def _cells(value: object, where: str) -> tuple[Cell, ...]:
     return tuple(dict.fromkeys(cells))
 
 
-def _check_overlaps(faults: tuple[Fault, ...], where: str) -> None:
-    """One fault at a time per forklift, and per service: a second one on top of the first
-    would have no clear meaning (kill a stalled process?)."""
+def check_overlaps(faults: tuple[Fault, ...], where: str) -> None:
+    """One fault at a time per forklift, per service and per host: a second one on top of the
+    first would have no clear meaning (kill a stalled process?)."""
     seen: dict[object, tuple[int, Fault]] = {}
     order = sorted(enumerate(faults), key=lambda p: p[1].at)
     for i, fault in order:
-        who = fault.vehicle if fault.kind in VEHICLE_KINDS else fault.service
+        who = fault.vehicle if fault.kind in VEHICLE_KINDS else fault.service or \
+            (f"host {fault.host}" if fault.host else None)
         if who is None:
             continue
         if who in seen:
@@ -274,7 +284,7 @@ def scenario_toml(scenario: Scenario, header: str = "") -> str:
         spec = KINDS[fault.kind]
         fields = {"vehicle": fault.vehicle, "duration": fault.duration,
                   "factor": fault.factor, "service": fault.service,
-                  "downtime": fault.downtime, "cells": fault.cells}
+                  "downtime": fault.downtime, "cells": fault.cells, "host": fault.host}
         for key in (*spec.required, *spec.optional):
             value = fields[key]
             if value is None:

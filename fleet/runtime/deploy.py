@@ -19,7 +19,7 @@ from fleet.mission.order_work import DEFAULT_ORDERS
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.runtime.access import OPERATOR, Credentials, dictionary_text
 from fleet.runtime.args import BusFlags
-from fleet.runtime.argtypes import topic_level
+from fleet.runtime.argtypes import endpoint, topic_level
 from fleet.runtime.process_configs import (
     AgentConfig,
     DispatcherConfig,
@@ -56,6 +56,8 @@ class DeployConfig:
     speed: float = 10.0  # sim seconds per wall second, real-time clock
     gather_s: float = 5.0  # "auto" fleets: start once no forklift has claimed for this long
     router: str = "router"  # the router's host name (its compose service)
+    # Several docker hosts (docs/deployment.md): this host's router links to the first one's
+    router_link: str = ""
     secure: bool = False  # access control; the logins come from compose secrets
     # VDA 5050 (docs/vda5050.md): "external" runs no mission of ours, the forklifts take a
     # master's orders through the gateway (the compose profile vda5050 adds it and the broker)
@@ -142,6 +144,15 @@ def _check(config: DeployConfig) -> None:
     if config.dispatch == "external" and config.clock != ClockMode.REALTIME.value:
         raise UserError(f"FLEET_CLOCK={config.clock}: FLEET_DISPATCH=external drives the "
                         "forklifts on the real-time clock (leave FLEET_CLOCK unset)")
+    if config.router_link:
+        try:
+            endpoint(config.router_link)
+        except argparse.ArgumentTypeError as exc:
+            raise UserError(f"FLEET_ROUTER_LINK: {exc}") from None
+        if config.secure:
+            raise UserError("FLEET_ROUTER_LINK with FLEET_SECURE=1: routers linked across "
+                            "hosts have no logins of their own yet; a secure deployment runs "
+                            "on one host")
     for name in ("interface", "manufacturer"):
         try:
             topic_level(getattr(config, name))
@@ -156,7 +167,9 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
     if service == "router":
         secure = {"acl": Path(ACL_FILE), "users": Path(SECRETS / "fleet_users")} \
             if config.secure else {}
-        return RouterConfig((f"tcp/0.0.0.0:{ROUTER_PORT}",), exit_when_idle_s=5.0, **secure)
+        return RouterConfig((f"tcp/0.0.0.0:{ROUTER_PORT}",),
+                            (config.router_link,) if config.router_link else (),
+                            exit_when_idle_s=5.0, **secure)
     if service == "vehicle":  # logged in as any forklift, then as the one it claimed
         logins = Path(SECRETS / "fleet_vehicle_logins") if config.secure else None
         return AgentConfig(_bus(config, ""), None, logins=logins, id_file=Path(VEHICLE_ID_FILE),

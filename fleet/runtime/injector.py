@@ -4,7 +4,8 @@ processes as the clock passes their instants (docs/faults.md).
 It follows the clock like a forklift: on each tick it applies every action due by then, then
 acknowledges the tick, so in fast mode the clock stands still until the fault is in place.
 Signals and restarts go to the launcher's children; a link is cut at the forklift's own
-forwarder (fleet/runtime/linkproxy.py); a breakdown or a slow planner is told to the agent, which
+forwarder (fleet/runtime/linkproxy.py), a host's at the forwarder between its router and the
+first host's; a breakdown or a slow planner is told to the agent, which
 plays the hardware. Detection and recovery are not its business: the dispatcher notices a
 fault as it would notice a real one.
 """
@@ -24,6 +25,7 @@ import zenoh
 from fleet.mission.faults import Fault, FaultKind, Scenario
 from fleet.mission.spec import ClockMode
 from fleet.runtime.bus import Requester, RequestFailed, Stream, received, wait_gone
+from fleet.runtime.hosts import Hosts
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.linkproxy import LinkProxy
 from fleet.wire.protocol import ClockAck, ClockTick, InjectFault, Reply
@@ -42,7 +44,7 @@ class Action:
     t: float
     what: str  # for the log and the bench: "kill agent-2", ...
     apply: Callable[[], None]
-    vehicle: int | None = None  # the forklift it stops: applied once it has acked the tick
+    vehicles: tuple[int, ...] = ()  # the forklifts it stops: applied once they acked the tick
     ends: bool = False  # it ends a fault (restart, continue, restore, repair)
 
 
@@ -66,6 +68,9 @@ class Injector:
     launcher: Launcher
     restart_args: Callable[[str], list[str]]  # fleet arguments to start a process kind again
     proxies: dict[int, LinkProxy] = field(default_factory=dict)
+    # A run on several hosts: each host's link to the first, and who runs there
+    host_links: dict[str, LinkProxy] = field(default_factory=dict)
+    hosts: Hosts | None = None
     applied: list[Applied] = field(default_factory=list)
     clocked_agents: bool = True  # they ack each tick: a stop waits until theirs is in
 
@@ -90,7 +95,7 @@ class Injector:
         self.inbox.put(None)
         self.worker.join()
         self.ack.undeclare()
-        for proxy in self.proxies.values():
+        for proxy in (*self.proxies.values(), *self.host_links.values()):
             proxy.close()
 
     def _work(self) -> None:
@@ -115,9 +120,9 @@ class Injector:
             now = last.t if fast else last.t + last.speed * max(0.0, time.time() - last.wall)
             while self.actions and self.actions[0][0].t <= now:
                 action, fault = self.actions.pop(0)
-                if action.vehicle is not None and fast and self.clocked_agents:
-                    # what it said is on its way first
-                    self._wait_ack(action.vehicle, last.tick)
+                if fast and self.clocked_agents:
+                    for vehicle in action.vehicles:  # what it said is on its way first
+                        self._wait_ack(vehicle, last.tick)
                 started = time.time()  # the fault's moment: applying it may take a while
                 try:
                     action.apply()
@@ -154,21 +159,29 @@ class Injector:
         k, v = fault.kind, fault.vehicle
         agent = f"agent-{v}"
         if k is FaultKind.KILL_VEHICLE:
-            out = [Action(fault.at, f"kill {agent}", lambda: self.launcher.kill(agent), v)]
+            out = [Action(fault.at, f"kill {agent}", lambda: self.launcher.kill(agent), (v,))]
             if fault.duration is not None:
                 out.append(Action(fault.until, f"restart {agent}",
                                   lambda: self._restart(agent), ends=True))
             return out
         if k is FaultKind.STALL_VEHICLE:
             return [Action(fault.at, f"stall {agent}",
-                           lambda: self.launcher.signal(agent, signal.SIGSTOP), v),
+                           lambda: self.launcher.signal(agent, signal.SIGSTOP), (v,)),
                     Action(fault.until, f"continue {agent}",
                            lambda: self.launcher.signal(agent, signal.SIGCONT), ends=True)]
         if k is FaultKind.CUT_LINK:
             return [Action(fault.at, f"cut the link of {agent}", lambda: self.proxies[v].cut(),
-                           v),
+                           (v,)),
                     Action(fault.until, f"restore the link of {agent}",
                            lambda: self.proxies[v].restore(), ends=True)]
+        if k is FaultKind.CUT_HOST:
+            name = fault.host or ""
+            link = self.host_links[name]
+            host = self.hosts.host(name) if self.hosts is not None else None
+            return [Action(fault.at, f"cut the link of host {name}", link.cut,
+                           host.vehicles if host is not None else ()),
+                    Action(fault.until, f"restore the link of host {name}", link.restore,
+                           ends=True)]
         if k is FaultKind.SLOW_PLANNER:
             return [Action(fault.at, f"slow the planner of {agent} {fault.factor:g}x",
                            lambda: self._tell(v, "slow_planner", fault.factor)),
@@ -176,7 +189,7 @@ class Injector:
                            lambda: self._tell(v, "slow_planner", 1.0), ends=True)]
         if k is FaultKind.VEHICLE_BREAKDOWN:
             out = [Action(fault.at, f"break down forklift {v}",
-                          lambda: self._tell(v, "breakdown"), v)]
+                          lambda: self._tell(v, "breakdown"), (v,))]
             if fault.duration is not None:
                 out.append(Action(fault.until, f"repair forklift {v}",
                                   lambda: self._tell(v, "repair"), ends=True))
@@ -189,7 +202,7 @@ class Injector:
 
     def _restart(self, kind: str) -> None:
         n = self.restarts[kind] = self.restarts.get(kind, 1) + 1
-        self.launcher.start(f"{kind}-{n}", self.restart_args(kind))
+        self.launcher.restart(kind, f"{kind}-{n}", self.restart_args(kind))
 
     def _kill_service(self, name: str, downtime: float) -> None:
         """Kill now; start again after `downtime` wall seconds (the mission may not advance

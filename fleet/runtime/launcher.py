@@ -24,6 +24,7 @@ class Child:
     proc: subprocess.Popen
     log: Path
     killed: bool = False  # on purpose (a fault): its exit is no failure of the run
+    prefix: tuple[str, ...] = ()  # the command that started it on its host
 
 
 class Launcher:
@@ -36,17 +37,18 @@ class Launcher:
         self.on_exit = on_exit
         log_dir.mkdir(parents=True, exist_ok=True)
 
-    def start(self, name: str, fleet_args: list[str]) -> Child:
+    def start(self, name: str, fleet_args: list[str], prefix: tuple[str, ...] = ()) -> Child:
         """Start `python -m fleet <fleet_args>` in its own process group (a Ctrl-C in the
-        terminal reaches only us; we stop the children in order)."""
+        terminal reaches only us; we stop the children in order); `prefix` starts it on
+        another host, in place (`ip netns exec NS`: signals reach it, fleet/runtime/hosts.py)."""
         path = self.log_dir / f"{name}.log"
         with open(path, "wb") as log:
-            proc = subprocess.Popen([sys.executable, "-m", "fleet", *fleet_args],
+            proc = subprocess.Popen([*prefix, sys.executable, "-m", "fleet", *fleet_args],
                                     stdin=subprocess.DEVNULL, stdout=log,
                                     stderr=subprocess.STDOUT, start_new_session=True,
                                     env={**os.environ, "PYTHONUNBUFFERED": "1",
                                          PARENT_ENV: str(os.getpid())})
-        child = Child(name, proc, path)
+        child = Child(name, proc, path, prefix=prefix)
         self.children.append(child)
         if self.on_exit is not None:
             threading.Thread(target=self._watch, args=(child,), daemon=True,
@@ -68,6 +70,11 @@ class Launcher:
                     child.proc.poll() is None:
                 return child
         raise RuntimeError(f"no {name} process is running")
+
+    def restart(self, name: str, again: str, fleet_args: list[str]) -> Child:
+        """Start `again` on the host where `name` was first started."""
+        first = next((c for c in self.children if c.name == name), None)
+        return self.start(again, fleet_args, first.prefix if first is not None else ())
 
     def kill(self, name: str) -> None:
         """SIGKILL (a fault: no chance to clean up) and reap it."""

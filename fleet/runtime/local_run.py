@@ -1,8 +1,9 @@
-"""One mission as processes on this machine (what `fleet run` does): a zenoh router on a
-loopback port, the recorder, the reservation service, one agent per forklift and the
-dispatcher, all clients of the router. This process follows the dispatcher's progress and
-result, and stops every child when the mission ends, on Ctrl-C (the dispatcher first, so the
-recording ends with how far the mission got), or as soon as any child dies."""
+"""One mission as processes (what `fleet run` does): a zenoh router on a loopback port, the
+recorder, the reservation service, one agent per forklift and the dispatcher, all clients of
+the router; or the same spread over several hosts, a router on each (fleet/runtime/hosts.py).
+This process follows the dispatcher's progress and result, and stops every child when the
+mission ends, on Ctrl-C (the dispatcher first, so the recording ends with how far the mission
+got), or as soon as any child dies."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import zenoh
 
-from fleet.mission.faults import FaultKind, Scenario
+from fleet.mission.faults import FaultKind, Scenario, scenario_toml
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.rundir import fresh
 from fleet.recording.segments import next_segment
@@ -40,6 +41,7 @@ from fleet.runtime.bus import (
     free_port,
     open_session,
 )
+from fleet.runtime.hosts import Hosts, cut_links, one_host
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
@@ -67,6 +69,7 @@ from fleet.wire.topics import (
 from fleet.world.layout_file import load_layout
 
 DISPATCHER_JOURNAL = "dispatcher.journal"  # an order mission's book, for a restarted one
+FAULTS_AS_LIVED = "faults.toml"  # a scenario's host cuts as its forklifts' link cuts
 ROUTER_TIMEOUT_MS = 30_000
 ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
 RECORDED_TIMEOUT_S = 10.0
@@ -100,6 +103,7 @@ class RunSpec:
     dispatch: str = "internal"
     mqtt: str = ""
     own_broker: bool = False  # start a mosquitto on `mqtt`'s port of 127.0.0.1 for the run
+    hosts: Hosts | None = None  # several hosts (None: this one, the router on `port`)
 
     @property
     def recording(self) -> Path:
@@ -157,7 +161,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                   ) -> RunOutcome:
     """Run the mission; `on_ready` is called with this process's session, the keys and the
     launcher once every child has been started (tests use it to watch or disturb the run)."""
-    endpoint = f"tcp/127.0.0.1:{spec.port or free_port()}"
+    hosts = spec.hosts or one_host(spec.port or free_port())
+    endpoint = hosts.first.endpoint
     keys = Keys(spec.run)
     fresh(spec.run_dir)  # a run directory of its own: no table, recording or log of another
     log_dir = spec.run_dir / "logs"
@@ -168,36 +173,50 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
     launcher = Launcher(log_dir, on_exit=lambda child: inbox.put(("exit", child)))
     session = None
     injector = None
-    port = int(endpoint.rsplit(":", 1)[1])
-    # A forklift whose link a fault cuts reaches the router through its own forwarder.
-    proxies = {f.vehicle: LinkProxy("127.0.0.1", port) for f in
-               (spec.faults.faults if spec.faults else ()) if f.kind is FaultKind.CUT_LINK}
+    faults = spec.faults.faults if spec.faults else ()
+    # A forklift whose link a fault cuts reaches its router through its own forwarder, a host
+    # whose link a fault cuts reaches the first host's router through one; both forward on
+    # the first host, where the injector is.
+    proxies = {f.vehicle: LinkProxy(hosts.of_process(f"agent-{f.vehicle}").address,
+                                    hosts.of_process(f"agent-{f.vehicle}").port,
+                                    listen_host=hosts.first.address)
+               for f in faults if f.kind is FaultKind.CUT_LINK}
+    host_links = {f.host: LinkProxy(hosts.first.address, hosts.first.port,
+                                    listen_host=hosts.first.address)
+                  for f in faults if f.kind is FaultKind.CUT_HOST and f.host}
+    if host_links and spec.faults is not None:  # the dispatcher detects them link by link
+        lived = spec.run_dir / FAULTS_AS_LIVED
+        lived.write_text(scenario_toml(cut_links(spec.faults, hosts),
+                                       f"{spec.faults.name}, each host cut as a cut of its "
+                                       f"forklifts' links"))
+        spec = dataclasses.replace(spec, faults_source=str(lived))
     secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles,
                       lifting=load_layout(spec.mission.layout).floor is not None) \
         if spec.secure else None
     recorded = threading.Event()  # the recorder holds the mission's result
 
-    def bus(principal: str, connect: str = endpoint) -> BusFlags:
-        """How a process reaches the router, logged in as `principal` in a secure run."""
+    def bus(principal: str, connect: str) -> BusFlags:
+        """How a process reaches its router, logged in as `principal` in a secure run."""
         if secrets is None:
             return BusFlags(spec.run, connect=(connect,))
         return BusFlags(spec.run, connect=(connect,), user=principal,
                         password_file=secrets.password_file(principal))
 
     def config_of(kind: str, again: bool) -> ProcessConfig:
+        own = hosts.of_process(kind).endpoint  # its host's router
         if kind == "recorder":  # run.mcap, then run-2.mcap after a restart
-            return RecorderConfig(bus(RECORDER), next_segment(spec.run_dir),
+            return RecorderConfig(bus(RECORDER, own), next_segment(spec.run_dir),
                                   foxglove=spec.foxglove)
         if kind == "reservation":
-            return ReservationConfig(bus(RESERVATION), journal)
+            return ReservationConfig(bus(RESERVATION, own), journal)
         if kind.startswith("agent-"):
             v = int(kind.split("-")[1])
-            connect = f"tcp/127.0.0.1:{proxies[v].port}" if v in proxies else endpoint
-            return AgentConfig(bus(vehicle_sender(v), connect), v)
+            return AgentConfig(bus(vehicle_sender(v), proxies[v].endpoint if v in proxies
+                                   else own), v)
         if kind == "dispatcher":  # a restart picks the mission up where it was
-            return dispatcher_config(spec, bus(DISPATCHER), recover=again)
+            return dispatcher_config(spec, bus(DISPATCHER, own), recover=again)
         if kind == "vda5050":
-            return GatewayConfig(bus("vda5050"), spec.mqtt)
+            return GatewayConfig(bus("vda5050", own), spec.mqtt)
         raise RunFailed(f"cannot restart a {kind} process")
 
     def args_of(kind: str, again: bool = False) -> list[str]:
@@ -205,15 +224,23 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         config = config_of(kind, again)
         return [*config.argv(), *spec.extra.get(config.COMMAND, [])]
 
+    def start(kind: str) -> Child:
+        """Start a process on its host."""
+        return launcher.start(kind, args_of(kind), hosts.of_process(kind).exec)
+
     broker = None
     try:
         if spec.own_broker:
             broker = start_mosquitto(log_dir / "mosquitto", mqtt_host_port(spec.mqtt)[1])
+        for proxy in (*proxies.values(), *host_links.values()):
+            proxy.start()
         router = launcher.start("router", RouterConfig(
             (endpoint,), acl=secrets.acl if secrets else None,
             users=secrets.users if secrets else None).argv())
-        for proxy in proxies.values():
-            proxy.start()
+        for host in hosts.hosts[1:]:  # linked to the first host's, through a fault's forwarder
+            link = host_links[host.name].endpoint if host.name in host_links else endpoint
+            launcher.start(hosts.router_name(host),
+                           RouterConfig((host.endpoint,), (link,)).argv(), host.exec)
         operator = secrets.logins[OPERATOR] if secrets else None
         session = _open_when_up(BusConfig("client", (endpoint,),
                                           user=operator.user if operator else "",
@@ -226,18 +253,19 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                                       lambda _: clock_started.set()))
         if spec.record:
             subscribers.append(follow_recorded(session, keys, recorded, log))
-            recorder = launcher.start("recorder", args_of("recorder"))
+            recorder = start("recorder")
             _wait_started(session, keys.recorder_alive, inbox, recorder)
-        launcher.start("reservation", args_of("reservation"))
+        start("reservation")
         for v in range(1, spec.vehicles + 1):
-            launcher.start(f"agent-{v}", args_of(f"agent-{v}"))
+            start(f"agent-{v}")
         if spec.faults is not None:
             injector = Injector(spec.faults, session, keys, launcher,
                                 lambda kind: args_of(kind, again=True), proxies,
+                                host_links=host_links, hosts=hosts,
                                 clocked_agents=spec.clocked_agents)
-        launcher.start("dispatcher", args_of("dispatcher"))
+        start("dispatcher")
         if spec.dispatch != "internal":
-            launcher.start("vda5050", args_of("vda5050"))
+            start("vda5050")
         if on_ready is not None:
             on_ready(session, keys, launcher)
         done = _follow(inbox, on_progress, clock_started)
@@ -260,7 +288,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
         if session is not None:
             session.close()  # before the router is told to stop: it waits for its clients
         launcher.stop_all()
-        for proxy in proxies.values():
+        for proxy in (*proxies.values(), *host_links.values()):
             proxy.close()
         if broker is not None:  # after the gateway: its clean goodbye reaches the broker
             stop_broker(broker)
