@@ -132,6 +132,7 @@ def run(layout_name: str = "paper", queries: int = 240, seed: int = 2026,
         "over_100ms": sum(t > 100 for t in times_ms),
         "outcomes": dict(sorted(outcomes.items())),
         "expansions_p50": statistics.median(expansions),
+        "expansions_p95": percentile(expansions, 0.95),
         "expansions_max": max(expansions),
         "setup_p50_ms": round(statistics.median(setup_ms), 3),
     }

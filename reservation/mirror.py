@@ -40,6 +40,9 @@ class TableMirror:
     def parked_from(self, vehicle: int, cell) -> float:
         return self.table.parked_from(vehicle, cell)
 
+    def busy(self, vehicle: int, cell) -> list[tuple[float, float]]:
+        return self.table.busy(vehicle, cell)
+
     @property
     def revision(self) -> int:
         return self.table.revision

@@ -11,7 +11,7 @@ from fleet.params import SearchParams, VehicleDims
 from fleet.planning.gridmap import GridMap
 from fleet.planning.maneuvers import body_cells_at_rest
 from fleet.planning.planner import HybridAStar, PlannerCache
-from fleet.planning.reservations import ReservationTable
+from fleet.planning.reservations import Interval, ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -150,14 +150,66 @@ def test_vehicle_parked_across_the_only_way_fails_fast():
     table.park(2, [(6, 1)], 0.0)
     result = HybridAStar(corridor()).plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
     assert isinstance(result, PlanFailure) and result.reason is FailureReason.NO_PATH
-    assert result.expansions == SearchParams().deadline_check_at
-    assert "parked for good" in result.detail
+    assert result.expansions == SearchParams().relaxation_check_at
+    assert "close every way to the goal in time" in result.detail
+
+
+def test_a_way_open_only_after_another_closes_for_good_fails_fast():
+    """(6, 1) is held until t = 50 s, and (8, 1), further on, is taken for good from t = 30
+    s: each alone could be waited out or outrun, together they close the corridor. Seeing
+    that needs the times of both (a safe-interval relaxation); with the hold ending at t = 10
+    s the way is open and the search finds it."""
+    for hold_until, found in ((50.0, False), (10.0, True)):
+        table = ReservationTable()
+        table.commit(2, [Interval((6, 1), 0.0, hold_until)])
+        table.park(3, [(8, 1)], 30.0)
+        result = HybridAStar(corridor()).plan(1, Pose((1, 1), 0), 0.0, [Pose((10, 1), 0)],
+                                              table)
+        assert isinstance(result, Trajectory) is found
+        if not found:
+            assert result.reason is FailureReason.NO_PATH
+            assert result.expansions == SearchParams().relaxation_check_at
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_relaxation_never_refuses_a_query_the_search_solves(seed):
+    """Seeded random maps, fleets and start times: wherever the search (without the check)
+    finds a trajectory, the safe-interval relaxation says the goal is reachable; and it
+    refuses some of the others (it is not a check that never says no)."""
+    rng = random.Random(seed)
+    solved = refused = 0
+    for _ in range(60):
+        blocked = frozenset((rng.randrange(14), rng.randrange(10)) for _ in range(14))
+        grid = GridMap(14, 10, blocked)
+        planner = HybridAStar(grid, params=SearchParams(relaxation_check_at=10**9,
+                                                        iter_search=3000))
+        table, taken = ReservationTable(), set()
+        poses = {}
+        for v in (1, 2, 3, 4):
+            poses[v] = free_pose(rng, grid, taken)
+            taken |= set(body_cells_at_rest(poses[v].cell, poses[v].heading))
+            table.park(v, body_cells_at_rest(poses[v].cell, poses[v].heading), 0.0)
+        for v in (2, 3, 4):  # the others drive first, each to a random free pose
+            goal = free_pose(rng, grid, taken)
+            other = planner.plan(v, poses[v], rng.choice([0.0, 2.0, 5.0]), [goal], table)
+            if isinstance(other, Trajectory):
+                table.commit(v, other.intervals, release_from=other.t_start)
+        goal = free_pose(rng, grid, set())
+        t0 = rng.choice([0.0, 3.0, 8.0])
+        result = planner.plan(1, poses[1], t0, [goal], table)
+        reachable = planner._intervals_reachable(1, poses[1], t0, {(goal.cell, goal.heading)},
+                                                 table)
+        if isinstance(result, Trajectory):
+            solved += 1
+            assert reachable, (seed, poses, goal, t0)
+        refused += not reachable
+    assert solved > 20 and refused > 0
 
 
 def test_deadline_check_lets_through_a_vehicle_that_parks_later():
     table = ReservationTable()
     table.park(2, [(6, 1)], 40.0)  # parks across the corridor only from t = 40 s
-    planner = HybridAStar(corridor(), params=SearchParams(deadline_check_at=1))
+    planner = HybridAStar(corridor(), params=SearchParams(relaxation_check_at=1))
     result = planner.plan(1, Pose((1, 1), 0), 0.0, [Pose((9, 1), 0)], table)
     assert isinstance(result, Trajectory)
     assert check_trajectory(result, others_of(table, 1), corridor()) == []

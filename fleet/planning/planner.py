@@ -100,8 +100,10 @@ class HybridAStar:
         self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
         self._component: dict[tuple[Cell, int], int] | None = None
         self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
+        self._longest: dict[Kind, float] = {}  # ... and longest
         for (kind, _, _), dt in self.velocity.links.items():
             self._shortest[kind] = min(dt, self._shortest.get(kind, INF))
+            self._longest[kind] = max(dt, self._longest.get(kind, 0.0))
 
     def component(self, pose: Pose) -> int | None:
         """Connected component of the pose in the static pose graph (moves are reversible,
@@ -248,11 +250,12 @@ class HybridAStar:
                 continue  # stale heap entry
             closed.add(node.key)
             expansions += 1
-            if expansions == p.deadline_check_at and not self._deadline_reachable(
+            if expansions == p.relaxation_check_at and not self._intervals_reachable(
                     vehicle, start, t_start, goal_set, store):
                 return PlanFailure(FailureReason.NO_PATH,
-                                   "vehicles parked for good cut every way to the goal "
-                                   f"(checked after {expansions} expansions)", expansions)
+                                   "other vehicles' reservations close every way to the goal "
+                                   "in time (a safe-interval relaxation, checked after "
+                                   f"{expansions} expansions)", expansions)
             if expansions > p.iter_search:
                 return PlanFailure(FailureReason.ITERATION_CAP,
                                    f"no path within iter_search={p.iter_search} expansions",
@@ -303,22 +306,94 @@ class HybridAStar:
         return PlanFailure(FailureReason.NO_PATH,
                            f"open list exhausted after {expansions} expansions", expansions)
 
-    def _deadline_reachable(self, vehicle: int, start: Pose, t_start: float,
-                            goal_set: set[tuple[Cell, int]], store: ReservationView) -> bool:
-        """Whether any goal is reached in the relaxation of `earliest_arrivals`, where a cell
-        may be used only if the maneuver ends before another vehicle parks on it for good.
-        Other reservations are ignored (waiting can outlast them). False proves that no
-        trajectory exists."""
-        deadline: dict[Cell, float] = {}
+    def _intervals_reachable(self, vehicle: int, start: Pose, t_start: float,
+                             goal_set: set[tuple[Cell, int]], store: ReservationView) -> bool:
+        """Whether any goal can be reached in a safe-interval relaxation (in the spirit of
+        SIPP) of the search: a pose may be stood on only while no other vehicle holds its
+        cells, within one of its safe intervals; a maneuver leaves within that interval, at
+        the earliest instant from which every cell it sweeps stays free for its kind's
+        shortest duration, and arrives between its shortest and its longest duration after
+        leaving, within a safe interval of the next pose; a goal is arrived at in an
+        interval that never ends. A real trajectory is such a sequence (it stands on each
+        pose at instants the search checked free, a wait holds the pose throughout, and each
+        maneuver takes one of its kind's link durations, its sweep free all along), except
+        that it may leave later than the earliest instant, which only delays it; so False
+        proves that no trajectory exists."""
+        busy_of: dict[Cell, list[tuple[float, float]]] = {}
+        safe_of: dict[tuple[int, int, int], list[tuple[float, float]]] = {}
+        shortest, longest = self._shortest, self._longest
 
-        def usable_until(cell: Cell) -> float:
-            t = deadline.get(cell)
-            if t is None:
-                t = deadline[cell] = store.parked_from(vehicle, cell)
+        def busy(c: Cell) -> list[tuple[float, float]]:
+            line = busy_of.get(c)
+            if line is None:
+                line = busy_of[c] = store.busy(vehicle, c)
+            return line
+
+        def safe(x: int, y: int, heading: int) -> list[tuple[float, float]]:
+            """The pose's safe intervals [start, end], closed (touching holds are allowed)."""
+            found = safe_of.get((x, y, heading))
+            if found is None:
+                held = sorted(iv for a, b in self.moves[heading][0].start_cells
+                              for iv in busy((x + a, y + b)))
+                found, free_from = [], -INF
+                for t0, t1 in held:
+                    if t0 > free_from:
+                        found.append((free_from, t0))
+                    free_from = max(free_from, t1)
+                if free_from < INF:
+                    found.append((free_from, INF))
+                safe_of[x, y, heading] = found
+            return found
+
+        def departure(edge: _Edge, t: float, duration: float, leave_by: float) -> float:
+            """The earliest instant from `t` on (INF: none by `leave_by`) at which every cell
+            the edge sweeps stays free for `duration`."""
+            moved = True
+            while moved:
+                moved = False
+                for c in (*edge.body_cells, *edge.end_cells):
+                    for t0, t1 in busy(c):
+                        if t0 >= t + duration:
+                            break
+                        if t1 > t:
+                            t, moved = t1, True
+                            if t > leave_by:
+                                return INF
             return t
 
-        arrivals = self.earliest_arrivals(start, t_start, usable_until, goal_set)
-        return any(((x, y), heading) in goal_set for x, y, heading in arrivals)
+        x0, y0, h0 = start.cell[0], start.cell[1], start.heading
+        first = next((i for i, (s, e) in enumerate(safe(x0, y0, h0)) if s <= t_start <= e),
+                     None)
+        if first is None:
+            return True  # the start itself is held: the search says so, not this test
+        best = {(x0, y0, h0, first): t_start}
+        heap = [(t_start, x0, y0, h0, first)]
+        while heap:
+            t, x, y, heading, i = heapq.heappop(heap)
+            if best[x, y, heading, i] < t:
+                continue
+            leave_by = safe_of[x, y, heading][i][1]
+            if ((x, y), heading) in goal_set and leave_by == INF:
+                return True
+            for edge in self.edges(x, y, heading):
+                if edge.kind is Kind.STOP:
+                    continue  # waiting is free within an interval
+                duration = shortest[edge.kind]
+                leave = departure(edge, t, duration, leave_by)
+                if leave == INF:
+                    continue
+                earliest, latest = leave + duration, leave_by + longest[edge.kind]
+                for j, (s, e) in enumerate(safe(edge.x, edge.y, edge.heading)):
+                    if s > latest:
+                        break
+                    arrive = max(earliest, s)
+                    if arrive > e or arrive > latest:
+                        continue
+                    key = (edge.x, edge.y, edge.heading, j)
+                    if arrive < best.get(key, INF):
+                        best[key] = arrive
+                        heapq.heappush(heap, (arrive, *key))
+        return False
 
     def earliest_arrivals(self, start: Pose, t_start: float = 0.0,
                           usable_until: Callable[[Cell], float] | None = None,

@@ -152,6 +152,10 @@ class ReservationView(Protocol):
         """When another vehicle takes `cell` for good (infinity if none does)."""
         ...
 
+    def busy(self, vehicle: int, cell: Cell) -> list[tuple[float, float]]:
+        """The times other vehicles hold `cell`, [start, end) in order."""
+        ...
+
 
 class ReservationWriter(Protocol):
     """How a participant changes a store: the table itself in one process, the reservation
@@ -215,6 +219,14 @@ class ReservationTable:
         if line is None or line.ends[-1] != INF or line.owners[-1] == vehicle:
             return INF
         return line.starts[-1]
+
+    def busy(self, vehicle: int, cell: Cell) -> list[tuple[float, float]]:
+        """The times other vehicles hold `cell`, [start, end) in order."""
+        line = self._cells.get(cell)
+        if line is None:
+            return []
+        return [(t0, t1) for t0, t1, owner in zip(line.starts, line.ends, line.owners,
+                                                  strict=True) if owner != vehicle]
 
     def first_conflict(self, vehicle: int, intervals: Iterable[Interval]) -> Conflict | None:
         for iv in intervals:
