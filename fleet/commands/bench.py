@@ -148,6 +148,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                          help="seconds of state messages measured per fleet (default 15)")
     runtime.add_argument("--json", action="store_true", help="print one JSON object")
     runtime.set_defaults(handler=run_runtime)
+    scale = which.add_parser("scale", help="whole fill missions with growing fleets, in process "
+                             "and as processes",
+                             description="Run a fill mission on a generated warehouse for each "
+                             "fleet size (a parking slot per forklift, about ten stacks each), "
+                             "on the fast clock, in process and as processes, each judged by "
+                             "its recording's verdicts; report wall time per decision, "
+                             "failures and peak memory, and how each grows with the fleet "
+                             "(docs/benchmarks.md).")
+    scale.add_argument("--fleets", type=fleet_sizes, default="12,32,64,100",
+                       help="fleet sizes, ascending (default 12,32,64,100)")
+    scale.add_argument("--modes", choices=["both", "inprocess", "processes"], default="both",
+                       help="in process, as processes, or both (default)")
+    scale.add_argument("--strategy", choices=[s.value for s in Strategy], default="greedy",
+                       help="dispatch strategy (default greedy: the ANN's networks are "
+                       "trained for paper)")
+    scale.add_argument("--timeout", type=positive_float, default=30.0, metavar="MINUTES",
+                       help="give a mission up after this many minutes of wall time "
+                       "(default 30)")
+    scale.add_argument("--json", action="store_true", help="print one JSON object")
+    scale.set_defaults(handler=run_scale)
     runtime004 = which.add_parser(
         "runtime004", help="seed 004 as processes: against in process, and real time",
         description="Seed 004's lifting AGVs as one agent process each: an order mission on "
@@ -262,6 +282,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "runs/DATE-TIME-LAYOUT-campaign)")
     campaign.add_argument("--json", action="store_true", help="print one JSON object")
     campaign.set_defaults(handler=run_campaign)
+
+
+def run_scale(args: argparse.Namespace) -> int:
+    from bench import scale
+
+    modes = scale.MODES if args.modes == "both" else (args.modes,)
+    if not args.fleets:
+        raise UserError("--fleets none leaves nothing to run: give fleet sizes, e.g. 12,32")
+    result = scale.run(args.fleets, modes, args.strategy, args.timeout * 60,
+                       lambda line: print(line, file=sys.stderr, flush=True))
+    if emitted_json(result, args.json):
+        return 0
+    print(f"fill missions, strategy {result['strategy']}, fast clock:")
+    for row in result["rows"]:
+        print(f"  {row['vehicles']:4d} forklifts {row['mode']:10s} {scale.describe(row)}")
+    for mode, steps in result["growth"].items():
+        for step in steps:
+            print(f"  {mode}: {step['from']} -> {step['to']} forklifts (x{step['fleet_x']}): "
+                  f"wall per decision x{step['wall_per_decision_x']} (exponent "
+                  f"{step['exponent']}), peak memory x{step['peak_mb_x']}")
+    return 0 if all(r.get("completed") and r["passed"] for r in result["rows"]) else 1
 
 
 def fleet_sizes(text: str) -> list[int]:
