@@ -73,12 +73,11 @@ def run(args: argparse.Namespace) -> int:
         check_faults004(scenario.faults, layout.floor, vehicles, scenario.name)
     else:
         check_against(scenario, layout, vehicles)
-    noun = "forklifts" if not (layout.has_lanes or layout.floor) else \
-        "lifting AGVs" if layout.floor else "AGVs"
+    noun = "forklift" if not (layout.has_lanes or layout.floor) else "AGV"
     print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
-          f"with {vehicles} {noun}")
+          f"with {vehicles} {'lifting ' if layout.floor else ''}{noun}s")
     for fault in sorted(scenario.faults, key=lambda f: f.at):
-        print(f"  {fault.describe()}")
+        print(f"  {fault.describe(noun)}")
     return 0
 
 

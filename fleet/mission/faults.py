@@ -104,8 +104,9 @@ class Fault:
         seconds: it is wall time, and no second fault may strike the service before)."""
         return self.at + self.downtime if self.kind is FaultKind.KILL_SERVICE else self.until
 
-    def describe(self) -> str:
-        who = f"forklift {self.vehicle}" if self.vehicle is not None else \
+    def describe(self, noun: str = "forklift") -> str:
+        """The fault in a few words (`noun`: what the run's vehicles are called)."""
+        who = f"{noun} {self.vehicle}" if self.vehicle is not None else \
             f"host {self.host}" if self.host is not None else \
             self.service or f"{len(self.cells)} cells"
         span = f" for {self.duration:g} s" if self.duration is not None else ""
@@ -308,10 +309,11 @@ def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:
     lane layout, off the floor its AGVs drive on: lanes, access cells, slots, stations and
     piles)."""
     floor = floor_cells(layout) if layout.has_lanes else None
+    noun = layout.vehicle_kind.noun
     for i, fault in enumerate(scenario.faults):
-        where = f"scenario {scenario.name}: fault {i + 1} ({fault.describe()})"
+        where = f"scenario {scenario.name}: fault {i + 1} ({fault.describe(noun)})"
         if fault.vehicle is not None and fault.vehicle > vehicles:
-            raise ScenarioError(f"{where}: the run has forklifts 1 to {vehicles}")
+            raise ScenarioError(f"{where}: the run has {noun}s 1 to {vehicles}")
         off = [c for c in fault.cells if not (0 <= c[0] < layout.cols and
                                               0 <= c[1] < layout.rows)]
         if off:

@@ -33,7 +33,7 @@ def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
     """Refuse what a seed-004 run cannot take, naming the fault: another kind, an AGV the
     run does not have, a cell off the floor an AGV drives on."""
     for i, fault in enumerate(faults):
-        where = f"scenario {scenario}: fault {i + 1} ({fault.describe()})"
+        where = f"scenario {scenario}: fault {i + 1} ({fault.describe('AGV')})"
         if fault.kind not in KINDS004:
             raise ScenarioError(f"{where}: on a seed-004 floor only "
                                 f"{', '.join(k.value for k in KINDS004)} are built yet")
