@@ -1,5 +1,6 @@
 """Whole fill missions at scale (`fleet bench scale`): for each fleet size, a generated
-warehouse with a parking slot per forklift and about ten stacks each, filled on the fast
+warehouse with room to park half as many again as the fleet and about ten stacks a forklift
+(lanes at least two deep), filled on the fast
 clock in process and as processes (`fleet run`, each run a fresh process), every run judged
 by its recording's verdicts. Reported per run: completed, verdicts, stacks, end time, wall
 time, wall time per decision, decision failures and peak memory (in all, and per agent as
@@ -22,23 +23,29 @@ from pathlib import Path
 from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
 
 STACKS_PER_FORKLIFT = 10
+PARKING_PER_FORKLIFT = 1.5  # with a slot each and no more, crowded aisles fail most decisions
+MIN_LANE_DEPTH = 2  # a lane one stack deep can leave its unload pose a dead end (a wedge)
 MAX_LANE_DEPTH = 5
 POLL_S = 0.5  # how often a run of processes has its processes' peak memory read
 MODES = ("inprocess", "processes")
 
 
 def floor_for(vehicles: int) -> Shape:
-    """The smallest generated floor (fewest aisles, then lanes) with a parking slot per
-    forklift, its lanes as deep as needed for STACKS_PER_FORKLIFT stacks a forklift (at most
-    MAX_LANE_DEPTH): about square, since the lanes per side grow with the aisles."""
+    """The smallest generated floor (fewest aisles, then lanes) with PARKING_PER_FORKLIFT
+    parking slots a forklift, its lanes as deep as needed for STACKS_PER_FORKLIFT stacks a
+    forklift (MIN_LANE_DEPTH to MAX_LANE_DEPTH): about square, since the lanes per side
+    grow with the aisles. A lane one stack deep is left out on purpose: its unload pose, in
+    an aisle two cells wide, has no way out once the lane across the aisle is filled, and a
+    fill that still has that stack to fill wedges."""
     aisles = 1
     while True:
         for depth in range(MIN_DEPTH, 4 * aisles + MIN_DEPTH + 1):
             shape = Shape(aisles, depth, 1, vehicles)
-            if shape.slots_per_aisle * aisles >= vehicles:
+            if shape.slots_per_aisle * aisles >= PARKING_PER_FORKLIFT * vehicles:
                 lanes = 4 * aisles * depth  # 2 sides x above and below each aisle
                 deep = math.ceil(STACKS_PER_FORKLIFT * vehicles / lanes)
-                return Shape(aisles, depth, max(1, min(MAX_LANE_DEPTH, deep)), vehicles)
+                return Shape(aisles, depth, max(MIN_LANE_DEPTH, min(MAX_LANE_DEPTH, deep)),
+                             vehicles)
         aisles += 1
 
 

@@ -28,7 +28,7 @@ from fleet.dispatching.decision import (
     TaskKind,
     VehicleView,
 )
-from fleet.dispatching.prelim import cover_time, preliminary_astar
+from fleet.dispatching.prelim import cover_time, preliminary_astar, travel_floor
 from fleet.params import DispatchParams
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
@@ -118,53 +118,115 @@ class Algorithm1:
     cluster_names: tuple[str, ...] = ()
     mlp: MlpFn | None = None
 
+    # Score every target, as Algorithm 1 enumerates them (what training learns from); when
+    # False, targets are scored best bound first and those that cannot win are skipped.
+    every_target: bool = False
+
     def score_clusters(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
                        u: list[float]) -> list[Score]:
         """Equations (3) and (9) for every cluster with work left."""
-        p = self.params
-        grid = self.grid_for()
-        j_hat = self.mlp(u) if (self.mlp is not None and self.strategy is Strategy.ANN) else None
-        scores = []
-        for target in targets:
-            cells = [g.cell for g in target.goals]
-            pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
-                                    cells, p.iter_pre)
-            if pre.found:
-                cover = cover_time(self.store, vehicle.vehicle, cells, pre.t_find, p.dt_entry)
-                travel = pre.t_find - t_i
-                i_d = -travel + (p.C5 if target.far else 0.0)
-                j0 = -p.cover_weight * cover + p.C2 * i_d + p.C3
-            else:
-                cover, i_d, j0 = 0.0, -float(p.iter_pre), p.C4
-            s0 = p.C1 * target.remaining + j0
-            jh = 0.0
-            if j_hat is not None:
-                jh = j_hat[self.cluster_names.index(target.name)]
-            value = {
-                Strategy.GREEDY: i_d,
-                Strategy.TRAFFIC: j0,
-                Strategy.BALANCE: float(target.remaining),
-                Strategy.COMPREHENSIVE: s0,
-                Strategy.ANN: (p.C1 * target.remaining + p.C9 * j0 + p.C10 * jh)
-                if j_hat is not None else s0,
-            }[self.strategy]
-            scores.append(Score(target, pre.found, pre.t_find, cover, i_d, j0, s0, jh, value))
-        return scores
+        return self._scored(vehicle, t_i, targets, u, TaskKind.DELIVER, every=True)
 
     def score_stations(self, vehicle: VehicleView, t_i: float,
                        targets: Sequence[Target]) -> list[Score]:
         """Equation (4), shifted by C3 so that a found station scores above zero."""
-        p = self.params
+        return self._scored(vehicle, t_i, targets, [], TaskKind.RETURN, every=True)
+
+    def _scored(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
+                u: list[float], kind: TaskKind, every: bool) -> list[Score]:
+        """The targets' scores in their order; unless `every`, only of those that could still
+        win: targets go best bound first (`_bound`: what the score would be with the shortest
+        travel the preliminary A* can find), and once the best score so far is accepted and
+        above the next bound, the rest are skipped. The choice is the same as with every
+        target scored (the skipped ones score below it); a refusal scores them all."""
         grid = self.grid_for()
-        scores = []
-        for target in targets:
-            cells = [g.cell for g in target.goals]
-            pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
-                                    cells, p.iter_pre)
-            i_r = -(pre.t_find - t_i) if pre.found else 0.0
-            s_r = p.C3 + i_r if pre.found else 0.0
-            scores.append(Score(target, pre.found, pre.t_find, 0.0, i_r, s_r, s_r, 0.0, s_r))
-        return scores
+        ann = kind is TaskKind.DELIVER and self.mlp is not None and \
+            self.strategy is Strategy.ANN
+        j_hat = self.mlp(u) if ann else None
+        jh = [j_hat[self.cluster_names.index(t.name)] if j_hat is not None else 0.0
+              for t in targets]
+
+        def score(k: int) -> Score:
+            if kind is TaskKind.DELIVER:
+                return self._cluster_score(grid, vehicle, t_i, targets[k], ann, jh[k])
+            return self._station_score(grid, vehicle, t_i, targets[k])
+
+        if every or not self._bounds_hold():
+            return [score(k) for k in range(len(targets))]
+        bounds = [self._bound(vehicle, t, kind, ann, jh[k]) for k, t in enumerate(targets)]
+        done: dict[int, Score] = {}
+        best: Score | None = None
+        for k in sorted(range(len(targets)), key=lambda k: -bounds[k]):
+            if best is not None and bounds[k] < best.value and self._acceptable(best, kind):
+                break
+            done[k] = score(k)
+            if done[k].found and (best is None or done[k].value > best.value):
+                best = done[k]
+        return [done[k] for k in sorted(done)]
+
+    def _bounds_hold(self) -> bool:
+        """Whether a score can only fall as travel and cover grow (the weights' signs)."""
+        p = self.params
+        return p.C2 >= 0 and p.cover_weight >= 0 and (
+            self.strategy is not Strategy.ANN or p.C9 >= 0)
+
+    def _bound(self, vehicle: VehicleView, target: Target, kind: TaskKind, ann: bool,
+               jh: float) -> float:
+        """The most the target can score if found: its score with no cover and the travel
+        `travel_floor` gives (no preliminary trajectory is shorter)."""
+        p = self.params
+        travel = travel_floor(vehicle.pose.cell, [g.cell for g in target.goals])
+        if kind is TaskKind.RETURN:
+            return p.C3 - travel
+        i_d = -travel + (p.C5 if target.far else 0.0)
+        return self._cluster_value(target, i_d, p.C2 * i_d + p.C3, ann, jh)
+
+    def _cluster_value(self, target: Target, i_d: float, j0: float, ann: bool,
+                       jh: float) -> float:
+        """What the strategy maximises (Equations 3 and 9)."""
+        p = self.params
+        s0 = p.C1 * target.remaining + j0
+        return {
+            Strategy.GREEDY: i_d,
+            Strategy.TRAFFIC: j0,
+            Strategy.BALANCE: float(target.remaining),
+            Strategy.COMPREHENSIVE: s0,
+            Strategy.ANN: p.C1 * target.remaining + p.C9 * j0 + p.C10 * jh if ann else s0,
+        }[self.strategy]
+
+    def _cluster_score(self, grid: GridMap, vehicle: VehicleView, t_i: float,
+                       target: Target, ann: bool, jh: float) -> Score:
+        p = self.params
+        cells = [g.cell for g in target.goals]
+        pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
+                                cells, p.iter_pre)
+        if pre.found:
+            cover = cover_time(self.store, vehicle.vehicle, cells, pre.t_find, p.dt_entry)
+            travel = pre.t_find - t_i
+            i_d = -travel + (p.C5 if target.far else 0.0)
+            j0 = -p.cover_weight * cover + p.C2 * i_d + p.C3
+        else:
+            cover, i_d, j0 = 0.0, -float(p.iter_pre), p.C4
+        s0 = p.C1 * target.remaining + j0
+        return Score(target, pre.found, pre.t_find, cover, i_d, j0, s0, jh if ann else 0.0,
+                     self._cluster_value(target, i_d, j0, ann, jh))
+
+    def _station_score(self, grid: GridMap, vehicle: VehicleView, t_i: float,
+                       target: Target) -> Score:
+        p = self.params
+        cells = [g.cell for g in target.goals]
+        pre = preliminary_astar(grid, self.store, vehicle.vehicle, vehicle.pose.cell, t_i,
+                                cells, p.iter_pre)
+        i_r = -(pre.t_find - t_i) if pre.found else 0.0
+        s_r = p.C3 + i_r if pre.found else 0.0
+        return Score(target, pre.found, pre.t_find, 0.0, i_r, s_r, s_r, 0.0, s_r)
+
+    def _acceptable(self, best: Score, kind: TaskKind) -> bool:
+        """Whether the best found score makes the decision solid (Algorithm 1, lines 16 and
+        24): positive for a return and for the scored strategies."""
+        if kind is TaskKind.RETURN or self.strategy in (Strategy.COMPREHENSIVE, Strategy.ANN):
+            return best.value > 0  # S_r, S_d,0, or Equation 9's S_d
+        return True
 
     def accepted(self, scores: Sequence[Score], kind: TaskKind) -> Score | None:
         """The best target, if the decision is solid: a found preliminary trajectory and, for
@@ -173,9 +235,7 @@ class Algorithm1:
         if not found:
             return None
         best = max(found, key=lambda s: s.value)  # first of equals: targets are ordered
-        if kind is TaskKind.RETURN or self.strategy in (Strategy.COMPREHENSIVE, Strategy.ANN):
-            return best if best.value > 0 else None  # S_r, S_d,0, or Equation 9's S_d
-        return best
+        return best if self._acceptable(best, kind) else None
 
     def decide(self, vehicles: Sequence[VehicleView], failed: Sequence[int],
                targets_for: Callable[[VehicleView], list[Target]],
@@ -206,10 +266,7 @@ class Algorithm1:
             view = by_id[current]
             t_i = postponements.get(current, view.t_free)
             targets = targets_for(view)
-            if view.next_task is TaskKind.DELIVER:
-                scores = self.score_clusters(view, t_i, targets, u)
-            else:
-                scores = self.score_stations(view, t_i, targets)
+            scores = self._scored(view, t_i, targets, u, view.next_task, self.every_target)
             best = self.accepted(scores, view.next_task)
             if best is not None:
                 return DispatchOutcome(ScoredDecision(current, t_i, view.next_task,

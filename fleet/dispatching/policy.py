@@ -53,13 +53,14 @@ class PolicySetup:
     grid_for: Callable[[], GridMap]  # the static map as the work state leaves it now
     params: DispatchParams = field(default_factory=DispatchParams)
     mlp: MlpFn | None = None  # the trained scorer, for a strategy that uses one
+    every_target: bool = False  # score every target, even those that cannot win (training)
 
 
 def algorithm1(setup: PolicySetup) -> Algorithm1:
     return Algorithm1(grid_for=setup.grid_for, store=setup.store, strategy=setup.strategy,
                       params=setup.params,
                       cluster_names=tuple(c.name for c in setup.layout.clusters),
-                      mlp=setup.mlp)
+                      mlp=setup.mlp, every_target=setup.every_target)
 
 
 def order_book(setup: PolicySetup) -> DispatchPolicy:

@@ -22,6 +22,8 @@ from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
 
 NEIGHBOURS = ((1, 0), (0, 1), (-1, 0), (0, -1), (0, 0))  # the five patterns of Figure 4
+STEP_TIME = 1.25  # one node step (T3)
+WAIT_TIME = 1.0  # one wait (T12)
 
 
 @dataclass(frozen=True)
@@ -34,13 +36,18 @@ class PrelimResult:
 
 def preliminary_astar(grid: GridMap, store: ReservationView, vehicle: int, start: Cell,
                       t_i: float, targets: Iterable[Cell], iter_pre: int = 500,
-                      step_time: float = 1.25, wait_time: float = 1.0) -> PrelimResult:
+                      step_time: float = STEP_TIME, wait_time: float = WAIT_TIME
+                      ) -> PrelimResult:
     """Earliest arrival at any target node, avoiding other vehicles' reserved cells."""
     goal = set(targets)
-    if not goal:
+    if not goal or (start not in goal and all(
+            store.parked_from(vehicle, g) < t_i + travel_floor(start, (g,), step_time)
+            for g in goal)):
+        # Every target is taken for good before the virtual vehicle could reach it: the
+        # search could only fail, after iter_pre expansions.
         return PrelimResult(False, t_i, None, 0)
 
-    def h(cell: Cell) -> float:
+    def h(cell: Cell) -> float:  # travel_floor, inline: the search's hottest line
         return step_time * min(abs(cell[0] - g[0]) + abs(cell[1] - g[1]) for g in goal)
 
     open_heap: list[tuple[float, int, Cell, float]] = [(h(start), 0, start, t_i)]
@@ -64,6 +71,12 @@ def preliminary_astar(grid: GridMap, store: ReservationView, vehicle: int, start
             heapq.heappush(open_heap, (tn - t_i + h(nxt), counter, nxt, tn))
             counter += 1
     return PrelimResult(False, t_i, None, expansions)
+
+
+def travel_floor(start: Cell, targets: Iterable[Cell], step_time: float = STEP_TIME) -> float:
+    """No preliminary trajectory reaches a target sooner: a step per cell of the Manhattan
+    distance to the nearest (the search's heuristic, and a bound on any score it gives)."""
+    return step_time * min(abs(start[0] - g[0]) + abs(start[1] - g[1]) for g in targets)
 
 
 def cover_time(store: ReservationView, vehicle: int, cells: Iterable[Cell], t0: float,

@@ -90,6 +90,9 @@ class Planned:
 class EngineOptions:
     params: DispatchParams = field(default_factory=DispatchParams)
     mlp: MlpFn | None = None
+    # Score every target of a decision, even those that cannot win: what training learns
+    # from (the choice is the same either way).
+    score_every_target: bool = False
     max_consecutive_failures: int = 400
     # After this many failures in a row the fleet may be stuck on a choice rather than on the
     # layout: a forklift then skips the targets it failed to reach since the last success.
@@ -187,7 +190,7 @@ class Engine:
         self.policy = dispatch_policy(PolicySetup(
             mission.strategy, self.layout, self.executor.store,
             lambda: self.layout.grid_map(self.work.filled), self.options.params,
-            self.options.mlp))
+            self.options.mlp, self.options.score_every_target))
 
     def active(self) -> list[VehicleSlot]:
         """Vehicles with something left to do: any return, or a delivery while work waits."""

@@ -100,8 +100,8 @@ def train(layout: Layout, cycles: int, seed: int, lm_steps: int = 50,
         mission = Mission(layout=layout.name, kind=MissionKind.FILL, strategy=strategy,
                           seed=seed)
         collector = SampleCollector(layout, strategy)
-        options = EngineOptions(mlp=mlps if cycle > 1 else None, progress=step,
-                                planned=collector.planned)
+        options = EngineOptions(mlp=mlps if cycle > 1 else None, score_every_target=True,
+                                progress=step, planned=collector.planned)
         record = run_mission(mission, options, layout)
         samples.extend(collector.samples)
         fits = mlps.fit(samples, lm_steps)
