@@ -173,17 +173,20 @@ def dispatcher_restarts(recording: Recording) -> list[Restart]:
     found: list[tuple[int, int]] = []  # (the key's last message before, the first after)
     last: dict[str, Recorded] = {}
     numbers: dict[str, set[int]] = defaultdict(set)
+    highest: dict[str, int] = {}  # max(numbers[key]), kept as it grows (a run has many)
     failures: dict[str, int] = {}
     for r, m in _events(recording):
         key, seq = r.key, r.envelope.seq
         before = last.get(key)
         fewer = isinstance(m, Progress) and m.failures < failures.get(key, 0)
         if before is not None and (seq == 1 or seq in numbers[key] or fewer
-                                   or seq + RESTART_DROP < max(numbers[key])):
+                                   or seq + RESTART_DROP < highest[key]):
             found.append((before.log_ns, r.log_ns))
             numbers[key] = set()
+            highest[key] = seq
         last[key] = r
         numbers[key].add(seq)
+        highest[key] = max(highest.get(key, seq), seq)
         if isinstance(m, Progress):
             failures[key] = m.failures
     starts: list[int] = []
