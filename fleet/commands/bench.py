@@ -151,9 +151,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     scale = which.add_parser("scale", help="whole fill missions with growing fleets, in process "
                              "and as processes",
                              description="Run a fill mission on a generated warehouse for each "
-                             "fleet size (a parking slot per forklift, about ten stacks each), "
-                             "on the fast clock, in process and as processes, each judged by "
-                             "its recording's verdicts; report wall time per decision, "
+                             "fleet size (parking for 1.5 times the fleet, about ten stacks a "
+                             "forklift), on the fast clock, in process and as processes, each "
+                             "judged by its recording's verdicts; report wall time per decision, "
                              "failures and peak memory, and how each grows with the fleet "
                              "(docs/benchmarks.md).")
     scale.add_argument("--fleets", type=fleet_sizes, default="12,32,64,100",
