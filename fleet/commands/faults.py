@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         check_faults004(scenario.faults, layout.floor, vehicles, scenario.name)
     else:
         check_against(scenario, layout, vehicles)
-    noun = "forklift" if not (layout.has_lanes or layout.floor) else "AGV"
+    noun = "AGV" if layout.floor else layout.vehicle_kind.noun  # 004's kind is not built
     print(f"scenario {scenario.name}: {len(scenario.faults)} faults, fine for {layout.name} "
           f"with {vehicles} {'lifting ' if layout.floor else ''}{noun}s")
     for fault in sorted(scenario.faults, key=lambda f: f.at):
