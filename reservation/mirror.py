@@ -10,6 +10,7 @@ a diff (`since_revision`) or a new snapshot.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -40,8 +41,8 @@ class TableMirror:
     def parked_from(self, vehicle: int, cell) -> float:
         return self.table.parked_from(vehicle, cell)
 
-    def busy(self, vehicle: int, cell) -> list[tuple[float, float]]:
-        return self.table.busy(vehicle, cell)
+    def busy(self, vehicle: int, cell, after: float = -math.inf) -> list[tuple[float, float]]:
+        return self.table.busy(vehicle, cell, after)
 
     @property
     def revision(self) -> int:

@@ -101,6 +101,21 @@ class TableMatchesModel(RuleBasedStateMachine):
             assert owner_in_table(self.table, cell, 1e9) == self.model.owner(cell, 1e9)
 
     @invariant()
+    def busy_is_what_the_others_hold(self):
+        for vehicle in VEHICLES:
+            for cell in CELLS:
+                held = self.table.busy(vehicle, cell)
+                for q in range(0, 44):
+                    t = q * 0.25 - 0.125
+                    owner = self.model.owner(cell, t)
+                    assert any(t0 <= t < t1 for t0, t1 in held) == \
+                        (owner not in (None, vehicle))
+                for q in range(-1, 42):  # from `after` on: what ends later, on the grid too
+                    after = q * 0.25
+                    assert self.table.busy(vehicle, cell, after) == \
+                        [(t0, t1) for t0, t1 in held if t1 > after]
+
+    @invariant()
     def never_two_vehicles_overlap(self):
         rs = self.table.reservations()
         for a in rs:

@@ -53,6 +53,11 @@ class _Edge(NamedTuple):
     body_cells: tuple[Cell, ...]  # start and intermediate cells
 
 
+# A move as the safe-interval relaxation sees it: end pose, the cells it sweeps, and its
+# kind's shortest and longest durations.
+_Move = tuple[int, int, int, tuple[Cell, ...], float, float]
+
+
 @cache
 def _candidate_edges(moves: tuple[Move, ...], x: int, y: int) -> tuple[_Edge, ...]:
     """Every move from (x, y) with absolute cells, whatever the map: planners for different
@@ -98,6 +103,7 @@ class HybridAStar:
         self.moves = [tuple(self.move_of[m, h] for m in Manner) for h in range(4)]
         self._static: dict[tuple[int, Manner], list[list[int]]] | None = None
         self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
+        self._moves: dict[tuple[int, int, int], list[_Move]] = {}  # the relaxation's
         self._component: dict[tuple[Cell, int], int] | None = None
         self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
         self._longest: dict[Kind, float] = {}  # ... and longest
@@ -321,12 +327,11 @@ class HybridAStar:
         proves that no trajectory exists."""
         busy_of: dict[Cell, list[tuple[float, float]]] = {}
         safe_of: dict[tuple[int, int, int], list[tuple[float, float]]] = {}
-        shortest, longest = self._shortest, self._longest
 
         def busy(c: Cell) -> list[tuple[float, float]]:
             line = busy_of.get(c)
             if line is None:
-                line = busy_of[c] = store.busy(vehicle, c)
+                line = busy_of[c] = store.busy(vehicle, c, t_start)
             return line
 
         def safe(x: int, y: int, heading: int) -> list[tuple[float, float]]:
@@ -345,14 +350,18 @@ class HybridAStar:
                 safe_of[x, y, heading] = found
             return found
 
-        def departure(edge: _Edge, t: float, duration: float, leave_by: float) -> float:
+        def departure(swept: tuple[Cell, ...], t: float, duration: float, leave_by: float
+                      ) -> float:
             """The earliest instant from `t` on (INF: none by `leave_by`) at which every cell
             the edge sweeps stays free for `duration`."""
             moved = True
             while moved:
                 moved = False
-                for c in (*edge.body_cells, *edge.end_cells):
-                    for t0, t1 in busy(c):
+                for c in swept:
+                    line = busy_of.get(c)
+                    if line is None:
+                        line = busy_of[c] = store.busy(vehicle, c, t_start)
+                    for t0, t1 in line:
                         if t0 >= t + duration:
                             break
                         if t1 > t:
@@ -366,34 +375,58 @@ class HybridAStar:
                      None)
         if first is None:
             return True  # the start itself is held: the search says so, not this test
+        # Goal first (A*, by arrival plus the soonest the goal could follow): any order of
+        # the states finds the same set reachable, this one reaches a goal far sooner.
+        goal_cells = {cell for cell, _ in goal_set}
+        rate = self._seconds_per_cell
+
+        def soonest(x: int, y: int) -> float:
+            return rate * min(abs(x - gx) + abs(y - gy) for gx, gy in goal_cells)
+
         best = {(x0, y0, h0, first): t_start}
-        heap = [(t_start, x0, y0, h0, first)]
+        heap = [(t_start + soonest(x0, y0), t_start, x0, y0, h0, first)]
         while heap:
-            t, x, y, heading, i = heapq.heappop(heap)
+            _, t, x, y, heading, i = heapq.heappop(heap)
             if best[x, y, heading, i] < t:
                 continue
             leave_by = safe_of[x, y, heading][i][1]
             if ((x, y), heading) in goal_set and leave_by == INF:
                 return True
-            for edge in self.edges(x, y, heading):
-                if edge.kind is Kind.STOP:
-                    continue  # waiting is free within an interval
-                duration = shortest[edge.kind]
-                leave = departure(edge, t, duration, leave_by)
+            for ex, ey, eh, swept, duration, slowest in self._moves_from(x, y, heading):
+                leave = departure(swept, t, duration, leave_by)
                 if leave == INF:
                     continue
-                earliest, latest = leave + duration, leave_by + longest[edge.kind]
-                for j, (s, e) in enumerate(safe(edge.x, edge.y, edge.heading)):
+                earliest, latest = leave + duration, leave_by + slowest
+                for j, (s, e) in enumerate(safe(ex, ey, eh)):
                     if s > latest:
                         break
                     arrive = max(earliest, s)
                     if arrive > e or arrive > latest:
                         continue
-                    key = (edge.x, edge.y, edge.heading, j)
+                    key = (ex, ey, eh, j)
                     if arrive < best.get(key, INF):
                         best[key] = arrive
-                        heapq.heappush(heap, (arrive, *key))
+                        heapq.heappush(heap, (arrive + soonest(ex, ey), arrive, *key))
         return False
+
+    def _moves_from(self, x: int, y: int, heading: int) -> list[_Move]:
+        """The relaxation's view of the statically valid moves from a pose (waits left out:
+        waiting is free within an interval), cached per map."""
+        found = self._moves.get((x, y, heading))
+        if found is None:
+            found = self._moves[x, y, heading] = [
+                (edge.x, edge.y, edge.heading, (*edge.body_cells, *edge.end_cells),
+                 self._shortest[edge.kind], self._longest[edge.kind])
+                for edge in self.edges(x, y, heading) if edge.kind is not Kind.STOP]
+        return found
+
+    @property
+    def _seconds_per_cell(self) -> float:
+        """The fewest seconds any maneuver takes per cell it moves the vehicle (Manhattan):
+        no vehicle closes a distance of d cells in less than d times this."""
+        return min(self._shortest[move.manner.kind]
+                   / (abs(move.end_delta[0]) + abs(move.end_delta[1]))
+                   for move in self.move_of.values() if move.end_delta != (0, 0))
 
     def earliest_arrivals(self, start: Pose, t_start: float = 0.0,
                           usable_until: Callable[[Cell], float] | None = None,

@@ -152,8 +152,10 @@ class ReservationView(Protocol):
         """When another vehicle takes `cell` for good (infinity if none does)."""
         ...
 
-    def busy(self, vehicle: int, cell: Cell) -> list[tuple[float, float]]:
-        """The times other vehicles hold `cell`, [start, end) in order."""
+    def busy(self, vehicle: int, cell: Cell, after: float = -INF
+             ) -> list[tuple[float, float]]:
+        """The times other vehicles hold `cell`, [start, end) in order, those that end after
+        `after` only."""
         ...
 
 
@@ -220,13 +222,18 @@ class ReservationTable:
             return INF
         return line.starts[-1]
 
-    def busy(self, vehicle: int, cell: Cell) -> list[tuple[float, float]]:
-        """The times other vehicles hold `cell`, [start, end) in order."""
+    def busy(self, vehicle: int, cell: Cell, after: float = -INF
+             ) -> list[tuple[float, float]]:
+        """The times other vehicles hold `cell`, [start, end) in order, those that end after
+        `after` only (intervals do not overlap, so their ends are in order too: a search late
+        in a long mission does not read the cell's past)."""
         line = self._cells.get(cell)
         if line is None:
             return []
-        return [(t0, t1) for t0, t1, owner in zip(line.starts, line.ends, line.owners,
-                                                  strict=True) if owner != vehicle]
+        i = bisect.bisect_right(line.ends, after)
+        return [(t0, t1) for t0, t1, owner in zip(line.starts[i:], line.ends[i:],
+                                                  line.owners[i:], strict=True)
+                if owner != vehicle]
 
     def first_conflict(self, vehicle: int, intervals: Iterable[Interval]) -> Conflict | None:
         for iv in intervals:
@@ -453,17 +460,24 @@ class ReservationTable:
 
     def _insert(self, vehicle: int, iv: Interval) -> None:
         line = self._cells.get(iv.cell)
-        entries = list(zip(line.starts, line.ends, line.owners, strict=True)) if line else []
+        if line is None:
+            line = self._cells[iv.cell] = _CellLine()
         t0, t1 = iv.t0, iv.t1
+        # Only the entries that touch or overlap [t0, t1] can change: they lie side by side,
+        # since a line's intervals do not overlap (a long mission's past is not rewritten).
+        i = bisect.bisect_left(line.ends, t0)
+        j = bisect.bisect_right(line.starts, t1)
         kept = []
-        for s, e, o in entries:
-            if o == vehicle and s <= t1 and e >= t0:  # touching or overlapping: merge
+        for s, e, o in zip(line.starts[i:j], line.ends[i:j], line.owners[i:j], strict=True):
+            if o == vehicle:  # touching or overlapping: merge
                 t0, t1 = min(t0, s), max(t1, e)
             else:
                 kept.append((s, e, o))
         kept.append((t0, t1, vehicle))
         kept.sort()
-        self._set_line(iv.cell, kept)
+        line.starts[i:j] = [s for s, _, _ in kept]
+        line.ends[i:j] = [e for _, e, _ in kept]
+        line.owners[i:j] = [o for _, _, o in kept]
         cells = self._cells_of.setdefault(vehicle, {})
         cells[iv.cell] = max(cells.get(iv.cell, t1), t1)
 
