@@ -34,6 +34,10 @@ class Kind(Enum):
     TURN = "turn"
     LANE = "lane"
 
+    # Members are singletons compared by identity: hash them so (Enum's own hash is a call in
+    # Python, and the planner's innermost loops look them up in dicts).
+    __hash__ = object.__hash__
+
 
 class Manner(Enum):
     """The eleven expansion manners: (kind, direction +1 forward / -1 reverse, side +1 left)."""
@@ -49,6 +53,10 @@ class Manner(Enum):
     LANE_RIGHT = ("lane-right", Kind.LANE, 1, -1)
     LANE_LEFT_REVERSE = ("lane-left-reverse", Kind.LANE, -1, 1)
     LANE_RIGHT_REVERSE = ("lane-right-reverse", Kind.LANE, -1, -1)
+
+    # Members are singletons compared by identity: hash them so (Enum's own hash is a call in
+    # Python, and the planner's innermost loops look them up in dicts).
+    __hash__ = object.__hash__
 
     def __init__(self, label: str, kind: Kind, direction: int, side: int) -> None:
         self.label = label

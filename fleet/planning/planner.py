@@ -51,7 +51,11 @@ class _Edge(NamedTuple):
     heading: int
     end_cells: tuple[Cell, ...]
     body_cells: tuple[Cell, ...]  # start and intermediate cells
+    kind_slot: int  # the kind's place in Kind: a search memoises child times by it
 
+
+_KIND_SLOT = {kind: i for i, kind in enumerate(Kind)}
+_TIMED_SLOTS = 2 * len(_KIND_SLOT)  # (kind, from rest)
 
 # A move as the safe-interval relaxation sees it: end pose, the cells it sweeps, and its
 # kind's shortest and longest durations.
@@ -66,7 +70,8 @@ def _candidate_edges(moves: tuple[Move, ...], x: int, y: int) -> tuple[_Edge, ..
                        x + move.end_delta[0], y + move.end_delta[1], move.end_heading,
                        tuple((x + a, y + b) for a, b in sorted(move.end_cells)),
                        tuple((x + a, y + b) for a, b in sorted(move.start_cells
-                                                               | move.middle_cells)))
+                                                               | move.middle_cells)),
+                       _KIND_SLOT[move.manner.kind])
                  for move in moves)
 
 
@@ -248,7 +253,23 @@ class HybridAStar:
         counter = 1
         expansions = 0
         h_cache: dict[tuple[int, int, int], float] = {}
-        conflict = store.conflict
+        # Each cell's holds by others that end after t_start, read once a search: every
+        # instant the search asks about is from t_start on.
+        holds: dict[Cell, list[tuple[float, float]]] = {}
+
+        def held(cells: tuple[Cell, ...], t0: float, t1: float) -> bool:
+            """Whether another vehicle holds any of the cells somewhere in [t0, t1)."""
+            for c in cells:
+                line = holds.get(c)
+                if line is None:
+                    line = holds[c] = store.busy(vehicle, c, t_start)
+                for s, e in line:
+                    if s >= t1:
+                        break
+                    if e > t0:
+                        return True
+            return False
+
         child_times = self.velocity.child_times
         while open_heap:
             f, _, node = heapq.heappop(open_heap)
@@ -268,26 +289,34 @@ class HybridAStar:
                                    expansions - 1)
             x, y, heading, _ = node.key
             parent_at = node.times.at
+            # The child times depend only on the edge's kind and whether it starts from
+            # rest: a few values an expansion, each computed once.
+            timed: list[tuple[EndTimes, float, float, float] | None] = [None] * _TIMED_SLOTS
             for edge in self.edges(x, y, heading):
                 manner = edge.manner
                 d = edge.direction
                 reverses = d != 0 and node.last_dir != 0 and d != node.last_dir
-                times = child_times(node.times, edge.kind, manner is Manner.STOP or reverses)
-                tz = times.at[0]
+                from_rest = manner is Manner.STOP or reverses
+                slot = 2 * edge.kind_slot + from_rest
+                known = timed[slot]
+                if known is None:
+                    times = child_times(node.times, edge.kind, from_rest)
+                    known = timed[slot] = (
+                        times, times.at[0],
+                        min(parent_at[v] for v in times.start_level if v is not None),
+                        max(t for t in times.at if t < INF))
+                times, tz, t_from, t_to = known
                 ex, ey, eh = edge.x, edge.y, edge.heading
                 key = (ex, ey, eh, tz)
                 if key in closed:
                     continue
-                t_from = min(parent_at[v] for v in times.start_level if v is not None)
-                t_to = max(t for t in times.at if t < INF)
-                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.end_cells):
+                if held(edge.end_cells, t_from, t_to):
                     closed.add(key)  # gamma = 1
                     continue
-                if any(conflict(vehicle, c, t_from, t_to) is not None for c in edge.body_cells):
+                if held(edge.body_cells, t_from, t_to):
                     continue  # gamma = 2
                 at_goal = ((ex, ey), eh) in goal_set
-                if at_goal and any(conflict(vehicle, c, tz, INF) is not None
-                                   for c in edge.end_cells):
+                if at_goal and held(edge.end_cells, tz, INF):
                     closed.add(key)  # cannot park here at this time
                     continue
                 turns = node.turns + (edge.kind is Kind.TURN)

@@ -65,9 +65,11 @@ class VelocityPlanner:
 
     def __init__(self, times: ManeuverTimes = ManeuverTimes()) -> None:
         self.links = link_durations(times)
-        self._by_kind: dict[Kind, list[tuple[Speed, Speed, float]]] = {}
+        # Per kind: (start level, end level, duration, start level as a Speed); plain ints
+        # index faster than IntEnum members in the search's innermost loop.
+        self._by_kind: dict[Kind, list[tuple[int, int, float, Speed]]] = {}
         for (kind, v0, v1), dt in self.links.items():
-            self._by_kind.setdefault(kind, []).append((v0, v1, dt))
+            self._by_kind.setdefault(kind, []).append((int(v0), int(v1), dt, v0))
 
     def child_times(self, parent: EndTimes, kind: Kind, from_rest: bool) -> EndTimes:
         """End times of a maneuver of this kind after a parent that ends as `parent` says.
@@ -75,13 +77,14 @@ class VelocityPlanner:
         stop or when the direction of travel reverses."""
         best = [INF, INF, INF]
         via: list[Speed | None] = [None, None, None]
-        for v0, v1, dt in self._by_kind[kind]:
-            if from_rest and v0 is not Speed.ZERO:
+        at = parent.at
+        for v0, v1, dt, level in self._by_kind[kind]:
+            if from_rest and v0:
                 continue
-            t = parent.at[v0] + dt
+            t = at[v0] + dt
             if t < best[v1]:
                 best[v1] = t
-                via[v1] = v0
+                via[v1] = level
         return EndTimes((best[0], best[1], best[2]), (via[0], via[1], via[2]))
 
 
