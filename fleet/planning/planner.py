@@ -115,6 +115,11 @@ class HybridAStar:
         for (kind, _, _), dt in self.velocity.links.items():
             self._shortest[kind] = min(dt, self._shortest.get(kind, INF))
             self._longest[kind] = max(dt, self._longest.get(kind, 0.0))
+        # The fewest seconds any maneuver takes per cell it moves the vehicle (Manhattan): no
+        # vehicle closes a distance of d cells in less than d times this.
+        self._seconds_per_cell = min(
+            self._shortest[move.manner.kind] / (abs(move.end_delta[0]) + abs(move.end_delta[1]))
+            for move in self.move_of.values() if move.end_delta != (0, 0))
 
     def component(self, pose: Pose) -> int | None:
         """Connected component of the pose in the static pose graph (moves are reversible,
@@ -448,14 +453,6 @@ class HybridAStar:
                  self._shortest[edge.kind], self._longest[edge.kind])
                 for edge in self.edges(x, y, heading) if edge.kind is not Kind.STOP]
         return found
-
-    @property
-    def _seconds_per_cell(self) -> float:
-        """The fewest seconds any maneuver takes per cell it moves the vehicle (Manhattan):
-        no vehicle closes a distance of d cells in less than d times this."""
-        return min(self._shortest[move.manner.kind]
-                   / (abs(move.end_delta[0]) + abs(move.end_delta[1]))
-                   for move in self.move_of.values() if move.end_delta != (0, 0))
 
     def earliest_arrivals(self, start: Pose, t_start: float = 0.0,
                           usable_until: Callable[[Cell], float] | None = None,
