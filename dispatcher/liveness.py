@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import zenoh
 
@@ -68,6 +69,30 @@ class Liveness:
                 missing = sorted(set(vehicles) - self.alive)
                 raise ParticipantLost(f"forklift agents {missing} did not come up within "
                                       f"{timeout:g} s")
+
+    def appearances(self, vehicle: int) -> int:
+        """How many times the vehicle's token has come (back) so far."""
+        with self.changed:
+            return self.appeared.get(vehicle, 0)
+
+    def wait_back(self, vehicle: int, appeared_before: int, quiet_s: float,
+                  timeout: float) -> None:
+        """Once a vehicle's link was silent (its process stopped, its link cut): return when
+        it is known which session it is on, that is when its token came back since
+        (`appeared_before`: how many times it had come before), or when it has stayed for
+        `quiet_s` from now (long enough for its router to have dropped a session whose
+        lease ran out during the silence, and said so)."""
+        now = time.monotonic()
+        quiet_until, deadline = now + quiet_s, now + timeout
+        with self.changed:
+            while not (vehicle in self.alive and (self.appeared.get(vehicle, 0) > appeared_before
+                                                  or now >= quiet_until)):
+                if now >= deadline:
+                    raise ParticipantLost(f"the agent of vehicle {vehicle} did not come back "
+                                          f"within {timeout:g} s")
+                wake = deadline if vehicle not in self.alive else min(quiet_until, deadline)
+                self.changed.wait(wake - now)
+                now = time.monotonic()
 
     def wait_gone(self, vehicle: int, timeout: float) -> bool:
         """Give the liveliness subscriber a moment to hear of a vehicle that just went."""

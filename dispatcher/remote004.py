@@ -14,11 +14,14 @@ refuses a take the table gave (someone outside the mission holds the cell) ends 
 mission, saying so. A plan is made by the AGV's agent on the table sent with the request,
 and waits for no answer. So a run of processes gives the in-process events, move for move.
 
-A killed agent (a `kill_vehicle` fault) is killed when the tracker strikes it: the fault
-clock stops the fault injector at that instant and waits for its ack, then for the agent's
-liveliness token to go; until the injector's new agent is up, the dispatcher lets go of the
-AGV's cells itself (the AGV stands; only its last move's cell behind it is let go), and
-asks the agent nothing.
+An agent a fault takes (`kill_vehicle`, `stall_vehicle`, `cut_link`) is taken when the
+tracker strikes its AGV: every request so far answered first, then the fault clock stops
+the fault injector at that instant and waits for its ack (a killed agent's liveliness token
+must then go; a stalled or cut-off one may keep it until its lease runs out). Until the
+fault is over the dispatcher lets go of the AGV's cells itself (the AGV stands; only its
+last move's cell behind it is let go) and asks the agent nothing; at the fault's end the
+injector starts a new agent, continues the stalled one or restores its link, and the agent
+is asked again once its token is there.
 """
 
 from __future__ import annotations
@@ -38,16 +41,16 @@ from dispatcher.clock import FastClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
 from fleet.errors import UserError
-from fleet.mission.faults import DETECT_TIMEOUT_S, Scenario
+from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
 from fleet.mission.faults004 import injected004
-from fleet.mission.freeze import BREAKDOWN
+from fleet.mission.freeze import BREAKDOWN, CAUSES
 from fleet.mission.record004 import Publish, run_mission004
 from fleet.mission.spec import ClockMode, Mission
 from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Interval, ReservationTable, ReservationView
 from fleet.planning.rules004 import XY
-from fleet.runtime.bus import Requester, RequestFailed
+from fleet.runtime.bus import LEASE_MS, Requester, RequestFailed
 from fleet.wire.convert import held_to_wire
 from fleet.wire.protocol import (
     ZONE,
@@ -66,6 +69,9 @@ REQUEST_TIMEOUT_S = 60.0  # a search on paper004 takes milliseconds
 ASKING_AT_ONCE = 16  # requests in flight: more than a 2-core machine's processes can serve
 LATE_S = 0.3  # an instant handled this much wall time after it came is late
 AGENT_BACK_S = 60.0  # for a restarted agent to come up (a fresh process on a busy machine)
+# After a silence shorter than the lease, its end may still cost the session (the router
+# hears the next keep-alive, a quarter lease later, too late): trusted again after this.
+SILENCE_SETTLES_S = 1.5 * LEASE_MS / 1000
 Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
@@ -80,7 +86,8 @@ class RemoteVehicles:
         # the dispatcher's own writes: closed zones, and the cells of AGVs without an agent
         self.reservations = reservations
         self.fault_clock = fault_clock  # stops the fault injector at an agent's fault
-        self.absent: set[int] = set()  # AGVs whose agent a fault took, not back yet
+        # AGVs whose agent a fault took, not back yet: how often its token had come before
+        self.absent: dict[int, int] = {}
         # no retry: an agent that does not answer is gone (liveliness says so)
         self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
@@ -130,26 +137,29 @@ class RemoteVehicles:
                                   f"(held by someone outside the mission?): {reason}")
 
     def down(self, vehicle: int, t: float, cause: str) -> None:
-        """A killed agent is killed now: every request so far answered first, then the
-        injector stopped at t (it kills), then its token seen gone."""
+        """The fault takes the AGV's agent now: every request so far answered first, then
+        the injector stopped at t (it kills, stalls or cuts); a killed agent's token seen
+        gone."""
         if cause == BREAKDOWN:
             return  # its agent stands the AGV still and goes on answering
         self.settle()
-        self.absent.add(vehicle)
+        self.absent[vehicle] = self.liveness.appearances(vehicle)
         self._fault_instant(t)
-        if not self.liveness.wait_gone(vehicle, DETECT_TIMEOUT_S):
+        if cause == CAUSES[FaultKind.KILL_VEHICLE] and not self.liveness.wait_gone(
+                vehicle, DETECT_TIMEOUT_S):
             raise ParticipantLost(f"AGV {vehicle}'s agent was to be gone at t={t:g} "
                                   f"({cause}), but its liveliness token stayed for "
                                   f"{DETECT_TIMEOUT_S:g} s")
 
     def up(self, vehicle: int, t: float) -> None:
-        """The injector starts the AGV's new agent at t; it is asked again once it is up."""
+        """The injector gives the AGV its agent back at t (a new one, the stalled one
+        continued, its link restored); it is asked again once its token is there."""
         if vehicle not in self.absent:
             return
         self.settle()  # what the dispatcher wrote for it is in first
         self._fault_instant(t)
-        self.liveness.wait_for([vehicle], AGENT_BACK_S)
-        self.absent.discard(vehicle)
+        self.liveness.wait_back(vehicle, self.absent.pop(vehicle), SILENCE_SETTLES_S,
+                                AGENT_BACK_S)
 
     def _fault_instant(self, t: float) -> None:
         if self.fault_clock is None:

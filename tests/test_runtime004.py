@@ -187,6 +187,46 @@ def test_a_killed_agent_dies_at_its_instant_and_its_restart_gives_the_inprocess_
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
 
 
+AGENT_FAULTS = {"stall_vehicle": ("agent stalled", "stall agent-2", "continue agent-2"),
+                "cut_link": ("link lost", "cut the link of agent-2",
+                             "restore the link of agent-2")}
+
+
+@pytest.mark.parametrize("kind,clock,speed", [("stall_vehicle", ClockMode.FAST, 1.0),
+                                              ("cut_link", ClockMode.REALTIME, 40.0)])
+def test_a_stalled_or_cut_off_agent_is_left_alone_until_its_fault_ends(kind, clock, speed,
+                                                                        tmp_path):
+    """The injector stops AGV 2's agent (SIGSTOP) or silences its zenoh link when the
+    tracker strikes it, mid-leg, and continues it or restores the link 30 s later. The
+    agent stays up but hears nothing meanwhile, so the dispatcher lets go of its cell and
+    asks it nothing (a request to it would wait for an answer that cannot come before the
+    fault's end, which waits for the request); the events are the in-process run's, where
+    the fault is a stop told by its cause, and the recording passes every verdict."""
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    scenario = tmp_path / "fault.toml"
+    scenario.write_text(KILL.replace('"kill_vehicle"', f'"{kind}"'))
+    cause, begin, end = AGENT_FAULTS[kind]
+    faults = load_scenario(scenario).faults
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run()
+    down = [e for e in reference.events if isinstance(e, BrokeDown)]
+    assert [(e.vehicle, e.t, e.until, e.cause) for e in down] == [(2, 40.5, 70.5, cause)]
+    assert any(isinstance(e, Moved) and e.vehicle == 2 and e.t0 >= 70.5
+               for e in reference.events)
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
+    outcome = run_processes(RunSpec(
+        mission, 4, tmp_path / "run", clock, speed, faults=injected004(load_scenario(scenario)),
+        faults_source=str(scenario), clocked_agents=False))
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)
+    assert [(a.what, a.t) for a in outcome.injected] == [(begin, 40.5), (end, 70.5)]
+    logs = sorted(p.name for p in (tmp_path / "run" / "logs").iterdir())
+    assert "agent-2-2.log" not in logs  # the same agent went on
+    report = analyze004(read_recording(tmp_path / "run"))
+    assert report.passed and report.faults == 1 and report.fault_breaches == []
+    assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
+
+
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():
     floor = build(Floor004Shape(**SHAPE), "small004")
     events = Mission004(floor, 8, generate_orders(floor, 20, 2)).run().events
@@ -220,8 +260,8 @@ def test_fleet_run_on_paper004_in_process_then_analyze(tmp_path, capsys):
 @pytest.mark.parametrize("flags,named", [
     (["--battery", "n_op=6"], "without --battery yet"),
     (["--order-area", "lower-left"], "--order-area"),
-    (["--faults", "stall_vehicle"],
-     "only vehicle_breakdown, close_zone, kill_vehicle are built yet"),
+    (["--faults", "slow_planner"], "only vehicle_breakdown, close_zone, kill_vehicle, "
+                                   "stall_vehicle, cut_link are built yet"),
     (["--mission", "fill"], "runs order missions, not --mission fill"),
     (["--vehicles", "500"], "--vehicles 500: the AGVs of paper004 start on its 96 parking"),
 ])

@@ -2,11 +2,12 @@
 tracker's event order, so a faulty run is the same in one process and as processes. A
 broken-down AGV stands, holding its cell, which reads stagnant: empty AGVs go round it,
 loaded ones wait; a closed zone is held by ZONE in the store, and the same holds for its
-cells. An AGV whose agent is killed stands the same way, from the instant the injector kills
-the agent to the one it starts a new agent (if ever): the tracker strikes it as a breakdown
-told by its cause, and its seam asks the injector to kill when it strikes
-(dispatcher/remote004.py). The other kinds act on services, and on agents in ways seed 004's
-runs do not recover from yet (stalled, cut off, slowed): they are refused by name."""
+cells. An AGV whose agent is killed, stalled or cut off stands the same way, from the instant
+the injector does it to the instant the injector starts a new agent, continues it or
+restores its link (if ever): the tracker strikes it as a breakdown told by its cause, and
+its seam asks the injector to act when it strikes and when it is over
+(dispatcher/remote004.py). The other kinds act on services, or slow a planner that a
+seed-004 run does not wait for: they are refused by name."""
 
 from __future__ import annotations
 
@@ -18,8 +19,10 @@ from fleet.mission.tracking004 import Tracker
 from fleet.planning.rules004 import XY, Kind
 from fleet.world.floor004 import Floor004
 
-KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VEHICLE)
-INJECTED004 = (FaultKind.KILL_VEHICLE,)  # what the injector does to the run's processes
+KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VEHICLE,
+            FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK)
+# what the injector does to the run's processes
+INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK)
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
 
 
@@ -57,7 +60,7 @@ def injected004(scenario: Scenario) -> Scenario | None:
 def apply_faults(tracker: Tracker, faults: Sequence[Fault]) -> None:
     """Schedule each fault in the tracker (checked already: check_faults004)."""
     for fault in faults:
-        if fault.kind in (FaultKind.VEHICLE_BREAKDOWN, FaultKind.KILL_VEHICLE):
+        if fault.kind in CAUSES:  # the AGV stands, whatever befell it or its agent
             assert fault.vehicle is not None
             tracker.break_down(fault.vehicle, fault.at, fault.until,
                                CAUSES[fault.kind])

@@ -30,12 +30,15 @@ RELIABLE = zenoh.CongestionControl.BLOCK
 log = logging.getLogger("fleet.runtime.bus")
 
 
+LEASE_MS = 1000  # a lost peer is noticed after this (measured: docs/reliability.md)
+
+
 @dataclass(frozen=True)
 class BusConfig:
     mode: str = "client"  # "client", "peer" or "router"
     connect: tuple[str, ...] = (DEFAULT_ROUTER,)
     listen: tuple[str, ...] = ()
-    lease_ms: int = 1000  # a lost peer is noticed after this (measured: docs/reliability.md)
+    lease_ms: int = LEASE_MS
     connect_timeout_ms: int = -1  # -1: wait for the router however long it takes to start
     user: str = ""  # log in to the router as this principal (fleet/runtime/access.py)
     password: str = ""
