@@ -161,6 +161,13 @@ class RemoteVehicles:
         self.liveness.wait_back(vehicle, self.absent.pop(vehicle), SILENCE_SETTLES_S,
                                 AGENT_BACK_S)
 
+    def service_fault(self, t: float) -> None:
+        """The reservation service is killed at t: every request so far answered, then the
+        injector stopped at t (it kills, and starts a new one from the journal a moment
+        later, which the agents' and the dispatcher's requests wait for)."""
+        self.settle()
+        self._fault_instant(t)
+
     def _fault_instant(self, t: float) -> None:
         if self.fault_clock is None:
             raise ParticipantLost(f"a fault of an agent at t={t:g} with no fault injector to "

@@ -34,6 +34,7 @@ from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import CellRequest, RouteRequest, encode
 from fleet.world.floor004 import Floor004Shape, build
 from fleet.world.layout_file import load_layout
+from reservation.journal import Journal
 
 SHAPE = dict(blocks_across=4, double_rows=4, stations=2, piles_per_side=2, block_width=3,
              transit_rows=2)
@@ -227,6 +228,36 @@ def test_a_stalled_or_cut_off_agent_is_left_alone_until_its_fault_ends(kind, clo
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
 
 
+def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_path):
+    """The injector kills the reservation service at t = 40 (the tracker's instant holds
+    until it has) and starts a new one from the journal 2 s of wall time later; the AGVs'
+    takes and let-goes wait for it. The events are those of the run without the fault, the
+    table never held a cell twice, no request was applied twice, and every verdict
+    passes."""
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    scenario = tmp_path / "kill.toml"
+    scenario.write_text('[[fault]]\nkind = "kill_service"\nat = 40.0\n'
+                        'service = "reservation"\ndowntime = 2.0\n')
+    faults = load_scenario(scenario).faults
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
+    assert Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run().events \
+        == reference.events  # in one process there is no service to kill
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
+    outcome = run_processes(RunSpec(
+        mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
+        faults_source=str(scenario), clocked_agents=False))
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)
+    assert [(a.what, a.t) for a in outcome.injected] == [("kill the reservation for 2 s", 40.0)]
+    assert "reservation-2.log" in {p.name for p in (tmp_path / "run" / "logs").iterdir()}
+    journal = tmp_path / "run" / "reservation.journal"
+    assert journal_overlaps(journal) == []
+    ids = [c.request_id for c in Journal(journal).replay().changes if c.request_id]
+    assert len(ids) == len(set(ids))
+    assert analyze004(read_recording(tmp_path / "run")).passed
+
+
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():
     floor = build(Floor004Shape(**SHAPE), "small004")
     events = Mission004(floor, 8, generate_orders(floor, 20, 2)).run().events
@@ -261,7 +292,7 @@ def test_fleet_run_on_paper004_in_process_then_analyze(tmp_path, capsys):
     (["--battery", "n_op=6"], "without --battery yet"),
     (["--order-area", "lower-left"], "--order-area"),
     (["--faults", "slow_planner"], "only vehicle_breakdown, close_zone, kill_vehicle, "
-                                   "stall_vehicle, cut_link are built yet"),
+                                   "stall_vehicle, cut_link, kill_service are built yet"),
     (["--mission", "fill"], "runs order missions, not --mission fill"),
     (["--vehicles", "500"], "--vehicles 500: the AGVs of paper004 start on its 96 parking"),
 ])

@@ -13,7 +13,7 @@ from fleet.mission.faults import (
     load_scenario,
     shipped_source,
 )
-from fleet.mission.faults004 import KINDS004, check_faults004
+from fleet.mission.faults004 import check_faults004, taken004
 from fleet.runtime.args import fleet_of
 from fleet.runtime.argtypes import layout_arg, positive_int, scenario_arg
 from fleet.world.layout_file import load_layout
@@ -83,4 +83,4 @@ def run(args: argparse.Namespace) -> int:
 
 def _fits004(scenario: Scenario) -> bool:
     """Whether a seed-004 run takes every fault of the scenario."""
-    return all(f.kind in KINDS004 for f in scenario.faults)
+    return all(taken004(f) for f in scenario.faults)

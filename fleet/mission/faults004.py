@@ -6,8 +6,11 @@ cells. An AGV whose agent is killed, stalled or cut off stands the same way, fro
 the injector does it to the instant the injector starts a new agent, continues it or
 restores its link (if ever): the tracker strikes it as a breakdown told by its cause, and
 its seam asks the injector to act when it strikes and when it is over
-(dispatcher/remote004.py). The other kinds act on services, or slow a planner that a
-seed-004 run does not wait for: they are refused by name."""
+(dispatcher/remote004.py). A killed reservation service changes nothing the tracker
+decides: its seam holds the instant while the injector kills it, and the requests wait for
+its successor, which reads the journal. A killed dispatcher or recorder (a seed-004
+dispatcher does not pick its mission up, nor its analysis a recording in segments) and a
+slowed planner (which no seed-004 decision waits for) are refused by name."""
 
 from __future__ import annotations
 
@@ -20,9 +23,11 @@ from fleet.planning.rules004 import XY, Kind
 from fleet.world.floor004 import Floor004
 
 KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VEHICLE,
-            FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK)
+            FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK, FaultKind.KILL_SERVICE)
 # what the injector does to the run's processes
-INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK)
+INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
+               FaultKind.KILL_SERVICE)
+SERVICES004 = ("reservation",)  # the services a seed-004 run survives the death of
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
 
 
@@ -31,15 +36,25 @@ def floor_xy(floor: Floor004, cell: tuple[int, int]) -> XY:
     return (cell[0], floor.height - 1 - cell[1])
 
 
+def taken004(fault: Fault) -> bool:
+    """Whether a seed-004 run takes a fault of this kind (and service)."""
+    return fault.kind in KINDS004 and (fault.kind is not FaultKind.KILL_SERVICE
+                                       or fault.service in SERVICES004)
+
+
 def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
                     scenario: str) -> None:
-    """Refuse what a seed-004 run cannot take, naming the fault: another kind, an AGV the
-    run does not have, a cell off the floor an AGV drives on."""
+    """Refuse what a seed-004 run cannot take, naming the fault: another kind, a service it
+    does not recover, an AGV the run does not have, a cell off the floor an AGV drives on."""
     for i, fault in enumerate(faults):
         where = f"scenario {scenario}: fault {i + 1} ({fault.describe('AGV')})"
         if fault.kind not in KINDS004:
             raise ScenarioError(f"{where}: on a seed-004 floor only "
                                 f"{', '.join(k.value for k in KINDS004)} are built yet")
+        if not taken004(fault):
+            raise ScenarioError(f"{where}: on a seed-004 floor only the "
+                                f"{', '.join(SERVICES004)} service can be killed yet (a "
+                                f"seed-004 run does not recover a killed {fault.service})")
         if fault.vehicle is not None and not 1 <= fault.vehicle <= vehicles:
             raise ScenarioError(f"{where}: the run has AGVs 1 to {vehicles}")
         for cell in fault.cells:
@@ -64,6 +79,8 @@ def apply_faults(tracker: Tracker, faults: Sequence[Fault]) -> None:
             assert fault.vehicle is not None
             tracker.break_down(fault.vehicle, fault.at, fault.until,
                                CAUSES[fault.kind])
-        else:
+        elif fault.kind is FaultKind.KILL_SERVICE:
+            tracker.service_fault(fault.at)
+        elif fault.kind is FaultKind.CLOSE_ZONE:
             tracker.close_zone([floor_xy(tracker.floor, c) for c in fault.cells], fault.at,
                                fault.until)

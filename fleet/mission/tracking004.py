@@ -182,6 +182,11 @@ class Vehicles(Protocol):
         """The AGV goes on from t (repaired, or its agent back)."""
         ...
 
+    def service_fault(self, t: float) -> None:
+        """The reservation service is killed at t: it changes nothing the tracker decides,
+        only when the fault injector acts."""
+        ...
+
 
 class LocalVehicles:
     """Every AGV in this process, against one `ReservationTable`."""
@@ -215,6 +220,9 @@ class LocalVehicles:
 
     def up(self, vehicle: int, t: float) -> None:
         pass
+
+    def service_fault(self, t: float) -> None:
+        pass  # no services here
 
 
 class StageKind(Enum):
@@ -506,6 +514,11 @@ class Tracker:
             self._wake(vehicle, until)
             return repaired
         self._at(t, strike)
+
+    def service_fault(self, t: float) -> None:
+        """At t the reservation service is killed: the seam lets the fault injector act
+        then (nothing is logged: the events are those of a run without it)."""
+        self._at(t, lambda: self.vehicles.service_fault(t))
 
     def close_zone(self, xys: list[XY], t0: float, t1: float) -> None:
         """From t0 to t1 the cells nobody holds at t0 are closed: nobody enters them."""
