@@ -259,6 +259,21 @@ def test_components_match_a_plain_graph_search(seed):
     assert {frozenset(p) for p in labels.values()} == components_by_search(planner)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_moves_that_fit_are_those_whose_cells_are_free(seed):
+    """The moves from each pose, on and just off the map, are those whose end and swept
+    cells the grid says are free (pose_graph lays them out once per map size)."""
+    rng = random.Random(seed)
+    blocked = frozenset((rng.randrange(12), rng.randrange(9)) for _ in range(rng.randrange(30)))
+    planner = HybridAStar(GridMap(12, 9, blocked))
+    for x in range(-2, 14):
+        for y in range(-2, 11):
+            for h in range(4):
+                fits = [move.manner for move in planner.moves[h] if planner.grid.all_free(
+                    (x + a, y + b) for a, b in (*move.end_cells, *move.middle_cells))]
+                assert [e.manner for e in planner.edges(x, y, h)] == fits, (x, y, h)
+
+
 def test_planner_cache_keeps_the_most_recently_used():
     built = []
 

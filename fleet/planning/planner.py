@@ -28,6 +28,7 @@ from fleet.planning.blockage import Blockage, blockage, held_for_good, sidings
 from fleet.planning.geometry import Cell
 from fleet.planning.gridmap import GridMap
 from fleet.planning.maneuvers import Kind, Manner, Move, move_table
+from fleet.planning.pose_graph import MANNERS, Components, components, fitting, skeleton
 from fleet.planning.reservations import ReservationView
 from fleet.planning.trajectory import (
     FailureReason,
@@ -102,14 +103,16 @@ class HybridAStar:
                  times: ManeuverTimes = ManeuverTimes(),
                  params: SearchParams = SearchParams()) -> None:
         self.grid = grid
+        self.dims = dims
         self.params = params
         self.velocity = VelocityPlanner(times)
         self.move_of = move_table(dims, grid.cell_size)
         self.moves = [tuple(self.move_of[m, h] for m in Manner) for h in range(4)]
-        self._static: dict[tuple[int, Manner], list[list[int]]] | None = None
+        self._graph = skeleton(dims, grid.cell_size, grid.cols, grid.rows)
+        self._fits: np.ndarray | None = None  # which moves fit on this map (pose_graph)
         self._edges: dict[tuple[int, int, int], list[_Edge]] = {}
         self._moves: dict[tuple[int, int, int], list[_Move]] = {}  # the relaxation's
-        self._component: dict[tuple[Cell, int], int] | None = None
+        self._components: Components | None = None
         self._shortest: dict[Kind, float] = {}  # each kind's shortest speed link
         self._longest: dict[Kind, float] = {}  # ... and longest
         for (kind, _, _), dt in self.velocity.links.items():
@@ -124,92 +127,30 @@ class HybridAStar:
     def component(self, pose: Pose) -> int | None:
         """Connected component of the pose in the static pose graph (moves are reversible,
         so reachability is symmetric); None for a pose on a blocked cell."""
-        if self._component is None:
-            self._component = self._components()
-        return self._component.get((pose.cell, pose.heading))
+        if self._components is None:
+            self._components = components(self._graph, self._fitting())
+        return self._components.of(self._graph, pose.cell, pose.heading)
 
-    def _components(self) -> dict[tuple[Cell, int], int]:
-        """Label every free pose with its connected component: union-find over the static
-        moves, vectorised (hook roots, then jump pointers until every edge agrees)."""
-        g = self.grid
-        if self._static is None:
-            self._static = self._static_table()
-
-        def node(x, y, h):
-            return (x * g.rows + y) * 4 + h
-
-        src, dst = [], []
-        for (heading, manner), gamma in self._static.items():
-            if manner is Manner.STOP:
-                continue
-            # a move's gamma ignores its start cells: require the start pose free as well
-            usable = (np.asarray(gamma) == 0) & (np.asarray(self._static[heading, Manner.STOP])
-                                                  == 0)
-            xs, ys = np.nonzero(usable)
-            move = self.move_of[manner, heading]
-            src.append(node(xs, ys, heading))
-            dst.append(node(xs + move.end_delta[0], ys + move.end_delta[1], move.end_heading))
-        u, v = np.concatenate(src), np.concatenate(dst)
-        parent = np.arange(g.cols * g.rows * 4)
-        while True:
-            ru, rv = parent[u], parent[v]
-            if np.array_equal(ru, rv):
-                break
-            np.minimum.at(parent, np.maximum(ru, rv), np.minimum(ru, rv))
-            while not np.array_equal(jumped := parent[parent], parent):
-                parent = jumped
-        labels = parent.tolist()
-        return {((x, y), h): labels[node(x, y, h)]
-                for h in range(4) for (x, y) in np.argwhere(
-                    np.asarray(self._static[h, Manner.STOP]) == 0).tolist()}
-
-    def static_gamma(self, cell: Cell, move: Move) -> int:
-        """Algorithm 3, lines 4-7 and 15-18: 1 if the end pose hits the static map, 2 if only
-        the sweep does, else 0."""
-        x, y = cell
-        if 0 <= x < self.grid.cols and 0 <= y < self.grid.rows:
-            if self._static is None:
-                self._static = self._static_table()
-            return self._static[move.heading, move.manner][x][y]
-        if not self.grid.all_free((x + a, y + b) for a, b in move.end_cells):
-            return 1
-        return 2 if not self.grid.all_free((x + a, y + b) for a, b in move.middle_cells) else 0
-
-    def _static_table(self) -> dict[tuple[int, Manner], list[list[int]]]:
-        """static_gamma for every cell of the map at once, per (heading, manner): a cell is
-        free where the map is, so "all cells of a move free" is an AND of shifted copies of
-        the free mask. Building a planner for a new fill state is then a few milliseconds,
-        which the dispatcher and every agent do often."""
-        g = self.grid
-        pad = 1 + max(max(abs(a), abs(b)) for move in self.move_of.values()
-                      for a, b in move.swept)
-        free = np.zeros((g.cols + 2 * pad, g.rows + 2 * pad), dtype=bool)
-        free[pad:pad + g.cols, pad:pad + g.rows] = True
-        for x, y in g.blocked:
-            if 0 <= x < g.cols and 0 <= y < g.rows:
-                free[pad + x, pad + y] = False
-
-        def all_free(offsets: frozenset[Cell]) -> np.ndarray:
-            ok = np.ones((g.cols, g.rows), dtype=bool)
-            for a, b in offsets:
-                ok &= free[pad + a:pad + a + g.cols, pad + b:pad + b + g.rows]
-            return ok
-
-        table = {}
-        for (manner, heading), move in self.move_of.items():
-            gamma = np.where(all_free(move.end_cells), 0, 1)
-            gamma[(gamma == 0) & ~all_free(move.middle_cells)] = 2
-            table[heading, manner] = gamma.tolist()
-        return table
+    def _fitting(self) -> np.ndarray:
+        if self._fits is None:
+            self._fits = fitting(self._graph, self.grid.blocked)
+        return self._fits
 
     def edges(self, x: int, y: int, heading: int) -> list[_Edge]:
-        """The statically valid moves from a pose, with absolute cells (cached per map)."""
+        """The statically valid moves from a pose, with absolute cells (cached per map):
+        Algorithm 3, lines 4-7 and 15-18, static collisions always fail (gamma 1: the end
+        pose hits the static map; 2: only the sweep does)."""
         found = self._edges.get((x, y, heading))
         if found is None:
-            found = [edge for move, edge in zip(self.moves[heading],
-                                                _candidate_edges(self.moves[heading], x, y),
-                                                strict=True)
-                     if not self.static_gamma((x, y), move)]  # static collisions always fail
+            candidates = _candidate_edges(self.moves[heading], x, y)
+            if 0 <= x < self.grid.cols and 0 <= y < self.grid.rows:
+                first = self._graph.move(x, y, heading)
+                fit = self._fitting()[first:first + len(MANNERS)].tolist()
+            else:  # off the map: no table, the cells themselves
+                fit = [self.grid.all_free((x + a, y + b) for a, b in
+                                          (*move.end_cells, *move.middle_cells))
+                       for move in self.moves[heading]]
+            found = [edge for edge, ok in zip(candidates, fit, strict=True) if ok]
             self._edges[x, y, heading] = found
         return found
 
