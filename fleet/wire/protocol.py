@@ -752,82 +752,148 @@ def decode(payload: bytes) -> Envelope:
 
 def build_message(cls: type[Message], body: dict) -> Message:
     """A message of type `cls` from its body map, validated (ProtocolError otherwise)."""
-    hints = _hints(cls)
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(body) - known, key=str)
-    if unknown:
-        raise ProtocolError(f"{cls.TYPE}: unknown field {unknown[0]!r}")
+    checkers, known, required = _fields(cls)
+    if not body.keys() <= known:
+        unknown = sorted(body.keys() - known, key=str)[0]
+        raise ProtocolError(f"{cls.TYPE}: unknown field {unknown!r}")
     values = {}
-    for f in fields(cls):
-        if f.name not in body:
-            if f.default is MISSING and f.default_factory is MISSING:
-                raise ProtocolError(f"{cls.TYPE}: missing field {f.name!r}")
-            continue
-        values[f.name] = _check(body[f.name], hints[f.name], f"{cls.TYPE}.{f.name}")
+    for name, check in checkers:
+        if name in body:
+            values[name] = _checked(check, body[name], f"{cls.TYPE}.{name}")
+        elif name in required:
+            raise ProtocolError(f"{cls.TYPE}: missing field {name!r}")
     return cls(**values)
 
 
+Checker = typing.Callable[[Any], Any]
+
+
+class _Invalid(Exception):
+    """A value a checker refuses: what is wrong, and where below the checked value
+    ("[2][0]"); made a ProtocolError naming the whole place by `_check`."""
+
+    def __init__(self, what: str, below: str = "") -> None:
+        self.what, self.below = what, below
+
+
 @functools.cache
-def _hints(cls: type[Message]) -> dict[str, Any]:
-    return typing.get_type_hints(cls, include_extras=True)
+def _fields(cls: type[Message]) -> tuple[tuple[tuple[str, Checker], ...], frozenset[str],
+                                         frozenset[str]]:
+    """Each field's checker in order, the fields' names, and those without a default."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    return (tuple((f.name, _checker(hints[f.name])) for f in fields(cls)),
+            frozenset(f.name for f in fields(cls)),
+            frozenset(f.name for f in fields(cls)
+                      if f.default is MISSING and f.default_factory is MISSING))
 
 
 def _check(value: Any, hint: Any, where: str) -> Any:
-    """`value` converted to the type `hint` describes, or ProtocolError."""
+    """`value` converted to the type `hint` describes, or ProtocolError naming `where`."""
+    return _checked(_checker(hint), value, where)
+
+
+def _checked(check: Checker, value: Any, where: str) -> Any:
+    try:
+        return check(value)
+    except _Invalid as exc:
+        raise ProtocolError(f"{where}{exc.below}: {exc.what}") from None
+
+
+@functools.cache
+def _checker(hint: Any) -> Checker:
+    """A function converting a value to the type `hint` describes, or raising _Invalid:
+    the hint is read once, not at every value (every message every process receives is
+    checked)."""
     origin = typing.get_origin(hint)
     if origin is Annotated:
         base, *validators = typing.get_args(hint)
-        value = _check(value, base, where)
-        for validate in validators:
-            try:
-                validate(value)
-            except ValueError as exc:
-                raise ProtocolError(f"{where}: {exc}") from None
-        return value
+        check_base = _checker(base)
+
+        def annotated(value: Any) -> Any:
+            value = check_base(value)
+            for validate in validators:
+                try:
+                    validate(value)
+                except ValueError as exc:
+                    raise _Invalid(str(exc)) from None
+            return value
+        return annotated
     if origin in (types.UnionType, typing.Union):
-        errors = []
-        for option in typing.get_args(hint):
-            if option is type(None):
-                if value is None:
-                    return None
-                continue
-            try:
-                return _check(value, option, where)
-            except ProtocolError as exc:
-                errors.append(str(exc))
-        raise ProtocolError(errors[0] if errors else f"{where}: must be null")
-    if hint is bool:
-        if not isinstance(value, bool):
-            raise ProtocolError(f"{where}: must be true or false, not {value!r}")
-        return value
-    if hint is int:
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise ProtocolError(f"{where}: must be an integer, not {value!r}")
-        return value
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ProtocolError(f"{where}: must be a number, not {value!r}")
-        value = float(value)
-        if math.isnan(value):
-            raise ProtocolError(f"{where}: must not be NaN")
-        return value
-    if hint is str:
-        if not isinstance(value, str):
-            raise ProtocolError(f"{where}: must be a string, not {value!r}")
-        return value
-    if hint is dict:
-        if not isinstance(value, dict):
-            raise ProtocolError(f"{where}: must be a map")
-        return value
+        options = [_checker(o) for o in typing.get_args(hint) if o is not type(None)]
+        nullable = type(None) in typing.get_args(hint)
+
+        def union(value: Any) -> Any:
+            if nullable and value is None:
+                return None
+            first = None
+            for option in options:
+                try:
+                    return option(value)
+                except _Invalid as exc:
+                    first = first or exc
+            raise first or _Invalid("must be null")
+        return union
+    if hint in _SCALARS:
+        return _SCALARS[hint]
     if origin is list:
-        if not isinstance(value, list | tuple):
-            raise ProtocolError(f"{where}: must be a list")
         (item,) = typing.get_args(hint)
-        return [_check(v, item, f"{where}[{i}]") for i, v in enumerate(value)]
+        check_item = _checker(item)
+
+        def listed(value: Any) -> list:
+            if not isinstance(value, list | tuple):
+                raise _Invalid("must be a list")
+            return [_item(check_item, v, i) for i, v in enumerate(value)]
+        return listed
     if origin is tuple:
-        items = typing.get_args(hint)
-        if not isinstance(value, list | tuple) or len(value) != len(items):
-            raise ProtocolError(f"{where}: must be a list of {len(items)} items")
-        return tuple(_check(v, h, f"{where}[{i}]") for i, (v, h) in
-                     enumerate(zip(value, items, strict=True)))
-    raise ProtocolError(f"{where}: unsupported type {hint!r}")  # pragma: no cover
+        items = tuple(_checker(h) for h in typing.get_args(hint))
+
+        def tupled(value: Any) -> tuple:
+            if not isinstance(value, list | tuple) or len(value) != len(items):
+                raise _Invalid(f"must be a list of {len(items)} items")
+            return tuple(_item(check, v, i) for i, (v, check) in
+                         enumerate(zip(value, items, strict=True)))
+        return tupled
+    raise TypeError(f"unsupported type {hint!r} in a message")  # pragma: no cover
+
+
+def _item(check: Checker, value: Any, index: int) -> Any:
+    try:
+        return check(value)
+    except _Invalid as exc:
+        raise _Invalid(exc.what, f"[{index}]{exc.below}") from None
+
+
+def _bool(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise _Invalid(f"must be true or false, not {value!r}")
+    return value
+
+
+def _int(value: Any) -> int:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise _Invalid(f"must be an integer, not {value!r}")
+    return value
+
+
+def _float(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise _Invalid(f"must be a number, not {value!r}")
+    value = float(value)
+    if math.isnan(value):
+        raise _Invalid("must not be NaN")
+    return value
+
+
+def _str(value: Any) -> str:
+    if not isinstance(value, str):
+        raise _Invalid(f"must be a string, not {value!r}")
+    return value
+
+
+def _dict(value: Any) -> dict:
+    if not isinstance(value, dict):
+        raise _Invalid("must be a map")
+    return value
+
+
+_SCALARS: dict[Any, Checker] = {bool: _bool, int: _int, float: _float, str: _str, dict: _dict}
