@@ -71,6 +71,7 @@ LATE_S = 0.3  # an instant handled this much wall time after it came is late
 AGENT_BACK_S = 60.0  # for a restarted agent to come up (a fresh process on a busy machine)
 # After a silence shorter than the lease, its end may still cost the session (the router
 # hears the next keep-alive, a quarter lease later, too late): trusted again after this.
+# Every process of a run keeps the default lease (fleet/runtime/bus.py).
 SILENCE_SETTLES_S = 1.5 * LEASE_MS / 1000
 Answer = TypeVar("Answer", CellReply, RouteReply)
 

@@ -80,6 +80,8 @@ def test_a_scenario_says_when_the_clock_must_stop_and_what_happens_there():
      "factor must be between 1 and 1000"),
     ("[[fault]]\nkind = 'kill_service'\nat = 1\nservice = 'router'",
      "service 'router' is not one of"),
+    ("[[fault]]\nkind = 'kill_service'\nat = 1\nservice = 'reservation'\ndowntime = 20",
+     "downtime must be at most 10 wall seconds"),
     ("[[fault]]\nkind = 'close_zone'\nat = 1\nduration = 5\ncells = '1;2'",
      "is not a cell"),
     ("[[fault]]\nkind = 'close_zone'\nat = 1\nduration = 5\ncells = 3", "cells must be"),

@@ -279,7 +279,7 @@ def test_lane_agvs_take_a_masters_orders_and_swap_two_shelves(agv_session):
 
 
 @pytest.fixture
-def fast_agv_session(tmp_path, broker) -> Iterator[Session]:
+def real_time_agv_session(tmp_path, broker) -> Iterator[Session]:
     # Real time: the crossing below needs AGV 2's leg to start less than about 3 s of sim
     # time after AGV 1's (measured: 0.01 to 2.7 s postpone, 3.6 s does not). At speed 6, and
     # once at speed 3 (0.5 and 1 s of wall time), the whole suite's load let the master's
@@ -288,14 +288,14 @@ def fast_agv_session(tmp_path, broker) -> Iterator[Session]:
         yield running
 
 
-def test_a_lane_agv_whose_leg_another_postpones_drives_the_postponed_leg(fast_agv_session):
+def test_a_lane_agv_whose_leg_another_postpones_drives_the_postponed_leg(real_time_agv_session):
     """Seed 002's collision rules settle a crossing by putting waits into a leg already
     committed: AGV 1 leaves pile c24 for slot s-8-23, and AGV 2, sent from pile c21 to slot
     s-28-14 once AGV 1 drives (its leg starting less than 3 s of sim time later, which is
     what the rules settle so), postpones AGV 1's leg. The gateway tells AGV 1's agent, which drives
     the postponed leg (recorded as the leg it commits), both orders finish, and the recording
     passes every verdict, the lanes' included."""
-    s = fast_agv_session
+    s = real_time_agv_session
     s.send_order(1, order("p1", ["pile-c9", "pile-c24"], layout="paper002"), 1)
     s.send_order(2, order("p2", ["pile-c25", "pile-c21"], layout="paper002"), 2)
     for vehicle, order_id in ((1, "p1"), (2, "p2")):

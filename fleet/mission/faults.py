@@ -76,6 +76,9 @@ KINDS: dict[FaultKind, KindSpec] = {
 }
 VEHICLE_KINDS = {k for k, spec in KINDS.items() if "vehicle" in spec.required}
 DEFAULT_DOWNTIME_S = 1.0
+# A killed service's clients retry their requests for 15 s (Requester.retry_s in
+# fleet/runtime/bus.py): a longer downtime would fail the run, not test its recovery.
+MAX_DOWNTIME_S = 10.0
 # A fault the dispatcher has not seen this many wall seconds after it happened was not
 # detected: the run fails (and `fleet bench faults` counts no sighting later than that).
 DETECT_TIMEOUT_S = 20.0
@@ -201,6 +204,10 @@ def _fault(data: dict, where: str) -> Fault:
         fields["duration"] = _seconds(data["duration"], f"{where}: duration")
     if "downtime" in data:
         fields["downtime"] = _seconds(data["downtime"], f"{where}: downtime", zero=True)
+        if fields["downtime"] > MAX_DOWNTIME_S:
+            raise ScenarioError(f"{where}: downtime must be at most {MAX_DOWNTIME_S:g} wall "
+                                f"seconds (the clients of a killed service retry for 15 s), "
+                                f"not {fields['downtime']:g}")
     if "factor" in data:
         factor = _number(data["factor"], f"{where}: factor")
         if not 1.0 <= factor <= 1000.0:

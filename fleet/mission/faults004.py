@@ -84,3 +84,5 @@ def apply_faults(tracker: Tracker, faults: Sequence[Fault]) -> None:
         elif fault.kind is FaultKind.CLOSE_ZONE:
             tracker.close_zone([floor_xy(tracker.floor, c) for c in fault.cells], fault.at,
                                fault.until)
+        else:
+            raise AssertionError(f"{fault.kind} passed check_faults004")

@@ -359,7 +359,7 @@ class BrokeDown:
     vehicle: int
     at: XY
     until: float
-    cause: str = BREAKDOWN  # or the process fault that stopped it: "agent killed"
+    cause: str = BREAKDOWN  # or the process fault: "agent killed", "agent stalled", "link lost"
 
 
 @dataclass(frozen=True)

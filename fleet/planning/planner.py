@@ -103,7 +103,6 @@ class HybridAStar:
                  times: ManeuverTimes = ManeuverTimes(),
                  params: SearchParams = SearchParams()) -> None:
         self.grid = grid
-        self.dims = dims
         self.params = params
         self.velocity = VelocityPlanner(times)
         self.move_of = move_table(dims, grid.cell_size)

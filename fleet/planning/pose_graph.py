@@ -55,7 +55,7 @@ class Components:
     def of(self, graph: Skeleton, cell: Cell, heading: int) -> int | None:
         """The pose's component; None for a pose off the map or whose body does not fit."""
         x, y = cell
-        if not (0 <= x < graph.cols and 0 <= y < graph.rows):
+        if not (0 <= x < graph.cols and 0 <= y < graph.rows and 0 <= heading < 4):
             return None
         node = (x * graph.rows + y) * 4 + heading
         return self.labels[node] if self.at_rest[node] else None

@@ -799,11 +799,16 @@ def _checked(check: Checker, value: Any, where: str) -> Any:
         raise ProtocolError(f"{where}{exc.below}: {exc.what}") from None
 
 
-@functools.cache
 def _checker(hint: Any) -> Checker:
     """A function converting a value to the type `hint` describes, or raising _Invalid:
     the hint is read once, not at every value (every message every process receives is
-    checked)."""
+    checked). Keyed by its text too: `int | float` equals `float | int`, but converts
+    otherwise."""
+    return _compiled(hint, repr(hint))
+
+
+@functools.cache
+def _compiled(hint: Any, text: str) -> Checker:
     origin = typing.get_origin(hint)
     if origin is Annotated:
         base, *validators = typing.get_args(hint)
