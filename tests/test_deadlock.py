@@ -253,7 +253,7 @@ starts = ["1,2,E", "3,2,E", "15,3,S", "8,2,N"]
 
 [bounds]
 x = [0.0, 32.0]
-y = [0.0, 10.0]
+y = [0.0, 14.0]
 
 [[cluster]]
 name = "c"
@@ -262,7 +262,7 @@ fill = ["14,0..15,0"]
 [[obstacle]]
 name = "walls"
 kind = "wall"
-cells = ["0,0..7,1", "0,3..7,4"]
+cells = ["0,0..7,1", "0,3..7,4", "0,5..15,5"]
 
 [[station]]
 name = "p1"
@@ -273,6 +273,18 @@ dock = "1,2,E"
 name = "p2"
 cell = "15,4"
 dock = "15,3,S"
+
+# Two docks behind the wall nobody can reach: four docks for four forklifts, so every one
+# of them returns at the end (a fleet larger than its docks would stay parked instead).
+[[station]]
+name = "far1"
+cell = "0,6"
+dock = "1,6,E"
+
+[[station]]
+name = "far2"
+cell = "15,6"
+dock = "14,6,W"
 """
 
 

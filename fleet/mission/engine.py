@@ -44,10 +44,10 @@ from fleet.mission.record import (
 from fleet.mission.seam import Executor, LocalExecutor, NoPacer, Pacer, Task, VehicleLost
 from fleet.mission.spec import Mission, MissionKind
 from fleet.mission.standstill import Cause, Standstill, failure_text, standstill
-from fleet.mission.step_aside import SentAside, break_deadlock
+from fleet.mission.step_aside import SIDINGS_OFFERED, SentAside, break_deadlock
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.params import DispatchParams
-from fleet.planning.blockage import Blockage
+from fleet.planning.blockage import Blockage, held_for_good
 from fleet.planning.trajectory import PlanFailure, Pose, Trajectory
 from fleet.vehicles.kind import Planner
 from fleet.wire.protocol import DeadlockSeen, DecisionFailure, Message, StackDone
@@ -176,6 +176,9 @@ class Engine:
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
         self.failed_at: dict[int, float] = {}  # the instant each vehicle last failed at
         self.asides = 0  # vehicles sent aside since the last subtask of the work
+        self.parked_held: set[int] = set()  # held back, and sent to park (or tried to)
+        self.released: set[int] = set()  # let go though the work holds them back
+        self.let_go: list[tuple[float, int]] = []  # when each was let go, in order
         # The stack (order) each subtask served, by their indices in the record: a subtask
         # postponed later (seed 002) serves it that much later.
         self.served_by: dict[int, int] = {}
@@ -193,9 +196,22 @@ class Engine:
             self.options.mlp, self.options.score_every_target))
 
     def active(self) -> list[VehicleSlot]:
-        """Vehicles with something left to do: any return, or a delivery while work waits."""
-        return [v for v in self.fleet.values() if v.vehicle not in self.faults.down and
-                self.work.busy(v.view())]
+        """Vehicles with something left to do (any return, or a delivery while work waits)
+        that the work does not hold back."""
+        busy, held = self._busy()
+        return [v for v in busy if v.vehicle not in held]
+
+    def _held_back(self) -> list[VehicleSlot]:
+        busy, held = self._busy()
+        return [v for v in busy if v.vehicle in held]
+
+    def _busy(self) -> tuple[list[VehicleSlot], frozenset[int]]:
+        """The vehicles that are up and have something left to do, and those of them the
+        work holds back (unless let go)."""
+        up = [v for v in self.fleet.values() if v.vehicle not in self.faults.down]
+        views = [v.view() for v in up]
+        busy = [v for v, view in zip(up, views, strict=True) if self.work.busy(view)]
+        return busy, self.work.held_back(views) - self.released
 
     def targets_for(self, view: VehicleView) -> list[Target]:
         """Where the forklift may go next; once the fleet is stuck, not where it failed to
@@ -271,6 +287,9 @@ class Engine:
             if t_work <= t_next and t_work < math.inf:
                 self._advance_work(t_work)
                 continue
+            for v in self._held_back():  # waits on: once let go, it is decided for from now
+                if v.t_free < t_next < math.inf:
+                    v.wait_until(t_next)
             return active or None
 
     def _advance_work(self, t: float) -> None:
@@ -296,6 +315,7 @@ class Engine:
         paced = self.pacer.before_decision(t_next, {v.vehicle: v.t_free for v in active})
         for v in active:
             v.wait_until(paced[v.vehicle])
+        self._park_held_back()
         remaining = self.work.remaining()
         outcome = self.policy.decide([v.view() for v in active], self.streak.failed,
                                      self.targets_for, remaining)
@@ -354,6 +374,47 @@ class Engine:
             self._failed_again(decision.vehicle, decision.t_i)
             self._break_deadlocks()
 
+    # -- held back (fleet/mission/work.py, `held_back`) ----------------------------------------
+    def _park_held_back(self) -> None:
+        """A vehicle the work holds back, once it stands still, goes to the nearest free
+        parking place, out of the way of the work, once for each time it is held back (if
+        none can be reached, the deadlock breaker may still move it)."""
+        held = {v.vehicle: v for v in self._held_back()}
+        self.parked_held &= set(held)
+        for vehicle, v in held.items():
+            if vehicle in self.parked_held or v.t_still > self.now:
+                continue
+            self.parked_held.add(vehicle)
+            if v.pose in self.work.parking():
+                continue
+            places = self._parking_places(v)
+            trajectory = self._send_aside(vehicle, places[:SIDINGS_OFFERED])
+            if trajectory is not None:
+                self._sent_aside(SentAside(vehicle, trajectory, vehicle), "park")
+            elif not self.work.keep_clear().isdisjoint(self.planners.get(
+                    self.work.filled).rest_cells(v.pose)):
+                self._let_go({vehicle})  # it cannot stay on a dock or a stack to do
+
+    def _let_go(self, vehicles: set[int]) -> None:
+        """Decided for though the work holds them back, until they have fetched goods."""
+        for vehicle in sorted(vehicles - self.released):
+            self.released.add(vehicle)
+            self.let_go.append((self.now, vehicle))
+
+    def _parking_places(self, v: VehicleSlot) -> tuple[Pose, ...]:
+        """The work's parking places nobody holds for good, off the cells the work still
+        needs and the ways the waiting vehicles wait on, nearest first."""
+        store = self.executor.store
+        planner = self.planners.get(self.work.filled)
+        needed = set(self.work.keep_clear()).union(
+            *(w.blockage.cells for w in self.waits.values() if w.blockage is not None))
+        free = [p for p in self.work.parking()
+                if p != v.pose and all(held_for_good(store, v.vehicle, c) is None
+                                       and c not in needed for c in planner.rest_cells(p))]
+        return tuple(sorted(free, key=lambda p: (abs(p.cell[0] - v.pose.cell[0])
+                                                 + abs(p.cell[1] - v.pose.cell[1]),
+                                                 p.cell, p.heading)))
+
     # -- deadlocks (fleet/mission/deadlock.py, fleet/mission/step_aside.py) -------------------
     def _break_deadlocks(self) -> None:
         """Once every vehicle with work had a chance to fail since the last subtask, find the
@@ -372,18 +433,36 @@ class Engine:
         idle = {v.vehicle for v in self.fleet.values()
                 if v.vehicle not in self.faults.down and v.t_still <= self.now}
         self.waits = {v: w for v, w in self.waits.items() if w.revision == store.revision}
+        held = self._busy()[1]
         for v in active:
             if v.vehicle not in idle:
                 continue
             if not self.work.targets(v.view(), poses):
-                continue  # offered nothing to do now: it cannot move by itself
+                # Offered nothing to do now: it cannot move by itself. It waits for the
+                # held-back vehicles in the way of its work, if any: they never move by
+                # themselves (any other in its way will, once it is decided for again).
+                way = self.work.in_the_way(v.view(), poses) if held else None
+                blockers = way.blockers & held if way else None
+                if blockers:
+                    idle.discard(v.vehicle)
+                    self.waits[v.vehicle] = Wait(v.vehicle, dataclasses.replace(
+                        way, blockers=blockers), store.revision)
+                    self.waiting_since.setdefault(v.vehicle, self.now)
+                continue
             idle.discard(v.vehicle)
             known = self.waits.get(v.vehicle)
             if known is None or (not known.shortest and not known.blockers
                                  and self._replanned(v.vehicle)):
                 self.waits[v.vehicle] = self._wait(v, planner, movable)
             self.waiting_since.setdefault(v.vehicle, self.now)
-        for deadlock in deadlocks(self.waits, idle, self.waiting_since):
+        # A held-back vehicle in the way that cannot step aside has the ones walling it in
+        # sent aside first: its way to another parking place.
+        held_ways = {v.vehicle: Wait(v.vehicle, planner.blockage(
+            v.vehicle, v.pose, [p for p in self.work.parking() if p != v.pose], store,
+            movable), store.revision)
+            for v in self.fleet.values() if v.vehicle in held and v.vehicle in idle}
+        found = deadlocks(self.waits, idle, self.waiting_since)
+        for deadlock in found:
             if deadlock.kind is WaitKind.WALLED:
                 if (deadlock.waiting, store.revision) not in self.said_walled:
                     self.said_walled.add((deadlock.waiting, store.revision))
@@ -391,8 +470,8 @@ class Engine:
                                             list(deadlock.chain), None, None, None))
                 continue
             waiting = self.fleet[deadlock.waiting]
-            sent = break_deadlock(deadlock, self.waits, planner, store, poses,
-                                  self.work.keep_clear(), self._send_aside,
+            sent = break_deadlock(deadlock, held_ways | self.waits, planner, store, poses,
+                                  self.work.keep_clear(), self._move_aside,
                                   lambda w=waiting: self._ways(w, planner, movable))
             if sent is not None:
                 self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
@@ -400,6 +479,12 @@ class Engine:
                                         str(sent.trajectory.goal), sent.for_vehicle))
                 self._sent_aside(sent)
                 return
+        # None could be sent aside: the held-back vehicles in the way are let go for goods,
+        # out by the way every forklift takes.
+        for deadlock in found:
+            if deadlock.kind is not WaitKind.WALLED:
+                self._let_go((set(deadlock.chain) | self.waits[deadlock.waiting].blockers)
+                             & held)
 
     def _wait(self, v: VehicleSlot, planner: Planner, movable: Callable[[int], bool]) -> Wait:
         """The vehicle's way as the wait-for graph sees it. A way that crosses nobody parked
@@ -432,6 +517,17 @@ class Engine:
         self.record.deadlocks.append(deadlock)
         self._emit(deadlock, deadlock.t)
 
+    def _move_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
+        """Out of another's way: a held-back vehicle to a parking place out of every way if
+        it can reach one, else (and any other vehicle) to the nearest siding."""
+        v = self.fleet[vehicle]
+        if vehicle in self._busy()[1]:
+            places = self._parking_places(v)[:SIDINGS_OFFERED]
+            trajectory = self._send_aside(vehicle, places) if places else None
+            if trajectory is not None:
+                return trajectory
+        return self._send_aside(vehicle, sidings)
+
     def _send_aside(self, vehicle: int, sidings: tuple[Pose, ...]) -> Trajectory | None:
         """Plan and commit the vehicle's move to the nearest siding it can reach."""
         v = self.fleet[vehicle]
@@ -448,18 +544,19 @@ class Engine:
             return None
         return result if isinstance(result, Trajectory) else None
 
-    def _sent_aside(self, sent: SentAside) -> None:
+    def _sent_aside(self, sent: SentAside, why: str = "") -> None:
         v, traj = self.fleet[sent.vehicle], sent.trajectory
         self.faults.committed(dataclasses.replace(v), traj)
         waited = sum(s.t1 - s.t0 for s in traj.steps
                      if self.vehicle_kind.is_wait(s.manner.label))
         v.step_aside(traj, waited)
         self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(v.next_task)))
-        subtask = Subtask(v.vehicle, TaskKind.ASIDE, f"aside for {sent.for_vehicle}", None,
+        subtask = Subtask(v.vehicle, TaskKind.ASIDE, why or f"aside for {sent.for_vehicle}", None,
                           None, traj.t_start, traj.t_end, traj.t_end, traj, False)
         self.record.subtasks.append(subtask)
         self._emit(subtask_event(subtask), traj.t_start)
-        self.asides += 1
+        if not why:
+            self.asides += 1
         self.streak.forget({v.vehicle})
 
     def _emit(self, message: Message, t: float) -> None:
@@ -534,6 +631,7 @@ class Engine:
                      if self.vehicle_kind.is_wait(s.manner.label))
         v.drive(decision.kind, target.name, traj, t_done, waited,
                 self.work.next_task(decision.kind))
+        self.released.discard(v.vehicle)
         self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(decision.kind),
                                                 self.work.carried_after(decision.kind)))
         subtask = Subtask(v.vehicle, decision.kind, target.name, target.stack_index,

@@ -51,6 +51,7 @@ from fleet.mission.order_log import (
 from fleet.mission.orders import Order, OrderBook, StationTrip, release_orders
 from fleet.mission.spec import Mission
 from fleet.mission.work import Reopened, StackServed
+from fleet.planning.blockage import Blockage
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import Pose, Trajectory
@@ -207,6 +208,15 @@ class OrderWork:
     def targets(self, view: VehicleView, poses: dict[int, Pose]) -> list[Target]:
         trip = self.trips.get(view.vehicle)
         return [] if trip is None else [trip]
+
+    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+        return frozenset()  # the order book hands out trips as the work arrives
+
+    def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:
+        return None
+
+    def parking(self) -> tuple[Pose, ...]:
+        return ()
 
     def loaded(self, kind: TaskKind) -> bool:
         return kind in (TaskKind.PACK, TaskKind.STOW)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Protocol
 
@@ -21,6 +22,7 @@ from fleet.dispatching.decision import Decision, Target, TaskKind, VehicleView
 from fleet.mission.battery import Battery
 from fleet.mission.spec import MissionKind
 from fleet.params import DispatchParams
+from fleet.planning.blockage import Blockage, held_for_good
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import Interval, ReservationView
 from fleet.planning.trajectory import Pose, Trajectory
@@ -90,6 +92,18 @@ class MissionWork(Protocol):
     def targets(self, view: VehicleView, poses: dict[int, Pose]) -> list[Target]:
         """Where the vehicle may go for its next subtask, in the order they are offered;
         `poses` are where every vehicle of the fleet stands (or will once it arrives)."""
+
+    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+        """The vehicles, of those that are up (`fleet`), that are to wait where they stand
+        rather than start their next subtask: none is decided for until that changes."""
+
+    def parking(self) -> tuple[Pose, ...]:
+        """Where a vehicle the work holds back waits (the nearest free place)."""
+
+    def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:
+        """When the vehicle is offered nothing to do: the vehicles standing for good where
+        they keep its work from being offered, and the cells that work needs (None: no
+        vehicle does; the wait-for graph then takes it as idle)."""
 
     @abstractmethod
     def loaded(self, kind: TaskKind) -> bool:
@@ -282,6 +296,15 @@ class StackWork(ABC):
                                       len(queue), cluster.name in self.far))
         return targets
 
+    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+        return frozenset()
+
+    def parking(self) -> tuple[Pose, ...]:
+        return self.layout.vehicle_starts
+
+    def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:
+        return None
+
     def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
         if view.next_task is TaskKind.RETURN:
             return tuple(st.dock for st in self.layout.stations)
@@ -375,41 +398,116 @@ class FillWork(StackWork):
     def _unserved(self, cell: Cell) -> None:
         self.present.discard(cell)
 
+    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+        """An empty forklift waits, parked, rather than fetch goods while as many carry or
+        fetch them as the clusters can take (one delivery each at a time), and never so
+        many that they could take every dock. Goods beyond what the clusters take wait at
+        the docks; once every dock is taken, the empty forklifts can come back to none and
+        stand, with nowhere to go, in front of the very stacks the loaded ones wait for (64
+        forklifts on 24 docks, docs/benchmarks.md). Once every stack is assigned, an empty
+        one has no goods to fetch and stays parked: the docks could not hold the whole
+        fleet. A fleet no larger than the docks never takes them all while one of its
+        forklifts is empty: it is never held back, and every forklift ends at a dock."""
+        empty = frozenset(v.vehicle for v in fleet if v.next_task is TaskKind.RETURN)
+        if len(fleet) <= len(self.layout.stations):
+            return frozenset()
+        if not self.work_left():
+            return empty
+        in_flight = len(fleet) - len(empty)
+        return empty if in_flight >= self.in_flight_limit() else frozenset()
+
+    def in_flight_limit(self) -> int:
+        """The most forklifts that may carry or fetch goods at once, when more forklifts
+        than docks."""
+        clusters = sum(1 for queue in self.queue.values() if queue)
+        return max(1, min(clusters, len(self.layout.stations) - 1))
+
+    def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:
+        """A loaded forklift offered no stack waits for the forklifts parked where they keep
+        every cluster's next stack from being offered: on the stack's cell, walled in by
+        filling it, or across every way out of its unload poses. Without these waits the
+        wait-for graph saw it as idle, and the forklifts in its way, with nothing to do
+        either, were never sent aside."""
+        if view.next_task is not TaskKind.DELIVER:
+            return None
+        planner = self.planners.get(self.filled)
+        blockers: set[int] = set()
+        cells: set[Cell] = set()
+        goal = None
+        for queue in self.queue.values():
+            if not queue:
+                continue
+            offer = self._offer(view, queue[0], poses)
+            if offer.poses:
+                return None  # offered after all
+            if offer.in_the_way:
+                blockers |= offer.in_the_way
+                unload = self.layout.unload_poses(queue[0].cell, self.present - {queue[0].cell})
+                cells |= {queue[0].cell, *(c for p in unload for c in planner.rest_cells(p)),
+                          *(c for p in unload for c in planner.exit_cells(p))}
+                goal = goal or (unload[0] if unload else None)
+        if not blockers or goal is None:
+            return None
+        return Blockage(goal, frozenset(blockers), frozenset(cells))
+
     def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
                    ) -> list[Pose]:
-        if self.store.conflict(view.vehicle, stack.cell, view.t_free, math.inf) is not None:
-            return []  # another forklift stands on or will cross the stack's cell
-        return self.poses_with_a_way_out(view.vehicle, super()._candidate(view, stack, poses),
-                                         self.present | {stack.cell}, poses)
+        return self._offer(view, stack, poses).poses
 
-    def poses_with_a_way_out(self, vehicle: int, poses: list[Pose], after: set[Cell],
-                             fleet: dict[int, Pose]) -> list[Pose]:
-        """Unload poses from which a station dock is still reachable once the stack is filled
-        (a pose beside the stack may be reachable only by sweeping the stack's own cell), and
-        that do not trap the forklift with another parked in its way; none if filling the
-        stack would wall in another forklift where it stands."""
-        others = [p for v, p in fleet.items() if v != vehicle]
-        planner = self.planners.get(frozenset(after))
+    def _offer(self, view: VehicleView, stack: Stack, fleet: dict[int, Pose]) -> Offer:
+        """The unload poses a forklift may serve the stack from: none while another forklift
+        stands on or will cross the stack's cell, or if filling the stack would wall in
+        another where it stands; else those from which a station dock is still reachable once
+        the stack is filled (a pose beside the stack may be reachable only by sweeping the
+        stack's own cell), and that do not trap the forklift with another parked in its way.
+        With them, the forklifts parked for good that keep the others from being offered."""
+        vehicle = view.vehicle
+        if self.store.conflict(vehicle, stack.cell, view.t_free, math.inf) is not None:
+            owner = held_for_good(self.store, vehicle, stack.cell)
+            return Offer([], frozenset({owner}) if owner is not None and owner > 0
+                         else frozenset())
+        planner = self.planners.get(frozenset(self.present | {stack.cell}))
         docks = {planner.component(st.dock) for st in self.layout.stations}
         now = self.planners.get(frozenset(self.present))
         docks_now = {now.component(st.dock) for st in self.layout.stations}
-        if any(planner.component(p) not in docks and now.component(p) in docks_now
-               for p in others):
-            return []
-        return [p for p in poses if planner.component(p) in docks
-                and not self._trapped(vehicle, p, planner, fleet)]
+        walled = frozenset(v for v, p in fleet.items() if v != vehicle
+                           and planner.component(p) not in docks
+                           and now.component(p) in docks_now)
+        if walled:
+            return Offer([], walled)
+        poses, in_the_way = [], set()
+        for p in self.layout.unload_poses(stack.cell, self.present - {stack.cell}):
+            if planner.component(p) not in docks:
+                continue
+            trapping = self._trapping(vehicle, p, planner, fleet)
+            if trapping:
+                in_the_way |= trapping
+            else:
+                poses.append(p)
+        return Offer(poses, frozenset(in_the_way))
 
-    def _trapped(self, vehicle: int, pose: Pose, planner: Planner,
-                 fleet: dict[int, Pose]) -> bool:
-        """Parked at `pose` once the stack is filled, every move out of it would cross a
-        forklift parked for good that could not leave either with this one there: neither
-        could ever move (a deadlock that no forklift sent aside can break)."""
+    def _trapping(self, vehicle: int, pose: Pose, planner: Planner,
+                  fleet: dict[int, Pose]) -> frozenset[int]:
+        """The forklifts parked for good across every move out of `pose` once the stack is
+        filled, if one of them could not leave either with this one there: neither could ever
+        move (a deadlock that no forklift sent aside can break). Empty: not trapped."""
         blockers = planner.exit_blockers(vehicle, pose, self.store)
         if not blockers:
-            return False
+            return frozenset()
         mine = planner.rest_cells(pose)
-        return any(planner.exit_blockers(b, fleet[b], self.store, mine) != frozenset()
-                   for b in blockers if b in fleet)
+        if any(planner.exit_blockers(b, fleet[b], self.store, mine) != frozenset()
+               for b in blockers if b in fleet):
+            return blockers
+        return frozenset()
+
+
+@dataclass(frozen=True)
+class Offer:
+    """The unload poses a stack is offered from, and the forklifts parked for good that keep
+    it from being offered from the others (or at all)."""
+
+    poses: list[Pose]
+    in_the_way: frozenset[int]
 
 
 class EmptyWork(StackWork):

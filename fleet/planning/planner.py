@@ -452,6 +452,12 @@ class HybridAStar:
         # Someone parked there for good can never be waited out.
         return all(held_for_good(store, vehicle, c) is None for c in cells)
 
+    def exit_cells(self, pose: Pose) -> frozenset[Cell]:
+        """Every cell a move out of `pose` sweeps."""
+        return frozenset(c for edge in self.edges(*pose.cell, pose.heading)
+                         if edge.kind is not Kind.STOP
+                         for c in (*edge.body_cells, *edge.end_cells))
+
     def exit_blockers(self, vehicle: int, pose: Pose, store: ReservationView,
                       also_held: Collection[Cell] = ()) -> frozenset[int] | None:
         """Who holds for good the cells of every move out of `pose` (with `also_held` held

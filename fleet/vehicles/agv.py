@@ -173,6 +173,9 @@ class LanePlanner:
     def rest_cells(self, pose: Pose) -> list[Cell]:
         return [pose.cell]
 
+    def exit_cells(self, pose: Pose) -> frozenset[Cell]:
+        return frozenset({pose.cell})
+
     def exit_blockers(self, vehicle: int, pose: Pose, store: ReservationView,
                       also_held: Collection[Cell] = ()) -> frozenset[int] | None:
         return frozenset()

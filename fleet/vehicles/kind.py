@@ -115,6 +115,10 @@ class Planner(Protocol):
         """The cells the body covers at rest at `pose` (on this planner's map)."""
         ...
 
+    def exit_cells(self, pose: Pose) -> frozenset[Cell]:
+        """Every cell a move out of `pose` sweeps."""
+        ...
+
     def exit_blockers(self, vehicle: int, pose: Pose, store: ReservationView,
                       also_held: Collection[Cell] = ()) -> frozenset[int] | None:
         """Who holds the cells of every move out of `pose` for good (with `also_held` held
