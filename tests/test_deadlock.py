@@ -274,8 +274,9 @@ name = "p2"
 cell = "15,4"
 dock = "15,3,S"
 
-# Two docks behind the wall nobody can reach: four docks for four forklifts, so every one
-# of them returns at the end (a fleet larger than its docks would stay parked instead).
+# Two docks behind the wall nobody can reach: four docks for four forklifts, so the fleet is
+# no larger than its docks and forklift 1 still returns once every stack is done (a larger
+# fleet's empty forklifts stay where they are at the end: tests/test_held_back.py).
 [[station]]
 name = "far1"
 cell = "0,6"

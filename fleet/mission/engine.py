@@ -178,7 +178,7 @@ class Engine:
         self.asides = 0  # vehicles sent aside since the last subtask of the work
         self.parked_held: set[int] = set()  # held back, and sent to park (or tried to)
         self.released: set[int] = set()  # let go though the work holds them back
-        self.let_go: list[tuple[float, int]] = []  # when each was let go, in order
+        self.let_go_at: list[tuple[float, int]] = []  # (instant, vehicle) of each let go
         # The stack (order) each subtask served, by their indices in the record: a subtask
         # postponed later (seed 002) serves it that much later.
         self.served_by: dict[int, int] = {}
@@ -204,6 +204,9 @@ class Engine:
     def _held_back(self) -> list[VehicleSlot]:
         busy, held = self._busy()
         return [v for v in busy if v.vehicle in held]
+
+    def _held(self) -> frozenset[int]:
+        return self._busy()[1]
 
     def _busy(self) -> tuple[list[VehicleSlot], frozenset[int]]:
         """The vehicles that are up and have something left to do, and those of them the
@@ -305,6 +308,9 @@ class Engine:
             self._advance_work(t_work)
         self.streak.tried = {}  # the table changes: a target that failed may not fail now
         self.waits = {}  # and who can move, whatever the table's revision says
+        self.parked_held = set()  # a park cut short may have stopped anywhere
+        for v in self._held_back():  # let go by it, decided for from its instant on
+            v.wait_until(max(v.t_free, disruption.t))
         self.faults.disrupt(disruption)
 
     def _decide(self, active: list[VehicleSlot]) -> None:
@@ -316,6 +322,9 @@ class Engine:
         for v in active:
             v.wait_until(paced[v.vehicle])
         self._park_held_back()
+        active = [v for v in active if v.vehicle not in self.faults.down]  # lost parking one
+        if not active:
+            return
         remaining = self.work.remaining()
         outcome = self.policy.decide([v.view() for v in active], self.streak.failed,
                                      self.targets_for, remaining)
@@ -381,25 +390,28 @@ class Engine:
         none can be reached, the deadlock breaker may still move it)."""
         held = {v.vehicle: v for v in self._held_back()}
         self.parked_held &= set(held)
+        in_the_way = self.work.keep_clear()
+        planner = self.planners.get(self.work.filled)
         for vehicle, v in held.items():
             if vehicle in self.parked_held or v.t_still > self.now:
                 continue
             self.parked_held.add(vehicle)
-            if v.pose in self.work.parking():
+            on_work = not in_the_way.isdisjoint(planner.rest_cells(v.pose))
+            if v.pose in self.work.parking() and not on_work:
                 continue
-            places = self._parking_places(v)
-            trajectory = self._send_aside(vehicle, places[:SIDINGS_OFFERED])
+            places = self._parking_places(v)[:SIDINGS_OFFERED]
+            trajectory = self._send_aside(vehicle, places) if places else None
             if trajectory is not None:
-                self._sent_aside(SentAside(vehicle, trajectory, vehicle), "park")
-            elif not self.work.keep_clear().isdisjoint(self.planners.get(
-                    self.work.filled).rest_cells(v.pose)):
+                self._sent_aside(SentAside(vehicle, trajectory, vehicle), "park",
+                                 breaks_deadlock=False)
+            elif on_work:
                 self._let_go({vehicle})  # it cannot stay on a dock or a stack to do
 
     def _let_go(self, vehicles: set[int]) -> None:
         """Decided for though the work holds them back, until they have fetched goods."""
         for vehicle in sorted(vehicles - self.released):
             self.released.add(vehicle)
-            self.let_go.append((self.now, vehicle))
+            self.let_go_at.append((self.now, vehicle))
 
     def _parking_places(self, v: VehicleSlot) -> tuple[Pose, ...]:
         """The work's parking places nobody holds for good, off the cells the work still
@@ -433,7 +445,7 @@ class Engine:
         idle = {v.vehicle for v in self.fleet.values()
                 if v.vehicle not in self.faults.down and v.t_still <= self.now}
         self.waits = {v: w for v, w in self.waits.items() if w.revision == store.revision}
-        held = self._busy()[1]
+        held = self._held()
         for v in active:
             if v.vehicle not in idle:
                 continue
@@ -521,7 +533,7 @@ class Engine:
         """Out of another's way: a held-back vehicle to a parking place out of every way if
         it can reach one, else (and any other vehicle) to the nearest siding."""
         v = self.fleet[vehicle]
-        if vehicle in self._busy()[1]:
+        if vehicle in self._held():
             places = self._parking_places(v)[:SIDINGS_OFFERED]
             trajectory = self._send_aside(vehicle, places) if places else None
             if trajectory is not None:
@@ -544,18 +556,20 @@ class Engine:
             return None
         return result if isinstance(result, Trajectory) else None
 
-    def _sent_aside(self, sent: SentAside, why: str = "") -> None:
+    def _sent_aside(self, sent: SentAside, why: str = "",
+                    breaks_deadlock: bool = True) -> None:
         v, traj = self.fleet[sent.vehicle], sent.trajectory
         self.faults.committed(dataclasses.replace(v), traj)
         waited = sum(s.t1 - s.t0 for s in traj.steps
                      if self.vehicle_kind.is_wait(s.manner.label))
         v.step_aside(traj, waited)
         self.drive_log[v.vehicle].append(AddLeg(traj, self.work.loaded(v.next_task)))
-        subtask = Subtask(v.vehicle, TaskKind.ASIDE, why or f"aside for {sent.for_vehicle}", None,
+        subtask = Subtask(v.vehicle, TaskKind.ASIDE, why or f"aside for {sent.for_vehicle}",
+                          None,
                           None, traj.t_start, traj.t_end, traj.t_end, traj, False)
         self.record.subtasks.append(subtask)
         self._emit(subtask_event(subtask), traj.t_start)
-        if not why:
+        if breaks_deadlock:  # what the breaker's give-up counts
             self.asides += 1
         self.streak.forget({v.vehicle})
 

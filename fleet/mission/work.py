@@ -408,9 +408,9 @@ class FillWork(StackWork):
         one has no goods to fetch and stays parked: the docks could not hold the whole
         fleet. A fleet no larger than the docks never takes them all while one of its
         forklifts is empty: it is never held back, and every forklift ends at a dock."""
-        empty = frozenset(v.vehicle for v in fleet if v.next_task is TaskKind.RETURN)
         if len(fleet) <= len(self.layout.stations):
             return frozenset()
+        empty = frozenset(v.vehicle for v in fleet if v.next_task is TaskKind.RETURN)
         if not self.work_left():
             return empty
         in_flight = len(fleet) - len(empty)
@@ -452,7 +452,7 @@ class FillWork(StackWork):
 
     def _candidate(self, view: VehicleView, stack: Stack, poses: dict[int, Pose]
                    ) -> list[Pose]:
-        return self._offer(view, stack, poses).poses
+        return list(self._offer(view, stack, poses).poses)
 
     def _offer(self, view: VehicleView, stack: Stack, fleet: dict[int, Pose]) -> Offer:
         """The unload poses a forklift may serve the stack from: none while another forklift
@@ -463,9 +463,8 @@ class FillWork(StackWork):
         With them, the forklifts parked for good that keep the others from being offered."""
         vehicle = view.vehicle
         if self.store.conflict(vehicle, stack.cell, view.t_free, math.inf) is not None:
-            owner = held_for_good(self.store, vehicle, stack.cell)
-            return Offer([], frozenset({owner}) if owner is not None and owner > 0
-                         else frozenset())
+            owner = held_for_good(self.store, vehicle, stack.cell)  # a forklift, not goods
+            return Offer((), frozenset({owner}) if owner in fleet else frozenset())
         planner = self.planners.get(frozenset(self.present | {stack.cell}))
         docks = {planner.component(st.dock) for st in self.layout.stations}
         now = self.planners.get(frozenset(self.present))
@@ -474,7 +473,7 @@ class FillWork(StackWork):
                            and planner.component(p) not in docks
                            and now.component(p) in docks_now)
         if walled:
-            return Offer([], walled)
+            return Offer((), walled)
         poses, in_the_way = [], set()
         for p in self.layout.unload_poses(stack.cell, self.present - {stack.cell}):
             if planner.component(p) not in docks:
@@ -484,7 +483,7 @@ class FillWork(StackWork):
                 in_the_way |= trapping
             else:
                 poses.append(p)
-        return Offer(poses, frozenset(in_the_way))
+        return Offer(tuple(poses), frozenset(in_the_way))
 
     def _trapping(self, vehicle: int, pose: Pose, planner: Planner,
                   fleet: dict[int, Pose]) -> frozenset[int]:
@@ -506,7 +505,7 @@ class Offer:
     """The unload poses a stack is offered from, and the forklifts parked for good that keep
     it from being offered from the others (or at all)."""
 
-    poses: list[Pose]
+    poses: tuple[Pose, ...]
     in_the_way: frozenset[int]
 
 
