@@ -42,8 +42,9 @@ def views(next_tasks: list[TaskKind]) -> list[VehicleView]:
             for i, task in enumerate(next_tasks)]
 
 
-def held(work: FillWork, view: VehicleView, fleet: list[VehicleView]) -> bool:
-    return view.vehicle in work.held_back(fleet)
+def held(work: FillWork, view: VehicleView, fleet: list[VehicleView], down: int = 0) -> bool:
+    """Whether `view` is held back, with `fleet` up and `down` more forklifts down."""
+    return view.vehicle in work.held_back(fleet, len(fleet) + down)
 
 
 def test_an_empty_forklift_waits_while_the_goods_in_flight_reach_the_limit():
@@ -83,6 +84,8 @@ def test_a_fleet_no_larger_than_its_docks_is_never_held_back():
     assert len(fleet) == len(CROWDED.stations) == 12
     assert not held(work, fleet[-1], fleet)
     assert held(work, fleet[-1], fleet + views([TaskKind.DELIVER] * 13)[12:])
+    # A thirteenth forklift down still counts: it comes back, and the rules do not change.
+    assert held(work, fleet[-1], fleet, down=1)
 
 
 def test_a_fleet_larger_than_its_docks_fills_a_floor_where_it_wedged():

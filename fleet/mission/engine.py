@@ -214,7 +214,7 @@ class Engine:
         up = [v for v in self.fleet.values() if v.vehicle not in self.faults.down]
         views = [v.view() for v in up]
         busy = [v for v, view in zip(up, views, strict=True) if self.work.busy(view)]
-        return busy, self.work.held_back(views) - self.released
+        return busy, self.work.held_back(views, len(self.fleet)) - self.released
 
     def targets_for(self, view: VehicleView) -> list[Target]:
         """Where the forklift may go next; once the fleet is stuck, not where it failed to

@@ -209,7 +209,7 @@ class OrderWork:
         trip = self.trips.get(view.vehicle)
         return [] if trip is None else [trip]
 
-    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+    def held_back(self, fleet: Sequence[VehicleView], size: int) -> frozenset[int]:
         return frozenset()  # the order book hands out trips as the work arrives
 
     def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:

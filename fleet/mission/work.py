@@ -93,9 +93,10 @@ class MissionWork(Protocol):
         """Where the vehicle may go for its next subtask, in the order they are offered;
         `poses` are where every vehicle of the fleet stands (or will once it arrives)."""
 
-    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+    def held_back(self, fleet: Sequence[VehicleView], size: int) -> frozenset[int]:
         """The vehicles, of those that are up (`fleet`), that are to wait where they stand
-        rather than start their next subtask: none is decided for until that changes."""
+        rather than start their next subtask: none is decided for until that changes.
+        `size`: the whole fleet's, those down included (they come back)."""
 
     def parking(self) -> tuple[Pose, ...]:
         """Where a vehicle the work holds back waits (the nearest free place)."""
@@ -296,7 +297,7 @@ class StackWork(ABC):
                                       len(queue), cluster.name in self.far))
         return targets
 
-    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+    def held_back(self, fleet: Sequence[VehicleView], size: int) -> frozenset[int]:
         return frozenset()
 
     def parking(self) -> tuple[Pose, ...]:
@@ -398,7 +399,7 @@ class FillWork(StackWork):
     def _unserved(self, cell: Cell) -> None:
         self.present.discard(cell)
 
-    def held_back(self, fleet: Sequence[VehicleView]) -> frozenset[int]:
+    def held_back(self, fleet: Sequence[VehicleView], size: int) -> frozenset[int]:
         """An empty forklift waits, parked, rather than fetch goods while as many carry or
         fetch them as the clusters can take (one delivery each at a time), and never so
         many that they could take every dock. Goods beyond what the clusters take wait at
@@ -407,8 +408,11 @@ class FillWork(StackWork):
         forklifts on 24 docks, docs/benchmarks.md). Once every stack is assigned, an empty
         one has no goods to fetch and stays parked: the docks could not hold the whole
         fleet. A fleet no larger than the docks never takes them all while one of its
-        forklifts is empty: it is never held back, and every forklift ends at a dock."""
-        if len(fleet) <= len(self.layout.stations):
+        forklifts is empty: it is never held back, and every forklift ends at a dock. The
+        whole fleet counts, those down too: a forklift down comes back, and the rules do
+        not change with a fault. (Every dock counts: a layout that passes `fleet layout
+        check` reaches every stack from every dock.)"""
+        if size <= len(self.layout.stations):
             return frozenset()
         empty = frozenset(v.vehicle for v in fleet if v.next_task is TaskKind.RETURN)
         if not self.work_left():
