@@ -104,8 +104,7 @@ def test_a_hosts_file_that_is_no_toml_or_missing_is_refused(tmp_path):
         load_hosts(hosts_file(tmp_path, 'host = "a"\n'), 4)
     with pytest.raises(HostsError, match="No such file"):
         load_hosts(tmp_path / "none.toml", 4)
-    with pytest.raises(HostsError, match="--secure runs on one host"):
-        hosts_for(hosts_file(tmp_path, TWO_HOSTS), 4, secure=True)
+    assert hosts_for(None, 4) is None
 
 
 def test_a_host_cut_is_lived_as_the_cut_links_of_its_forklifts(tmp_path):
@@ -139,7 +138,6 @@ def test_fleet_run_refuses_hosts_with_what_runs_on_one_host_alone(tmp_path, caps
     path = hosts_file(tmp_path, TWO_HOSTS)
     for extra, said in ((["--inprocess"], "takes no --hosts"),
                         (["--port", "7999"], "gives each host's router its port"),
-                        (["--secure"], "--secure runs on one host"),
                         (["--vehicles", "2"], "vehicle 3: the run has forklifts 1 to 2")):
         assert main(["run", "--layout", "paper", "--vehicles", "4", "--hosts", str(path), "--out",
                      str(tmp_path / "out"), *extra]) == 2
@@ -213,3 +211,24 @@ def test_a_host_cut_off_is_survived_like_the_cut_links_of_its_forklifts(tmp_path
     assert report.passed and report.stacks_done == 136, report.verdict_lines()
     assert {m.vehicle for _, m in recording.of(Halt)} >= {3, 4}
     assert {m.vehicle for _, m in recording.of(Resume)} == {3, 4}
+
+
+def test_a_secure_fleet_on_three_hosts_records_what_one_host_records(tmp_path):
+    """Every host's router checks its own clients' logins and rules; the routers link with
+    the run's logins and ids (tests/test_secure_hosts.py proves the links' rules)."""
+    summary, out = run_on_hosts(tmp_path, ["--secure"])
+    assert summary["verdicts"]["passed"] and summary["stacks_done"] == 136
+    assert summary["digest"] == reference_digest(None)
+    secrets = out / "secrets"
+    assert {p.name for p in secrets.glob("acl*.json")} == {
+        "acl.json", "acl-b.json", "acl-c.json"}
+    # The first host's router takes the others' links by login and id, theirs the first's
+    # by its id: the run reached every host, so each link was taken so.
+    linked = [s for s in json.loads((secrets / "acl.json").read_text())["subjects"]
+              if "zids" in s]
+    assert sorted(s.get("usernames", [""])[0] for s in linked) == ["router-b", "router-c"]
+    for name in ("b", "c"):
+        (first,) = [s for s in json.loads((secrets / f"acl-{name}.json").read_text())[
+            "subjects"] if "zids" in s]
+        assert "usernames" not in first and first["zids"][0] not in {
+            z for s in linked for z in s["zids"]}

@@ -48,6 +48,13 @@ vehicles, the dispatcher and the gateway get only what that run uses:
   the mission's table itself), no states or faults (a lifting AGV sends none).
 - `vda5050`: nothing (no gateway runs on a seed-004 floor).
 
+On several hosts (fleet/runtime/hosts.py) every host's router checks its own clients as
+above, and the routers trust each other with everything of the run, since each has checked
+what it forwards: the first host's router takes the link of another host's router when it
+logs in as `router-NAME` *and* has that router's zenoh id; another host's router takes the
+first's by its zenoh id alone (zenoh 1.10's accepting router presents no login, tested). The
+run draws the ids at random and keeps them with the logins, readable by its owner only.
+
 What the router sends to a client (flow "egress") is allowed for everyone on the whole run:
 a client only gets what it subscribed to or asked for, which ingress already decides. It
 must be allowed: a publisher sends nothing until the router has told it of a matching
@@ -59,6 +66,7 @@ from __future__ import annotations
 import json
 import os
 import secrets
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -107,10 +115,18 @@ class Credentials:
         return self.logins[vehicle_sender(vehicle)]
 
 
-def generate_credentials(run: str, vehicles: int) -> Credentials:
+def generate_credentials(run: str, vehicles: int, routers: Sequence[str] | None = None
+                         ) -> Credentials:
+    """A random password for each principal of a run of `vehicles`, or (`routers`) for each
+    of these other hosts' routers."""
+    names = principals(vehicles) if routers is None else list(routers)
     # token_urlsafe: letters, digits, - and _; never the ':' that ends a user in the dictionary
-    return Credentials(run, {name: Login(name, secrets.token_urlsafe(24))
-                             for name in principals(vehicles)})
+    return Credentials(run, {name: Login(name, secrets.token_urlsafe(24)) for name in names})
+
+
+def random_zid() -> str:
+    """A zenoh id no one can guess (128 bits, the top one set: zenoh refuses a leading 0)."""
+    return format(secrets.randbits(128) | 1 << 127, "032x")
 
 
 def write_private(path: str | Path, text: str) -> Path:
@@ -227,14 +243,34 @@ def _lifting_grants(root: str, vehicles: int) -> Grants:
     return grants
 
 
-def router_acl(keys_root: str, vehicles: int, lifting: bool = False) -> dict:
+@dataclass(frozen=True)
+class LinkedRouter:
+    """Another host's router, as this one's access control knows it: by its zenoh id and,
+    when it logs in here, its user name ("": it does not)."""
+
+    zid: str
+    user: str = ""
+
+
+def router_acl(keys_root: str, vehicles: int, lifting: bool = False,
+               linked: tuple[LinkedRouter, ...] = ()) -> dict:
     """The router's `access_control` section for one run (keys_root: `fleet/<run>`): deny
     by default; each principal's user name may send what `_grants` lists, and receive
-    anything of the run. `lifting`: the vehicles are seed 004's lifting AGVs."""
+    anything of the run. `lifting`: the vehicles are seed 004's lifting AGVs. `linked`: the
+    other hosts' routers, which may send anything of the run (their own access control
+    checked it)."""
     rules = [{"id": "egress", "messages": list(MESSAGES), "flows": ["egress"],
               "permission": "allow", "key_exprs": [f"{keys_root}/**"]}]
     subjects = []
     policies = []
+    if linked:
+        rules.append({"id": "routers", "messages": list(MESSAGES), "flows": ["ingress"],
+                      "permission": "allow", "key_exprs": [f"{keys_root}/**"]})
+        for router in linked:  # every listed property must match (a login and its id)
+            name = f"router {router.zid}"
+            subjects.append({"id": name, "zids": [router.zid],
+                             **({"usernames": [router.user]} if router.user else {})})
+            policies.append({"id": name, "rules": ["routers", "egress"], "subjects": [name]})
     for principal, grants in _grants(keys_root, vehicles, lifting).items():
         ids = []
         for i, (messages, key_exprs) in enumerate(grants):

@@ -102,16 +102,22 @@ class BusFlags:
 
     def login(self) -> tuple[str, str]:
         """The (user, password) the flags name; a user without its password is refused."""
-        if not self.user:
-            return "", ""
-        if self.password_file is None:
-            raise UserError(f"--user {self.user} needs --password-file")
-        try:
-            return self.user, self.password_file.read_text().strip()
-        except OSError as exc:
-            raise UserError(f"--password-file {self.password_file}: {exc.strerror}") from None
-        except UnicodeDecodeError:
-            raise UserError(f"--password-file {self.password_file}: not UTF-8 text") from None
+        return read_login(self.user, self.password_file)
+
+
+def read_login(user: str, password_file: Path | None) -> tuple[str, str]:
+    """The (user, password) that `--user` and `--password-file` name ("", "": no login); a
+    user without its password is refused."""
+    if not user:
+        return "", ""
+    if password_file is None:
+        raise UserError(f"--user {user} needs --password-file")
+    try:
+        return user, password_file.read_text().strip()
+    except OSError as exc:
+        raise UserError(f"--password-file {password_file}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UserError(f"--password-file {password_file}: not UTF-8 text") from None
 
 
 def add_mission_args(p: argparse.ArgumentParser) -> None:

@@ -44,10 +44,13 @@ class BusConfig:
     password: str = ""
     acl: dict | None = None  # a router: enforce this access control ...
     users_file: str = ""  # ... and authenticate sessions against this dictionary
+    zid: str = ""  # its zenoh id (hex; "": zenoh draws one), which linked routers know it by
 
     def zenoh_config(self) -> zenoh.Config:
         config = zenoh.Config()
         config.insert_json5("mode", json.dumps(self.mode))
+        if self.zid:
+            config.insert_json5("id", json.dumps(self.zid))
         config.insert_json5("scouting/multicast/enabled", "false")  # loopback and named hosts
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))

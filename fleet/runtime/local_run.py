@@ -26,9 +26,11 @@ from fleet.recording.rundir import fresh
 from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
     OPERATOR,
+    LinkedRouter,
+    dictionary_text,
     generate_credentials,
+    random_zid,
     router_acl,
-    write_dictionary,
     write_private,
 )
 from fleet.runtime.args import BusFlags
@@ -41,7 +43,7 @@ from fleet.runtime.bus import (
     free_port,
     open_session,
 )
-from fleet.runtime.hosts import Hosts, cut_links, one_host
+from fleet.runtime.hosts import Host, Hosts, cut_links, one_host
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
@@ -137,23 +139,47 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
 
 class Secrets:
     """A secure run's logins (fleet/runtime/access.py), kept in the run directory readable by its
-    owner only: the router's dictionary and access control, one password file each
-    (`lifting`: the access control of seed 004's lifting AGVs)."""
+    owner only: the routers' dictionary, one password file each, and each host's router its
+    access control and zenoh id (`lifting`: the access control of seed 004's lifting AGVs).
+    Another host's router logs in to the first host's under its process name (router-NAME)."""
 
-    def __init__(self, folder: Path, run: str, root: str, vehicles: int,
+    def __init__(self, folder: Path, run: str, root: str, vehicles: int, hosts: Hosts,
                  lifting: bool = False) -> None:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         self.folder = folder
+        self.hosts = hosts
         credentials = generate_credentials(run, vehicles)
-        self.logins = credentials.logins
-        self.users = write_dictionary(credentials, folder / "users.txt")
-        self.acl = folder / "acl.json"
-        self.acl.write_text(json.dumps(router_acl(root, vehicles, lifting), indent=1))
+        linked = [hosts.router_name(h) for h in hosts.hosts[1:]]
+        self.logins = {**credentials.logins,
+                       **generate_credentials(run, 0, linked).logins}
+        self.users = write_private(folder / "users.txt", dictionary_text(self.logins.values()))
+        self.zids = {h.name: random_zid() for h in hosts.hosts} if linked else {}
+        first = hosts.first
+        for host in hosts.hosts:
+            others = tuple(LinkedRouter(self.zids[h.name], hosts.router_name(h))
+                           for h in hosts.hosts[1:]) if host == first else \
+                ((LinkedRouter(self.zids[first.name]),) if linked else ())
+            write_private(self.acl(host), json.dumps(router_acl(root, vehicles, lifting,
+                                                                others), indent=1))
         for name, login in self.logins.items():
             write_private(folder / f"{name}.password", login.password)
 
     def password_file(self, principal: str) -> Path:
         return self.folder / f"{principal}.password"
+
+    def acl(self, host: Host) -> Path:
+        """The access control of the host's router."""
+        return self.folder / ("acl.json" if host == self.hosts.first
+                              else f"acl-{host.name}.json")
+
+    def router(self, host: Host, config: RouterConfig) -> RouterConfig:
+        """The host's router `config`, secured: its access control, the dictionary, its id,
+        and on another host than the first the login it links with."""
+        login = {} if host == self.hosts.first else {
+            "user": self.hosts.router_name(host),
+            "password_file": self.password_file(self.hosts.router_name(host))}
+        return dataclasses.replace(config, acl=self.acl(host), users=self.users,
+                                   zid=self.zids.get(host.name, ""), **login)
 
 
 def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None = None,
@@ -190,7 +216,7 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                        f"{spec.faults.name}, each host cut as a cut of its "
                                        f"forklifts' links"))
         spec = dataclasses.replace(spec, faults_source=str(lived))
-    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles,
+    secrets = Secrets(spec.run_dir / "secrets", spec.run, keys.root, spec.vehicles, hosts,
                       lifting=load_layout(spec.mission.layout).floor is not None) \
         if spec.secure else None
     recorded = threading.Event()  # the recorder holds the mission's result
@@ -234,13 +260,15 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             broker = start_mosquitto(log_dir / "mosquitto", mqtt_host_port(spec.mqtt)[1])
         for proxy in (*proxies.values(), *host_links.values()):
             proxy.start()
-        router = launcher.start("router", RouterConfig(
-            (endpoint,), acl=secrets.acl if secrets else None,
-            users=secrets.users if secrets else None).argv())
+        def router_config(host: Host, connect: tuple[str, ...]) -> RouterConfig:
+            config = RouterConfig((host.endpoint,), connect)
+            return secrets.router(host, config) if secrets else config
+
+        router = launcher.start("router", router_config(hosts.first, ()).argv())
         for host in hosts.hosts[1:]:  # linked to the first host's, through a fault's forwarder
             link = host_links[host.name].endpoint if host.name in host_links else endpoint
-            launcher.start(hosts.router_name(host),
-                           RouterConfig((host.endpoint,), (link,)).argv(), host.exec)
+            launcher.start(hosts.router_name(host), router_config(host, (link,)).argv(),
+                           host.exec)
         operator = secrets.logins[OPERATOR] if secrets else None
         session = _open_when_up(BusConfig("client", (endpoint,),
                                           user=operator.user if operator else "",

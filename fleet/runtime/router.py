@@ -12,6 +12,7 @@ import time
 import zenoh
 
 from fleet.errors import UserError
+from fleet.runtime.args import read_login
 from fleet.runtime.bus import BusConfig, open_session
 from fleet.runtime.lifecycle import stop_on_signals
 from fleet.runtime.process_configs import RouterConfig
@@ -75,8 +76,10 @@ def serve(config: RouterConfig) -> int:
             acl = json.loads(config.acl.read_text())
         except (OSError, ValueError) as exc:
             raise UserError(f"--acl {config.acl}: {exc}") from None
+    user, password = read_login(config.user, config.password_file)
     with open_session(BusConfig("router", config.connect, config.endpoints, acl=acl,
-                                users_file=str(config.users or ""))) as session:
+                                users_file=str(config.users or ""), zid=config.zid,
+                                user=user, password=password)) as session:
         clients = Clients(session)
         with clients.listener:
             log.info("routing on %s", ", ".join(config.endpoints))

@@ -1,0 +1,150 @@
+"""`fleet run --secure` on several hosts (fleet/runtime/access.py `LinkedRouter`, the run's
+`Secrets`): each host's router still checks its own clients, and the routers take each
+other's link only with a login and a zenoh id of the run's. Two router processes on loopback
+ports stand for two hosts here, configured as `fleet run` configures them;
+tests/test_multi_host.py runs a whole secure mission on network-namespace hosts."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import zenoh
+from test_access import Inbox, ask
+
+from fleet.runtime.access import random_zid
+from fleet.runtime.bus import BusConfig, free_port, open_session
+from fleet.runtime.hosts import Host, Hosts, load_hosts
+from fleet.runtime.local_run import Secrets
+from fleet.runtime.process_configs import RouterConfig
+from fleet.wire.topics import DISPATCHER, RECORDER, RESERVATION, Keys, vehicle_sender
+
+HOSTS = """
+[[host]]
+name = "a"
+address = "127.0.0.1"
+port = {a}
+vehicles = [1]
+
+[[host]]
+name = "b"
+address = "127.0.0.1"
+port = {b}
+vehicles = [2]
+"""
+ROUTE_S = 20.0  # a route across both routers is up within this (some 100 ms here)
+
+
+def until(done: Callable[[], bool], what: str) -> None:
+    """Try `done` until it holds: the routers tell each other of subscribers and queryables
+    on their own time, and a put before that reaches no one."""
+    deadline = time.monotonic() + ROUTE_S
+    while not done():
+        assert time.monotonic() < deadline, f"not within {ROUTE_S} s: {what}"
+
+
+@dataclass
+class Linked:
+    hosts: Hosts
+    secrets: Secrets
+    keys: Keys
+    sessions: list[zenoh.Session]
+
+    def login(self, principal: str, host: Host) -> zenoh.Session:
+        """A client of the host's router, logged in as `principal`."""
+        session = open_session(BusConfig(
+            "client", (host.endpoint,), connect_timeout_ms=10_000, user=principal,
+            password=self.secrets.logins[principal].password))
+        self.sessions.append(session)
+        return session
+
+
+@pytest.fixture
+def linked(tmp_path: Path) -> Iterator[Linked]:
+    path = tmp_path / "hosts.toml"
+    path.write_text(HOSTS.format(a=free_port(), b=free_port()))
+    hosts = load_hosts(path, 2)
+    keys = Keys("securehosts")
+    secrets = Secrets(tmp_path / "secrets", keys.run, keys.root, 2, hosts)
+    a, b = hosts.hosts
+    routers = []
+    for host, connect in ((a, ()), (b, (a.endpoint,))):
+        config = secrets.router(host, RouterConfig((host.endpoint,), connect))
+        with open(tmp_path / f"router-{host.name}.log", "wb") as log:
+            routers.append(subprocess.Popen([sys.executable, "-m", "fleet", *config.argv()],
+                                            stdout=log, stderr=subprocess.STDOUT))
+    running = Linked(hosts, secrets, keys, [])
+    try:
+        yield running
+    finally:
+        for session in running.sessions:  # before the routers: see fleet/runtime/router.py
+            session.close()
+        for router in routers:
+            router.terminate()
+            assert router.wait(timeout=30) == 0
+
+
+def test_secure_routers_of_two_hosts_carry_the_run_both_ways_and_still_check_their_clients(
+        linked: Linked):
+    a, b = linked.hosts.hosts
+    keys = linked.keys
+    dispatcher = linked.login(DISPATCHER, a)
+    states = Inbox()
+    dispatcher.declare_subscriber(f"{keys.root}/vehicle/*/state", states)
+    dispatcher.declare_queryable(keys.dispatch_mission,
+                                 lambda q: q.reply(keys.dispatch_mission, "the mission"))
+    # From host b to host a: a query and its reply, and a forklift's states.
+    recorder = linked.login(RECORDER, b)
+    until(lambda: ask(recorder, keys.dispatch_mission) == ["the mission"],
+          "the recorder on b asks the dispatcher on a")
+    forklift = linked.login(vehicle_sender(2), b)
+    n = 0
+
+    def forged_then_own() -> bool:
+        nonlocal n
+        n += 1
+        forklift.put(keys.vehicle_state(1), f"forged {n}")  # posing as forklift 1
+        forklift.put(keys.vehicle_state(2), f"own {n}")
+        return states.wait_for(f"own {n}")
+
+    until(forged_then_own, "forklift 2 on b reaches the dispatcher on a")
+    # Host b's router dropped what its client may not send: nothing forged came across.
+    assert not [p for p in states.payloads() if p.startswith("forged")]
+    # From host a to host b: the table's changes.
+    changes = Inbox()
+    forklift.declare_subscriber(keys.reservation_change, changes)
+    service = linked.login(RESERVATION, a)
+    m = 0
+
+    def change() -> bool:
+        nonlocal m
+        m += 1
+        service.put(keys.reservation_change, f"change {m}")
+        return changes.wait_for(f"change {m}")
+
+    until(change, "the reservation service on a reaches forklift 2 on b")
+
+
+def test_a_router_with_the_login_of_another_hosts_but_not_its_id_gets_nothing(linked: Linked):
+    a, b = linked.hosts.hosts
+    keys = linked.keys
+    dispatcher = linked.login(DISPATCHER, a)
+    dispatcher.declare_queryable(keys.dispatch_mission,
+                                 lambda q: q.reply(keys.dispatch_mission, "the mission"))
+    recorder = linked.login(RECORDER, b)
+    until(lambda: ask(recorder, keys.dispatch_mission) == ["the mission"],
+          "the recorder on b asks the dispatcher on a")  # what host b's router gets
+    name = linked.hosts.router_name(b)
+    rogue = open_session(BusConfig(
+        "router", (a.endpoint,), (f"tcp/127.0.0.1:{free_port()}",), zid=random_zid(),
+        user=name, password=linked.secrets.logins[name].password))
+    linked.sessions.append(rogue)
+    zid_a = linked.secrets.zids[a.name]
+    until(lambda: zid_a in {str(z) for z in rogue.info.routers_zid()},
+          "the rogue router is linked to a")
+    assert ask(rogue, keys.dispatch_mission) == []
