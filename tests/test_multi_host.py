@@ -213,22 +213,27 @@ def test_a_host_cut_off_is_survived_like_the_cut_links_of_its_forklifts(tmp_path
     assert {m.vehicle for _, m in recording.of(Resume)} == {3, 4}
 
 
-def test_a_secure_fleet_on_three_hosts_records_what_one_host_records(tmp_path):
-    """Every host's router checks its own clients' logins and rules; the routers link with
-    the run's logins and ids (tests/test_secure_hosts.py proves the links' rules)."""
-    summary, out = run_on_hosts(tmp_path, ["--secure"])
+def test_a_secure_fleet_on_three_hosts_survives_a_host_cut_off_as_on_one_host(tmp_path):
+    """Every host's router checks its own clients' logins and rules; the routers link over
+    TLS with the run's certificates, and the first host's takes the others' logins too
+    (tests/test_secure_hosts.py proves the links' rules). Host c, cut off and back, links
+    again through its forwarder."""
+    (tmp_path / "cut.toml").write_text(CUT_B.replace('host = "b"', 'host = "c"'))
+    summary, out = run_on_hosts(tmp_path, ["--secure", "--faults", str(tmp_path / "cut.toml")])
     assert summary["verdicts"]["passed"] and summary["stacks_done"] == 136
-    assert summary["digest"] == reference_digest(None)
+    assert summary["digest"] == reference_digest((out / "faults.toml").read_text())
     secrets = out / "secrets"
     assert {p.name for p in secrets.glob("acl*.json")} == {
         "acl.json", "acl-b.json", "acl-c.json"}
-    # The first host's router takes the others' links by login and id, theirs the first's
-    # by its id: the run reached every host, so each link was taken so.
-    linked = [s for s in json.loads((secrets / "acl.json").read_text())["subjects"]
-              if "zids" in s]
-    assert sorted(s.get("usernames", [""])[0] for s in linked) == ["router-b", "router-c"]
-    for name in ("b", "c"):
-        (first,) = [s for s in json.loads((secrets / f"acl-{name}.json").read_text())[
-            "subjects"] if "zids" in s]
-        assert "usernames" not in first and first["zids"][0] not in {
-            z for s in linked for z in s["zids"]}
+    # The first host's router takes the others' links by login and certificate, theirs the
+    # first's by its certificate; the run reached every host, so each link was taken so.
+    def linked(acl: str) -> list[tuple[list[str], list[str]]]:
+        return [(s["cert_common_names"], s.get("usernames", []))
+                for s in json.loads((secrets / acl).read_text())["subjects"]
+                if "cert_common_names" in s]
+
+    assert linked("acl.json") == [(["router-b"], ["router-b"]), (["router-c"], ["router-c"])]
+    assert linked("acl-b.json") == linked("acl-c.json") == [(["router"], [])]
+    for name in ("router", "router-b", "router-c"):  # each signed by the run's own CA
+        assert (secrets / f"{name}.key").stat().st_mode & 0o777 == 0o600
+        assert (secrets / f"{name}.pem").exists()

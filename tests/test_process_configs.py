@@ -14,6 +14,7 @@ from fleet.cli import build_parser
 from fleet.dispatching.decision import Strategy
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.planning.trajectory import Pose
+from fleet.runtime.access import TlsFiles
 from fleet.runtime.args import BusFlags
 from fleet.runtime.bus import free_port
 from fleet.runtime.process_configs import (
@@ -37,6 +38,9 @@ def configs(tmp_path: Path) -> list:
     return [
         RouterConfig(), RouterConfig(("tcp/0.0.0.0:1",), ("tcp/other:2",), tmp_path / "acl",
                                      tmp_path / "users", 5.0),
+        RouterConfig(("tcp/0.0.0.0:1",), ("tls/other:3",), tmp_path / "acl", tmp_path / "users",
+                     None, "router-b", tmp_path / "router-b.password",
+                     TlsFiles(tmp_path / "ca.pem", tmp_path / "b.pem", tmp_path / "b.key")),
         ReservationConfig(plain), ReservationConfig(secure, tmp_path / "{host}.journal", True),
         AgentConfig(plain, 3), AgentConfig(secure, None, "crane", 30.0, "small",
                                            Pose.parse("3,4,E"), tmp_path / "logins",

@@ -84,10 +84,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="serve the live view over the Foxglove WebSocket protocol on "
                    "127.0.0.1:PORT (default port 8765)")
     p.add_argument("--secure", action="store_true",
-                   help="the router runs zenoh access control and every process logs in with "
-                   "credentials made for this run (kept in OUT/secrets): a forklift may "
-                   "publish only as itself and commit only its own reservations, only the "
-                   "dispatcher assigns tasks, the recorder only reads (docs/faults.md)")
+                   help="the router (each host's, with --hosts) runs zenoh access control "
+                   "and every process logs in with credentials made for this run (kept in "
+                   "OUT/secrets): a forklift may publish only as itself and commit only its "
+                   "own reservations, only the dispatcher assigns tasks, the recorder only "
+                   "reads; the routers of several hosts link over TLS with certificates made "
+                   "for this run (docs/faults.md, docs/deployment.md)")
     p.add_argument("--hosts", type=Path, metavar="FILE",
                    help="spread the processes over several hosts, a zenoh router on each, "
                    "linked: a TOML file naming each host's address, how a process is started "

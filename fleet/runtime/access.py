@@ -50,10 +50,12 @@ vehicles, the dispatcher and the gateway get only what that run uses:
 
 On several hosts (fleet/runtime/hosts.py) every host's router checks its own clients as
 above, and the routers trust each other with everything of the run, since each has checked
-what it forwards: the first host's router takes the link of another host's router when it
-logs in as `router-NAME` *and* has that router's zenoh id; another host's router takes the
-first's by its zenoh id alone (zenoh 1.10's accepting router presents no login, tested). The
-run draws the ids at random and keeps them with the logins, readable by its owner only.
+what it forwards, but only each other: they link over TLS with certificates both ways, each
+signed by a CA made for the run (fleet/runtime/certificates.py), and each router's access
+control names the others by their certificates' common names (`router`, `router-NAME`).
+Another host's router also logs in to the first host's as `router-NAME` (the first's
+dictionary asks every session for a login). A zenoh id proves nothing (anyone may claim one),
+a certificate the run signed does.
 
 What the router sends to a client (flow "egress") is allowed for everyone on the whole run:
 a client only gets what it subscribed to or asked for, which ingress already decides. It
@@ -115,18 +117,12 @@ class Credentials:
         return self.logins[vehicle_sender(vehicle)]
 
 
-def generate_credentials(run: str, vehicles: int, routers: Sequence[str] | None = None
-                         ) -> Credentials:
-    """A random password for each principal of a run of `vehicles`, or (`routers`) for each
-    of these other hosts' routers."""
-    names = principals(vehicles) if routers is None else list(routers)
+def generate_credentials(run: str, vehicles: int, routers: Sequence[str] = ()) -> Credentials:
+    """A random password for each principal of a run of `vehicles`, and for each of these
+    other hosts' routers."""
     # token_urlsafe: letters, digits, - and _; never the ':' that ends a user in the dictionary
-    return Credentials(run, {name: Login(name, secrets.token_urlsafe(24)) for name in names})
-
-
-def random_zid() -> str:
-    """A zenoh id no one can guess (128 bits, the top one set: zenoh refuses a leading 0)."""
-    return format(secrets.randbits(128) | 1 << 127, "032x")
+    return Credentials(run, {name: Login(name, secrets.token_urlsafe(24))
+                             for name in (*principals(vehicles), *routers)})
 
 
 def write_private(path: str | Path, text: str) -> Path:
@@ -244,11 +240,21 @@ def _lifting_grants(root: str, vehicles: int) -> Grants:
 
 
 @dataclass(frozen=True)
-class LinkedRouter:
-    """Another host's router, as this one's access control knows it: by its zenoh id and,
-    when it logs in here, its user name ("": it does not)."""
+class TlsFiles:
+    """What a router needs to link with the others' over TLS, certificates both ways: the
+    run's CA certificate, its own certificate and its private key (PEM files)."""
 
-    zid: str
+    ca: Path
+    certificate: Path
+    private_key: Path
+
+
+@dataclass(frozen=True)
+class LinkedRouter:
+    """Another host's router, as this one's access control knows it: by the common name of
+    its certificate and, when it logs in here, its user name ("": it does not)."""
+
+    common_name: str
     user: str = ""
 
 
@@ -266,9 +272,9 @@ def router_acl(keys_root: str, vehicles: int, lifting: bool = False,
     if linked:
         rules.append({"id": "routers", "messages": list(MESSAGES), "flows": ["ingress"],
                       "permission": "allow", "key_exprs": [f"{keys_root}/**"]})
-        for router in linked:  # every listed property must match (a login and its id)
-            name = f"router {router.zid}"
-            subjects.append({"id": name, "zids": [router.zid],
+        for router in linked:  # every listed property must match (certificate, login)
+            name = f"linked {router.common_name}"
+            subjects.append({"id": name, "cert_common_names": [router.common_name],
                              **({"usernames": [router.user]} if router.user else {})})
             policies.append({"id": name, "rules": ["routers", "egress"], "subjects": [name]})
     for principal, grants in _grants(keys_root, vehicles, lifting).items():
@@ -290,6 +296,17 @@ def configure_router(config: zenoh.Config, acl: dict, dictionary_file: str | Pat
     config.insert_json5("access_control", json.dumps(acl))
     config.insert_json5("transport/auth/usrpwd/dictionary_file",
                         json.dumps(str(dictionary_file)))
+    return config
+
+
+def configure_tls(config: zenoh.Config, tls: TlsFiles) -> zenoh.Config:
+    """Make a router's TLS links (listened on or connected to) show its certificate and take
+    only peers whose certificate the run's CA signed."""
+    mine = {"private_key": str(tls.private_key), "certificate": str(tls.certificate)}
+    config.insert_json5("transport/link/tls", json.dumps({
+        "root_ca_certificate": str(tls.ca), "enable_mtls": True,
+        **{f"{side}_{what}": path for side in ("listen", "connect")
+           for what, path in mine.items()}}))
     return config
 
 

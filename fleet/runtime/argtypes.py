@@ -124,13 +124,6 @@ def port(text: str) -> int:
     return value
 
 
-def zenoh_id(text: str) -> str:
-    """A zenoh id as zenoh takes it: 1 to 32 lowercase hex digits, the first not 0."""
-    if not re.fullmatch(r"[1-9a-f][0-9a-f]{0,31}", text):
-        raise _refuse(text, "is not a zenoh id: 1 to 32 lowercase hex digits, the first not 0")
-    return text
-
-
 def endpoint(text: str) -> str:
     """A zenoh endpoint: PROTOCOL/HOST:PORT (tcp/127.0.0.1:7447, tcp/router:7447,
     tcp/[::1]:7447) or unixsock-stream/PATH, optionally with zenoh's ?metadata or #config."""

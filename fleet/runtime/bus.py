@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import zenoh
 
 from fleet.errors import UserError
-from fleet.runtime.access import configure_client, configure_router
+from fleet.runtime.access import TlsFiles, configure_client, configure_router, configure_tls
 from fleet.wire.protocol import Envelope, Message, ProtocolError, RecorderStatus, decode, encode
 from fleet.wire.topics import Keys
 
@@ -44,13 +44,11 @@ class BusConfig:
     password: str = ""
     acl: dict | None = None  # a router: enforce this access control ...
     users_file: str = ""  # ... and authenticate sessions against this dictionary
-    zid: str = ""  # its zenoh id (hex; "": zenoh draws one), which linked routers know it by
+    tls: TlsFiles | None = None  # its tls/ links: certificates both ways (routers' links)
 
     def zenoh_config(self) -> zenoh.Config:
         config = zenoh.Config()
         config.insert_json5("mode", json.dumps(self.mode))
-        if self.zid:
-            config.insert_json5("id", json.dumps(self.zid))
         config.insert_json5("scouting/multicast/enabled", "false")  # loopback and named hosts
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
@@ -60,6 +58,8 @@ class BusConfig:
             configure_client(config, self.user, self.password)
         if self.acl is not None:
             configure_router(config, self.acl, self.users_file)
+        if self.tls is not None:
+            configure_tls(config, self.tls)
         return config
 
 

@@ -150,9 +150,10 @@ def _check(config: DeployConfig) -> None:
         except argparse.ArgumentTypeError as exc:
             raise UserError(f"FLEET_ROUTER_LINK: {exc}") from None
         if config.secure:
-            raise UserError("FLEET_ROUTER_LINK with FLEET_SECURE=1: routers linked across "
-                            "hosts have no logins of their own yet; a secure deployment runs "
-                            "on one host")
+            raise UserError("FLEET_ROUTER_LINK with FLEET_SECURE=1: compose's routers have "
+                            "no logins or certificates of their own yet (fleet run --hosts "
+                            "--secure has them); a secure compose deployment runs on one "
+                            "docker host")
     for name in ("interface", "manufacturer"):
         try:
             topic_level(getattr(config, name))

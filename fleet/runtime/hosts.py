@@ -58,8 +58,17 @@ class Host:
 
     @property
     def endpoint(self) -> str:
-        host = f"[{self.address}]" if ":" in self.address else self.address
-        return f"tcp/{host}:{self.port}"
+        return f"tcp/{self._host}:{self.port}"
+
+    @property
+    def link_endpoint(self) -> str:
+        """Where the first host's router takes the other routers' links in a secure run: TLS,
+        on the port after its own."""
+        return f"tls/{self._host}:{self.port + 1}"
+
+    @property
+    def _host(self) -> str:
+        return f"[{self.address}]" if ":" in self.address else self.address
 
 
 @dataclass(frozen=True)

@@ -73,9 +73,10 @@ class LinkProxy:
     until cut() makes the link silent and restore() brings it back."""
 
     def __init__(self, target_host: str, target_port: int,
-                 listen_host: str = "127.0.0.1") -> None:
+                 listen_host: str = "127.0.0.1", protocol: str = "tcp") -> None:
         self.target = (target_host, target_port)
         self.listen_host = listen_host
+        self.protocol = protocol  # zenoh's over TCP: tcp, or tls (forwarded as it is)
         self._port = 0
         self._cut = False
         self._closed = False
@@ -130,7 +131,7 @@ class LinkProxy:
     def endpoint(self) -> str:
         """The zenoh endpoint that reaches the target through this proxy."""
         host = f"[{self.listen_host}]" if ":" in self.listen_host else self.listen_host
-        return f"tcp/{host}:{self._port}"
+        return f"{self.protocol}/{host}:{self._port}"
 
     @property
     def cut_active(self) -> bool:

@@ -27,10 +27,10 @@ from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
     OPERATOR,
     LinkedRouter,
-    dictionary_text,
+    TlsFiles,
     generate_credentials,
-    random_zid,
     router_acl,
+    write_dictionary,
     write_private,
 )
 from fleet.runtime.args import BusFlags
@@ -43,7 +43,8 @@ from fleet.runtime.bus import (
     free_port,
     open_session,
 )
-from fleet.runtime.hosts import Host, Hosts, cut_links, one_host
+from fleet.runtime.certificates import RunAuthority
+from fleet.runtime.hosts import Host, Hosts, HostsError, cut_links, one_host
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
@@ -139,28 +140,39 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
 
 class Secrets:
     """A secure run's logins (fleet/runtime/access.py), kept in the run directory readable by its
-    owner only: the routers' dictionary, one password file each, and each host's router its
-    access control and zenoh id (`lifting`: the access control of seed 004's lifting AGVs).
-    Another host's router logs in to the first host's under its process name (router-NAME)."""
+    owner only: the routers' dictionary, one password file each, each host's router its
+    access control (`lifting`: the rules of seed 004's lifting AGVs), and on several hosts
+    the certificates the routers link with (fleet/runtime/certificates.py). Another host's
+    router logs in to the first host's under its process name (router-NAME)."""
 
     def __init__(self, folder: Path, run: str, root: str, vehicles: int, hosts: Hosts,
                  lifting: bool = False) -> None:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         self.folder = folder
         self.hosts = hosts
-        credentials = generate_credentials(run, vehicles)
-        linked = [hosts.router_name(h) for h in hosts.hosts[1:]]
-        self.logins = {**credentials.logins,
-                       **generate_credentials(run, 0, linked).logins}
-        self.users = write_private(folder / "users.txt", dictionary_text(self.logins.values()))
-        self.zids = {h.name: random_zid() for h in hosts.hosts} if linked else {}
-        first = hosts.first
+        first, others = hosts.first, hosts.hosts[1:]
+        credentials = generate_credentials(run, vehicles,
+                                           [hosts.router_name(h) for h in others])
+        self.logins = credentials.logins
+        self.users = write_dictionary(credentials, folder / "users.txt")
+        self.tls: dict[str, TlsFiles] = {}
+        if others:
+            if first.port == 65535 or any(h.endpoint == first.link_endpoint.replace(
+                    "tls/", "tcp/", 1) for h in others):
+                raise HostsError(f"--secure: the first host's router takes the others' "
+                                 f"links on {first.link_endpoint}, the port after its own; "
+                                 f"give it a port with a free one after it")
+            authority = RunAuthority(folder, run)
+            self.tls = {h.name: authority.issue(hosts.router_name(h), h.address)
+                        for h in hosts.hosts}
         for host in hosts.hosts:
-            others = tuple(LinkedRouter(self.zids[h.name], hosts.router_name(h))
-                           for h in hosts.hosts[1:]) if host == first else \
-                ((LinkedRouter(self.zids[first.name]),) if linked else ())
+            if host == first:  # the others log in, with their certificates
+                linked = tuple(LinkedRouter(hosts.router_name(h), hosts.router_name(h))
+                               for h in others)
+            else:  # the first's certificate: it accepts the link, so it logs in nowhere
+                linked = (LinkedRouter(hosts.router_name(first)),)
             write_private(self.acl(host), json.dumps(router_acl(root, vehicles, lifting,
-                                                                others), indent=1))
+                                                                linked), indent=1))
         for name, login in self.logins.items():
             write_private(folder / f"{name}.password", login.password)
 
@@ -173,13 +185,17 @@ class Secrets:
                               else f"acl-{host.name}.json")
 
     def router(self, host: Host, config: RouterConfig) -> RouterConfig:
-        """The host's router `config`, secured: its access control, the dictionary, its id,
-        and on another host than the first the login it links with."""
-        login = {} if host == self.hosts.first else {
-            "user": self.hosts.router_name(host),
-            "password_file": self.password_file(self.hosts.router_name(host))}
-        return dataclasses.replace(config, acl=self.acl(host), users=self.users,
-                                   zid=self.zids.get(host.name, ""), **login)
+        """The host's router `config`, secured: its access control and the dictionary, and
+        on several hosts its certificate; the first host's also takes the others' links on
+        its TLS endpoint, another logs in to the first's under its name."""
+        config = dataclasses.replace(config, acl=self.acl(host), users=self.users,
+                                     tls=self.tls.get(host.name))
+        if not self.tls:
+            return config
+        if host == self.hosts.first:
+            return dataclasses.replace(config, listen=(*config.listen, host.link_endpoint))
+        name = self.hosts.router_name(host)
+        return dataclasses.replace(config, user=name, password_file=self.password_file(name))
 
 
 def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None = None,
@@ -207,8 +223,11 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                     hosts.of_process(f"agent-{f.vehicle}").port,
                                     listen_host=hosts.first.address)
                for f in faults if f.kind is FaultKind.CUT_LINK}
-    host_links = {f.host: LinkProxy(hosts.first.address, hosts.first.port,
-                                    listen_host=hosts.first.address)
+    # A secure run's routers link over TLS, on the port after the first host's router's.
+    link_port, link_protocol = (hosts.first.port + 1, "tls") if spec.secure else \
+        (hosts.first.port, "tcp")
+    host_links = {f.host: LinkProxy(hosts.first.address, link_port, hosts.first.address,
+                                    link_protocol)
                   for f in faults if f.kind is FaultKind.CUT_HOST and f.host}
     if host_links and spec.faults is not None:  # the dispatcher detects them link by link
         lived = spec.run_dir / FAULTS_AS_LIVED
@@ -266,7 +285,8 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
 
         router = launcher.start("router", router_config(hosts.first, ()).argv())
         for host in hosts.hosts[1:]:  # linked to the first host's, through a fault's forwarder
-            link = host_links[host.name].endpoint if host.name in host_links else endpoint
+            link = host_links[host.name].endpoint if host.name in host_links else \
+                hosts.first.link_endpoint if secrets else endpoint
             launcher.start(hosts.router_name(host), router_config(host, (link,)).argv(),
                            host.exec)
         operator = secrets.logins[OPERATOR] if secrets else None

@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
+from fleet.errors import UserError
 from fleet.mission.spec import ClockMode, Mission
 from fleet.planning.trajectory import Pose
+from fleet.runtime.access import TlsFiles
 from fleet.runtime.args import (
     BusFlags,
     add_bus_arguments,
@@ -34,7 +36,6 @@ from fleet.runtime.argtypes import (
     topic_level,
     writable_dir,
     writable_file,
-    zenoh_id,
 )
 from fleet.runtime.helptext import strategies_epilog
 
@@ -87,9 +88,9 @@ class RouterConfig(ProcessConfig):
     acl: Path | None = None  # access control (a JSON file), with ...
     users: Path | None = None  # ... the dictionary that authenticates sessions
     exit_when_idle_s: float | None = None
-    zid: str = ""  # its zenoh id ("": zenoh draws one)
     user: str = ""  # logs in to the routers it connects to as this user ...
     password_file: Path | None = None  # ... with the password in this file
+    tls: TlsFiles | None = None  # its TLS links to other routers: CA, certificate, key
 
     @property
     def endpoints(self) -> tuple[str, ...]:
@@ -114,26 +115,32 @@ class RouterConfig(ProcessConfig):
                        help="exit once sessions have come and every one has gone for this long "
                        "(a deployment whose processes exit when the mission ends; default: run "
                        "until stopped)")
-        p.add_argument("--id", type=zenoh_id, metavar="HEX",
-                       help="the router's zenoh id, 1 to 32 hex digits (the access control of "
-                       "the routers it links with names it so; default: a random one)")
         p.add_argument("--user", default="", metavar="NAME",
                        help="log in to the routers it connects to as this user (needs "
                        "--password-file; default: no login)")
         p.add_argument("--password-file", type=Path, metavar="FILE",
                        help="the password of --user, alone in this file (default: none)")
+        p.add_argument("--tls", nargs=3, type=Path, metavar=("CA", "CERTIFICATE", "KEY"),
+                       help="its tls/ links, listened on or connected to, show this "
+                       "certificate (with its private key) and take only peers whose "
+                       "certificate the CA signed (PEM files; default: no tls/ links)")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> RouterConfig:
+        if args.password_file is not None and not args.user:
+            raise UserError("--password-file needs --user: the password is that user's")
         return cls(tuple(args.listen), tuple(args.connect), args.acl, args.users,
-                   args.exit_when_idle, args.id or "", args.user, args.password_file)
+                   args.exit_when_idle, args.user, args.password_file,
+                   TlsFiles(*args.tls) if args.tls else None)
 
     def argv(self) -> list[str]:
         return [self.COMMAND, *(a for e in self.listen for a in ("--listen", e)),
                 *(a for e in self.connect for a in ("--connect", e)),
                 *_flag("--acl", self.acl), *_flag("--users", self.users),
-                *_flag("--exit-when-idle", self.exit_when_idle_s), *_flag("--id", self.zid, ""),
-                *_flag("--user", self.user, ""), *_flag("--password-file", self.password_file)]
+                *_flag("--exit-when-idle", self.exit_when_idle_s),
+                *_flag("--user", self.user, ""), *_flag("--password-file", self.password_file),
+                *(["--tls", str(self.tls.ca), str(self.tls.certificate),
+                   str(self.tls.private_key)] if self.tls else [])]
 
 
 @dataclass(frozen=True)

@@ -78,7 +78,7 @@ def serve(config: RouterConfig) -> int:
             raise UserError(f"--acl {config.acl}: {exc}") from None
     user, password = read_login(config.user, config.password_file)
     with open_session(BusConfig("router", config.connect, config.endpoints, acl=acl,
-                                users_file=str(config.users or ""), zid=config.zid,
+                                users_file=str(config.users or ""), tls=config.tls,
                                 user=user, password=password)) as session:
         clients = Clients(session)
         with clients.listener:

@@ -1,0 +1,70 @@
+"""A run's own certificate authority for the links between the routers of several hosts
+(`fleet run --hosts FILE --secure`): each router gets a key and a certificate whose common
+name is its process name (`router`, `router-NAME`), signed by a CA made for the run, and the
+routers link over TLS with certificates both ways (zenoh's `enable_mtls`), so each router's
+access control knows the other by its certificate (fleet/runtime/access.py)."""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import NameOID
+
+from fleet.runtime.access import TlsFiles, write_private
+
+VALID = datetime.timedelta(days=30)  # a run is hours long; a clock skewed by minutes is fine
+SKEW = datetime.timedelta(minutes=10)
+
+
+def _name(common_name: str) -> x509.Name:
+    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
+
+
+def _san(address: str) -> x509.GeneralName:
+    """The address the others reach the router at, as a certificate names it."""
+    try:
+        return x509.IPAddress(ipaddress.ip_address(address))
+    except ValueError:
+        return x509.DNSName(address)
+
+
+class RunAuthority:
+    """A CA of one run, kept in `folder` (its key readable by its owner only)."""
+
+    def __init__(self, folder: Path, run: str) -> None:
+        self.folder = folder
+        self.key = ec.generate_private_key(ec.SECP256R1())
+        self.name = _name(f"fleet run {run}")
+        now = datetime.datetime.now(datetime.UTC)
+        self.certificate = (
+            x509.CertificateBuilder().subject_name(self.name).issuer_name(self.name)
+            .public_key(self.key.public_key()).serial_number(x509.random_serial_number())
+            .not_valid_before(now - SKEW).not_valid_after(now + VALID)
+            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+            .sign(self.key, hashes.SHA256()))
+        self.ca = folder / "ca.pem"
+        self.ca.write_bytes(self.certificate.public_bytes(serialization.Encoding.PEM))
+
+    def issue(self, common_name: str, address: str) -> TlsFiles:
+        """A key and a certificate for the router `common_name` that listens at `address`."""
+        key = ec.generate_private_key(ec.SECP256R1())
+        now = datetime.datetime.now(datetime.UTC)
+        certificate = (
+            x509.CertificateBuilder().subject_name(_name(common_name))
+            .issuer_name(self.name).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(now - SKEW).not_valid_after(now + VALID)
+            .add_extension(x509.SubjectAlternativeName([_san(address)]), critical=False)
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .sign(self.key, hashes.SHA256()))
+        cert_path = self.folder / f"{common_name}.pem"
+        cert_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
+        key_path = write_private(self.folder / f"{common_name}.key", key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+            serialization.NoEncryption()).decode())
+        return TlsFiles(self.ca, cert_path, key_path)
