@@ -612,6 +612,8 @@ def test_real_processes_refuse_bad_input_without_a_traceback(busy_port, tmp_path
             f"is in use",
         ("router", "--acl", str(tmp_path / "acl.json"), "--users", str(tmp_path / "users")):
             f"fleet router: error: --acl {tmp_path / 'acl.json'}",
+        ("router", "--password-file", str(tmp_path / "users")):
+            "fleet router: error: --password-file needs --user",
         ("plan", "--from", "p1", "--to", "s1#1", "--png", str(ROOT / "README.md" / "x.png")):
             "is a file, not a directory",
     }

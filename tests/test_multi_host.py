@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cryptography import x509
 from netns import hosts_toml, namespace_hosts, require_netns
 
 from fleet.analysis.analyze import analyze
@@ -104,7 +105,18 @@ def test_a_hosts_file_that_is_no_toml_or_missing_is_refused(tmp_path):
         load_hosts(hosts_file(tmp_path, 'host = "a"\n'), 4)
     with pytest.raises(HostsError, match="No such file"):
         load_hosts(tmp_path / "none.toml", 4)
-    assert hosts_for(None, 4) is None
+
+
+def test_a_secure_runs_first_host_needs_the_port_after_its_routers(tmp_path):
+    assert hosts_for(None, 4, secure=True) is None
+    assert len(hosts_for(hosts_file(tmp_path, TWO_HOSTS), 4, secure=True).hosts) == 2
+    last = TWO_HOSTS.replace('address = "10.0.0.1"', 'address = "10.0.0.1"\nport = 65535')
+    with pytest.raises(HostsError, match=r"port after its own \(65535 \+ 1\), which is no port"):
+        hosts_for(hosts_file(tmp_path, last), 4, secure=True)
+    same = TWO_HOSTS.replace('address = "10.0.0.2"', 'address = "10.0.0.1"')
+    with pytest.raises(HostsError, match=r"\(7447 \+ 1\), which is taken"):
+        hosts_for(hosts_file(tmp_path, same), 4, secure=True)
+    assert hosts_for(hosts_file(tmp_path, same), 4, secure=False) is not None
 
 
 def test_a_host_cut_is_lived_as_the_cut_links_of_its_forklifts(tmp_path):
@@ -234,6 +246,11 @@ def test_a_secure_fleet_on_three_hosts_survives_a_host_cut_off_as_on_one_host(tm
 
     assert linked("acl.json") == [(["router-b"], ["router-b"]), (["router-c"], ["router-c"])]
     assert linked("acl-b.json") == linked("acl-c.json") == [(["router"], [])]
+    ca = x509.load_pem_x509_certificate((secrets / "ca.pem").read_bytes())
     for name in ("router", "router-b", "router-c"):  # each signed by the run's own CA
         assert (secrets / f"{name}.key").stat().st_mode & 0o777 == 0o600
-        assert (secrets / f"{name}.pem").exists()
+        x509.load_pem_x509_certificate((secrets / f"{name}.pem").read_bytes(
+            )).verify_directly_issued_by(ca)
+    # The CA's key is nowhere: no one signs another certificate of the run.
+    assert {p.name for p in secrets.iterdir() if p.suffix in (".key", ".pem")} == {
+        "ca.pem", *(f"{n}.{e}" for n in ("router", "router-b", "router-c") for e in ("key", "pem"))}

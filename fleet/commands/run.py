@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
         n = fleet_size(layout, mission.vehicles)
     if not args.inprocess:
         engine_options(mission, layout, args.weights)  # bad weights: refused before starting
-    hosts = hosts_for(args.hosts, n)
+    hosts = hosts_for(args.hosts, n, args.secure)
     scenario = fault_scenario(args.faults, layout, n, hosts) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path

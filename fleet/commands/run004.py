@@ -57,7 +57,7 @@ def run004(args: argparse.Namespace, layout: Layout, command: str) -> int:
     if scenario is not None:
         check_faults004(scenario.faults, floor, n, scenario.name)
     faults = scenario.faults if scenario is not None else ()
-    hosts = hosts_for(args.hosts, n)
+    hosts = hosts_for(args.hosts, n, args.secure)
     out = choose(args.out, args.force, layout.name, mission.strategy.value,
                  lambda line: print(f"fleet run: {line}", file=sys.stderr)).path
     bar = ProgressBar(mission.orders, f"orders on {layout.name}", unit="orders",

@@ -74,7 +74,7 @@ def run_external(args: argparse.Namespace, layout: Layout, command: str) -> int:
     spec = RunSpec(mission, n, out, ClockMode.REALTIME, args.speed,
                    port=args.port or free_port(), command=command, foxglove=args.foxglove,
                    dispatch="external", mqtt=url, own_broker=own_broker, secure=args.secure,
-                   hosts=hosts_for(args.hosts, n))
+                   hosts=hosts_for(args.hosts, n, args.secure))
     g, kind = GatewayConfig, layout.vehicle_kind
     say(f"{n} {kind.noun}s as VDA 5050 2.0.0 AGVs on {url}, topics "
         f"{g.interface}/v2/{g.manufacturer}/{serial_number(kind.name, 1)} .. "

@@ -17,8 +17,11 @@ from cryptography.x509.oid import NameOID
 
 from fleet.runtime.access import TlsFiles, write_private
 
-VALID = datetime.timedelta(days=30)  # a run is hours long; a clock skewed by minutes is fine
-SKEW = datetime.timedelta(minutes=10)
+# Valid from a day before the run to a year after: the hosts' clocks need not agree to the
+# minute, and a long session can link again; the CA's key is gone once the run has its
+# certificates, so a wide window lets no one sign more.
+VALID = datetime.timedelta(days=365)
+SKEW = datetime.timedelta(days=1)
 
 
 def _name(common_name: str) -> x509.Name:
@@ -34,7 +37,7 @@ def _san(address: str) -> x509.GeneralName:
 
 
 class RunAuthority:
-    """A CA of one run, kept in `folder` (its key readable by its owner only)."""
+    """A CA of one run: its certificate in `folder/ca.pem`, its key only in memory."""
 
     def __init__(self, folder: Path, run: str) -> None:
         self.folder = folder

@@ -61,10 +61,14 @@ class Host:
         return f"tcp/{self._host}:{self.port}"
 
     @property
+    def link_port(self) -> int:
+        """Where the first host's router takes the other routers' links in a secure run: the
+        port after its own."""
+        return self.port + 1
+
+    @property
     def link_endpoint(self) -> str:
-        """Where the first host's router takes the other routers' links in a secure run: TLS,
-        on the port after its own."""
-        return f"tls/{self._host}:{self.port + 1}"
+        return f"tls/{self._host}:{self.link_port}"
 
     @property
     def _host(self) -> str:
@@ -217,6 +221,17 @@ def cut_links(scenario: Scenario, hosts: Hosts | None) -> Scenario:
     return out
 
 
-def hosts_for(path: Path | None, vehicles: int) -> Hosts | None:
-    """The hosts of `fleet run --hosts FILE` (None: this machine alone)."""
-    return None if path is None else load_hosts(path, vehicles)
+def hosts_for(path: Path | None, vehicles: int, secure: bool) -> Hosts | None:
+    """The hosts of `fleet run --hosts FILE` (None: this machine alone); a secure run's
+    first host needs the port after its router's for the other routers' links."""
+    if path is None:
+        return None
+    hosts = load_hosts(path, vehicles)
+    first = hosts.first
+    if secure and len(hosts.hosts) > 1 and (first.link_port > 65535 or any(
+            (h.address, h.port) == (first.address, first.link_port) for h in hosts.hosts)):
+        raise HostsError(f"--hosts {path}: host {first.name}: with --secure its router takes "
+                         f"the other routers' links on the port after its own ({first.port} "
+                         f"+ 1), which is {'no port' if first.link_port > 65535 else 'taken'}"
+                         f"; give it another port")
+    return hosts

@@ -44,7 +44,7 @@ from fleet.runtime.bus import (
     open_session,
 )
 from fleet.runtime.certificates import RunAuthority
-from fleet.runtime.hosts import Host, Hosts, HostsError, cut_links, one_host
+from fleet.runtime.hosts import Host, Hosts, cut_links, one_host
 from fleet.runtime.injector import Applied, Injector
 from fleet.runtime.launcher import Child, Launcher
 from fleet.runtime.linkproxy import LinkProxy
@@ -156,12 +156,7 @@ class Secrets:
         self.logins = credentials.logins
         self.users = write_dictionary(credentials, folder / "users.txt")
         self.tls: dict[str, TlsFiles] = {}
-        if others:
-            if first.port == 65535 or any(h.endpoint == first.link_endpoint.replace(
-                    "tls/", "tcp/", 1) for h in others):
-                raise HostsError(f"--secure: the first host's router takes the others' "
-                                 f"links on {first.link_endpoint}, the port after its own; "
-                                 f"give it a port with a free one after it")
+        if others:  # the first host's link port is checked (hosts_for)
             authority = RunAuthority(folder, run)
             self.tls = {h.name: authority.issue(hosts.router_name(h), h.address)
                         for h in hosts.hosts}
@@ -223,11 +218,10 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                     hosts.of_process(f"agent-{f.vehicle}").port,
                                     listen_host=hosts.first.address)
                for f in faults if f.kind is FaultKind.CUT_LINK}
-    # A secure run's routers link over TLS, on the port after the first host's router's.
-    link_port, link_protocol = (hosts.first.port + 1, "tls") if spec.secure else \
-        (hosts.first.port, "tcp")
-    host_links = {f.host: LinkProxy(hosts.first.address, link_port, hosts.first.address,
-                                    link_protocol)
+    # A secure run's routers link over TLS, on the first host's link port.
+    first = hosts.first
+    host_links = {f.host: LinkProxy(first.address, first.link_port, first.address, "tls")
+                  if spec.secure else LinkProxy(first.address, first.port, first.address)
                   for f in faults if f.kind is FaultKind.CUT_HOST and f.host}
     if host_links and spec.faults is not None:  # the dispatcher detects them link by link
         lived = spec.run_dir / FAULTS_AS_LIVED
@@ -285,8 +279,10 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
 
         router = launcher.start("router", router_config(hosts.first, ()).argv())
         for host in hosts.hosts[1:]:  # linked to the first host's, through a fault's forwarder
-            link = host_links[host.name].endpoint if host.name in host_links else \
-                hosts.first.link_endpoint if secrets else endpoint
+            if host.name in host_links:
+                link = host_links[host.name].endpoint
+            else:
+                link = hosts.first.link_endpoint if spec.secure else endpoint
             launcher.start(hosts.router_name(host), router_config(host, (link,)).argv(),
                            host.exec)
         operator = secrets.logins[OPERATOR] if secrets else None

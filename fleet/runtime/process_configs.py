@@ -80,7 +80,8 @@ class RouterConfig(ProcessConfig):
     SUMMARY = "run a zenoh router for the other processes"
     DESCRIPTION = ("Run a zenoh router (in Python: there is no zenohd to install). Every other "
                    "process of a run connects to it as a client. `fleet run` starts one on a "
-                   "free loopback port; the compose deployment runs it as its router service.")
+                   "free loopback port (one per host with --hosts, linked to the first "
+                   "host's); the compose deployment runs it as its router service.")
     DEFAULT_LISTEN: ClassVar[str] = "tcp/0.0.0.0:7447"
 
     listen: tuple[str, ...] = ()  # none: DEFAULT_LISTEN

@@ -1,6 +1,7 @@
 """`fleet router`: a zenoh router in a Python process (there is no zenohd to install). The
-other processes connect to it as clients; `fleet run` starts one on a loopback port, the
-compose deployment runs it as the `router` service."""
+other processes connect to it as clients; `fleet run` starts one on a loopback port (one
+per host with --hosts, linked to the first host's), the compose deployment runs it as the
+`router` service."""
 
 from __future__ import annotations
 
@@ -65,6 +66,9 @@ class Clients:
 
 
 def serve(config: RouterConfig) -> int:
+    # zenoh's own errors, to this router's log: a link refused in its TLS or login handshake
+    # (a certificate of another run, a clock far off, a wrong address) shows nowhere else.
+    zenoh.init_log_from_env_or("error")
     stop = threading.Event()
     stop_on_signals(stop.set)
     acl = None
