@@ -379,6 +379,7 @@ def _read_segment(path: Path) -> tuple[Recording, list[int]]:
                 what = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
                 recording.problem = f"the file ends in a torn record ({what}) after " \
                     f"{os.path.getsize(path)} bytes"
+                recording.complete = False  # cut after its footer, before the closing magic
                 break
             if isinstance(record, Schema):
                 schemas[record.id] = record
