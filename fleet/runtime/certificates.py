@@ -43,31 +43,32 @@ class RunAuthority:
         self.folder = folder
         self.key = ec.generate_private_key(ec.SECP256R1())
         self.name = _name(f"fleet run {run}")
-        now = datetime.datetime.now(datetime.UTC)
-        self.certificate = (
-            x509.CertificateBuilder().subject_name(self.name).issuer_name(self.name)
-            .public_key(self.key.public_key()).serial_number(x509.random_serial_number())
-            .not_valid_before(now - SKEW).not_valid_after(now + VALID)
-            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-            .sign(self.key, hashes.SHA256()))
+        self.certificate = self._sign(self.name, self.key, x509.BasicConstraints(
+            ca=True, path_length=0))
         self.ca = folder / "ca.pem"
         self.ca.write_bytes(self.certificate.public_bytes(serialization.Encoding.PEM))
 
     def issue(self, common_name: str, address: str) -> TlsFiles:
         """A key and a certificate for the router `common_name` that listens at `address`."""
         key = ec.generate_private_key(ec.SECP256R1())
-        now = datetime.datetime.now(datetime.UTC)
-        certificate = (
-            x509.CertificateBuilder().subject_name(_name(common_name))
-            .issuer_name(self.name).public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(now - SKEW).not_valid_after(now + VALID)
-            .add_extension(x509.SubjectAlternativeName([_san(address)]), critical=False)
-            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-            .sign(self.key, hashes.SHA256()))
+        certificate = self._sign(_name(common_name), key, x509.BasicConstraints(
+            ca=False, path_length=None), x509.SubjectAlternativeName([_san(address)]))
         cert_path = self.folder / f"{common_name}.pem"
         cert_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
         key_path = write_private(self.folder / f"{common_name}.key", key.private_bytes(
             serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
             serialization.NoEncryption()).decode())
         return TlsFiles(self.ca, cert_path, key_path)
+
+    def _sign(self, subject: x509.Name, key: ec.EllipticCurvePrivateKey,
+              constraints: x509.BasicConstraints,
+              names: x509.SubjectAlternativeName | None = None) -> x509.Certificate:
+        """`key`'s certificate for `subject`, signed by this CA, valid around now."""
+        now = datetime.datetime.now(datetime.UTC)
+        builder = (x509.CertificateBuilder().subject_name(subject).issuer_name(self.name)
+                   .public_key(key.public_key()).serial_number(x509.random_serial_number())
+                   .not_valid_before(now - SKEW).not_valid_after(now + VALID)
+                   .add_extension(constraints, critical=True))
+        if names is not None:
+            builder = builder.add_extension(names, critical=False)
+        return builder.sign(self.key, hashes.SHA256())
