@@ -260,8 +260,9 @@ def test_a_killed_and_a_disconnected_forklift_container_do_not_stop_the_mission(
     report = analyze(recording)
     assert report.finished, report.mission_error
     assert (len(report.overlaps), len(report.outside_reservation), report.stacks_done,
-            report.stacks_duplicated, report.stacks_lost) == (0, 0, 136, [], []), report
-    assert report.passed, report
+            report.stacks_duplicated, report.stacks_lost) == (0, 0, 136, [], []), \
+        "\n".join(report.verdict_lines())
+    assert report.passed, "\n".join(report.verdict_lines()) + "\n" + logs
 
 
 def disturbed_mission(d: Deployment) -> tuple:
