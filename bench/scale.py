@@ -4,7 +4,9 @@ warehouse with room to park half as many again as the fleet and about ten stacks
 clock in process and as processes (`fleet run`, each run a fresh process), every run judged
 by its recording's verdicts. Reported per run: completed, verdicts, stacks, end time, wall
 time, wall time per decision, decision failures and peak memory (in all, and per agent as
-processes); per mode, how the wall time per decision grows with the fleet."""
+processes); per mode, how the wall time per decision grows with the fleet. A run that did not
+complete reports how far it got, and its directory (recording, logs) is kept and named; with
+`keep`, every run's is."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import itertools
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -116,20 +119,34 @@ def watch(args: list[str], timeout_s: float) -> Watched:
         return Watched(proc.returncode, out.read(), err.read(), wall, peaks, timed_out)
 
 
-def run_one(layout: Path, vehicles: int, mode: str, strategy: str, timeout_s: float) -> dict:
-    """One fill mission; its row of the report."""
-    with tempfile.TemporaryDirectory(prefix="fleet-bench-scale-") as out_dir:
-        args = ["run", "--layout", str(layout), "--vehicles", str(vehicles), "--mission",
-                "fill", "--strategy", strategy, "--json", "--out", out_dir,
-                *(["--inprocess"] if mode == "inprocess" else [])]
-        seen = watch(args, timeout_s)
+def run_one(layout: Path, vehicles: int, mode: str, strategy: str, timeout_s: float,
+            keep: Path | None = None) -> dict:
+    """One fill mission; its row of the report. Its directory (`fleet run --out`) is `keep`,
+    kept; without, a temporary one, kept and named in the row (`recording`) only when the run
+    did not complete, so a mission given up can still be looked at."""
+    out_dir = keep or Path(tempfile.mkdtemp(prefix=f"fleet-bench-scale-{vehicles}-{mode}-"))
+    args = ["run", "--layout", str(layout), "--vehicles", str(vehicles), "--mission",
+            "fill", "--strategy", strategy, "--json", "--out", str(out_dir),
+            *(["--inprocess"] if mode == "inprocess" else [])]
+    seen = watch(args, timeout_s)
+    row = _row(vehicles, mode, seen)
+    if keep is None and row["completed"]:
+        shutil.rmtree(out_dir, ignore_errors=True)
+    else:
+        row["recording"] = str(out_dir)
+    return row
+
+
+def _row(vehicles: int, mode: str, seen: Watched) -> dict:
     row: dict = {"vehicles": vehicles, "mode": mode, "wall_s": round(seen.wall_s, 1),
                  "timed_out": seen.timed_out}
     try:
         summary = json.loads(seen.stdout)
-    except ValueError:
-        last = seen.stderr.strip().splitlines()[-1:] or ["(nothing said)"]
-        return row | {"completed": False, "passed": False, "error": last[0]}
+    except ValueError:  # stopped before anything was recorded: what fleet run said instead
+        said = [line for line in seen.stderr.strip().splitlines()
+                if "logs and what was recorded" not in line]
+        return row | {"completed": False, "passed": False,
+                      "error": (said[-1:] or ["(nothing said)"])[0]}
     decisions = summary["subtasks"] + summary["decision_failures"]
     agents = [kb for cmd, kb in seen.peaks_kb.values() if " agent " in f"{cmd} "]
     return row | {
@@ -168,18 +185,23 @@ def growth(rows: list[dict]) -> dict[str, list[dict]]:
 
 
 def run(sizes: list[int], modes: tuple[str, ...] = MODES, strategy: str = "greedy",
-        timeout_s: float = 1800.0, progress: Callable[[str], None] | None = None) -> dict:
+        timeout_s: float = 1800.0, progress: Callable[[str], None] | None = None,
+        keep: Path | None = None) -> dict:
+    """The report; with `keep` (a directory not there yet), every run's directory is kept in
+    it as VEHICLES-MODE."""
     rows = []
-    with tempfile.TemporaryDirectory(prefix="fleet-bench-floors-") as floors:
+    with tempfile.TemporaryDirectory(prefix="fleet-bench-floors-") as scratch:
+        floors = keep or Path(scratch)
         for vehicles in sizes:
             shape = floor_for(vehicles)
-            layout = Path(floors) / f"scale-{vehicles}.toml"
+            layout = floors / f"scale-{vehicles}.toml"
             layout.write_text(generate_toml(shape, f"scale-{vehicles}"))
             for mode in modes:
                 if progress:
                     progress(f"{vehicles} forklifts, {mode}: a {shape.aisles} x {shape.depth} "
                              f"x {shape.lane_depth} floor ...")
-                row = run_one(layout, vehicles, mode, strategy, timeout_s)
+                row = run_one(layout, vehicles, mode, strategy, timeout_s,
+                              keep / f"{vehicles}-{mode}" if keep else None)
                 row["floor"] = {"aisles": shape.aisles, "depth": shape.depth,
                                 "lane_depth": shape.lane_depth}
                 rows.append(row)
@@ -197,7 +219,10 @@ def run(sizes: list[int], modes: tuple[str, ...] = MODES, strategy: str = "greed
 def describe(row: dict) -> str:
     if not row.get("completed"):
         why = "timed out" if row["timed_out"] else "did not complete"
-        return f"{why} after {row['wall_s']} s: {row.get('error', '')}"
+        got = (f"{row['stacks_done']}/{row['stacks']} stacks by t = {row['end_time_s']} s, "
+               f"{row['decision_failures']} failures; " if "stacks_done" in row else "")
+        kept = f"; kept in {row['recording']}" if row.get("recording") else ""
+        return f"{why} after {row['wall_s']} s: {got}{row.get('error', '')}{kept}"
     agent = f", {row['peak_agent_mb']} MB an agent" if row.get("peak_agent_mb") else ""
     return (f"{row['stacks_done']}/{row['stacks']} stacks, end {row['end_time_s']} s, "
             f"{row['decision_failures']} failures, verdicts "

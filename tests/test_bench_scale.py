@@ -54,3 +54,23 @@ def test_two_forklifts_fill_their_floor_the_same_in_process_and_as_processes(cap
     assert rows["processes"]["peak_agent_mb"] > 0 and rows["inprocess"]["peak_agent_mb"] is None
     assert rows["processes"]["peak_mb"] > rows["inprocess"]["peak_mb"]  # 7 interpreters
     assert result["same_record"] == {"2": True}
+
+
+def test_a_mission_given_up_reports_how_far_it_got_and_keeps_its_recording(tmp_path, capsys):
+    """32 forklifts cannot fill their floor in 15 s of wall time: the run is stopped, its row
+    says how many stacks were done by when, and its directory is kept in --keep."""
+    from fleet.analysis.analyze import analyze
+    from fleet.recording.reader import read_recording
+
+    keep = tmp_path / "kept"
+    assert main(["bench", "scale", "--fleets", "32", "--modes", "inprocess", "--timeout",
+                 "0.25", "--keep", str(keep), "--json"]) == 1
+    (row,) = json.loads(capsys.readouterr().out)["rows"]
+    assert row["timed_out"] and not row["completed"] and not row["passed"]
+    assert row["recording"] == str(keep / "32-inprocess")
+    assert (keep / "scale-32.toml").is_file()
+    report = analyze(read_recording(keep / "32-inprocess"))
+    assert row["stacks"] == len(generate_layout(floor_for(32)).stacks)
+    assert row["stacks_done"] == report.stacks_done < row["stacks"]
+    assert main(["bench", "scale", "--fleets", "2", "--keep", str(keep)]) == 2
+    assert "--keep" in capsys.readouterr().err

@@ -166,6 +166,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     scale.add_argument("--timeout", type=positive_float, default=30.0, metavar="MINUTES",
                        help="give a mission up after this many minutes of wall time "
                        "(default 30)")
+    scale.add_argument("--keep", type=Path, metavar="DIR",
+                       help="keep every run's directory (recording, logs) and floor in DIR, "
+                       "a new directory (default: only a run that did not complete is kept, "
+                       "in a temporary directory the report names)")
     scale.add_argument("--json", action="store_true", help="print one JSON object")
     scale.set_defaults(handler=run_scale)
     runtime004 = which.add_parser(
@@ -290,10 +294,17 @@ def run_scale(args: argparse.Namespace) -> int:
     modes = scale.MODES if args.modes == "both" else (args.modes,)
     if not args.fleets:
         raise UserError("--fleets none leaves nothing to run: give fleet sizes, e.g. 12,32")
+    if args.keep is not None:
+        try:
+            args.keep.mkdir(parents=True)
+        except FileExistsError:
+            raise UserError(f"--keep {args.keep}: already there; give a new directory, so "
+                            f"no earlier run's recordings are mixed in or replaced") from None
     result = scale.run(args.fleets, modes, args.strategy, args.timeout * 60,
-                       lambda line: print(line, file=sys.stderr, flush=True))
+                       lambda line: print(line, file=sys.stderr, flush=True), args.keep)
+    code = 0 if all(r.get("completed") and r["passed"] for r in result["rows"]) else 1
     if emitted_json(result, args.json):
-        return 0
+        return code
     print(f"fill missions, strategy {result['strategy']}, fast clock:")
     for row in result["rows"]:
         print(f"  {row['vehicles']:4d} forklifts {row['mode']:10s} {scale.describe(row)}")
@@ -302,7 +313,7 @@ def run_scale(args: argparse.Namespace) -> int:
             print(f"  {mode}: {step['from']} -> {step['to']} forklifts (x{step['fleet_x']}): "
                   f"wall per decision x{step['wall_per_decision_x']} (exponent "
                   f"{step['exponent']}), peak memory x{step['peak_mb_x']}")
-    return 0 if all(r.get("completed") and r["passed"] for r in result["rows"]) else 1
+    return code
 
 
 def fleet_sizes(text: str) -> list[int]:
