@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 
 import pytest
 from mission_check import mission_problems
@@ -112,13 +113,18 @@ def test_a_generated_floor_that_wedged_completes_without_a_trap():
     assert mission_problems(record, layout) == []
 
 
+# One choice a dispatch for two forklifts, and no lookahead: how the clock was pinned.
+PINNING = dataclasses.replace(DispatchParams(), iter_dispatch=1, lookahead=math.inf)
+
+
 def test_a_forklift_passed_over_by_a_dispatch_does_not_pin_the_clock():
     """More forklifts than a dispatch has choices (iter_dispatch, here 1 for 2 forklifts; 10
     for 24 on a generated floor): one whose plan failed is passed over, the backup state that
     would postpone it is never reached, and the clock stood at its free instant for good
-    while the others were postponed without end. It is tried again dt_postpone later."""
+    while the others were postponed without end. It is tried again dt_postpone later. (Made
+    with no lookahead: the other forklift then runs ahead, as Algorithm 1 alone lets it.)"""
     mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
-    options = EngineOptions(params=dataclasses.replace(DispatchParams(), iter_dispatch=1))
+    options = EngineOptions(params=PINNING)
     engine = Engine(mission, options)
     record = engine.run()
     assert len(record.stacks_done) == len(engine.layout.stacks)
@@ -130,7 +136,7 @@ def test_a_clock_that_stands_still_ends_the_mission_stuck_rather_than_hanging():
     one instant for max_consecutive_failures decisions, even while forklifts are said to
     move after it."""
     mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
-    options = EngineOptions(params=dataclasses.replace(DispatchParams(), iter_dispatch=1))
+    options = EngineOptions(params=PINNING)
     engine = Engine(mission, options)
     engine._passed_over = lambda active, outcome: None  # the pin, as it was
     with pytest.raises(MissionStuck, match="decisions in a row failed"):
@@ -181,6 +187,21 @@ def test_a_forklift_failing_while_the_others_work_does_not_hold_the_clock_back(t
     assert record["end_time_s"] < 2100.0
     worked = {s["vehicle"] for s in record["subtasks"] if s["t_i"] > 200.0}
     assert worked == {1, 2, 3, 4}
+
+
+def test_a_forklift_whose_plans_succeed_does_not_run_ahead_of_the_others(tmp_path):
+    """Paper, forklift 3 killed at 400.3 s and forklift 1 cut off at 407.6 s where they stood
+    in cluster s5 (examples/kill3_cut1.toml): forklifts 1, 3 and 4 failed their plans while
+    forklift 2's succeeded, and Algorithm 1 kept choosing forklift 2, up to 2000 s ahead of
+    the clock. Its commitments walled in the others' way for all that time: they stood for
+    most of the mission, which ended at 4502 s after 2056 failures. Decided for at most 40 s
+    ahead (the lookahead), every forklift works to the end."""
+    record, _ = fault_run(MissionKind.FILL, [("kill_vehicle", 400.3, 3, 150.0),
+                                             ("cut_link", 407.6, 1, 150.0)], tmp_path)
+    assert record["end_time_s"] < 2100.0
+    assert len(record["failures"]) < 100
+    late = [s for s in record["subtasks"] if s["t_i"] > 1500.0]
+    assert {s["vehicle"] for s in late} == {1, 2, 3, 4}
 
 
 @pytest.mark.parametrize("killed,cut", list(itertools.permutations(range(1, 5), 2)))

@@ -41,6 +41,31 @@ def test_rank_orders_by_free_time_and_puts_failed_vehicles_last():
     assert rank(views, failed=[3, 2]) == [1, 3, 2]
 
 
+def test_rank_leaves_out_vehicles_free_beyond_the_lookahead():
+    """Ours, not the seed's: a forklift free more than `lookahead` after the earliest is not
+    decided for yet, failed or not; one just at the bound still is."""
+    views = [view(1, (0, 0), 100.0), view(2, (0, 1), 140.0), view(3, (0, 2), 140.25)]
+    assert rank(views, lookahead=40.0) == [1, 2]
+    assert rank(views, failed=[1, 3], lookahead=40.0) == [2, 1]
+
+
+def test_a_vehicle_far_ahead_is_not_chosen_while_the_earliest_cannot_be_dispatched():
+    """Vehicle 1 is walled in; vehicle 2, free 60 s later, could go east. Beyond the lookahead
+    (40 s) vehicle 2 is not chosen: the backup state postpones vehicle 1 instead (its ten
+    choices: at 0 s, then nine times Δt_i later), and the clock moves on towards vehicle 2's
+    instant. Within the lookahead, vehicle 2 is chosen."""
+    store = ReservationTable()
+    store.park(3, [(6, 2)], 0.0)
+    store.park(4, [(0, 1), (1, 1), (2, 1), (0, 3), (1, 3), (2, 3), (3, 2)], 0.0)
+    views = [view(1, (1, 2), t_free=0.0), view(2, (8, 2), t_free=60.0)]
+    outcome = dispatcher(store).decide(views, [], east_target, {"east": 5})
+    assert outcome.decision is None and outcome.postponements == {1: 90.0}
+    assert {f.vehicle for f in outcome.failures} == {1}
+    views = [view(1, (1, 2), t_free=30.0), view(2, (8, 2), t_free=60.0)]
+    outcome = dispatcher(store).decide(views, [], east_target, {"east": 5})
+    assert outcome.decision is not None and outcome.decision.vehicle == 2
+
+
 def test_altered_state_when_the_first_vehicle_is_blocked():
     store = ReservationTable()
     store.park(3, [(6, 2)], 0.0)  # a broken-down forklift in the gap, for good

@@ -16,6 +16,7 @@ Reading of the seed where it is ambiguous (docs/dispatching.md says more):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -80,10 +81,15 @@ def _names(names: Sequence[str]) -> str:
                     else "")
 
 
-def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = ()) -> list[int]:
+def rank(vehicles: Sequence[VehicleView], failed: Sequence[int] = (),
+         lookahead: float = math.inf) -> list[int]:
     """Vehicles by the end of their last trajectory; vehicles whose last decision failed to be
-    planned go last, in the order they failed."""
-    order = [v.vehicle for v in sorted(vehicles, key=lambda v: (v.t_free, v.vehicle))]
+    planned go last, in the order they failed. Those free more than `lookahead` after the
+    earliest are left out: one decided for far ahead of the rest holds its way all the time in
+    between, and the others then plan around a wall of its commitments (docs/dispatching.md)."""
+    soonest = min((v.t_free for v in vehicles), default=0.0)
+    order = [v.vehicle for v in sorted(vehicles, key=lambda v: (v.t_free, v.vehicle))
+             if v.t_free <= soonest + lookahead]
     late = [v for v in failed if v in order]
     return [v for v in order if v not in late] + late
 
@@ -247,7 +253,7 @@ class Algorithm1:
         cannot starve the others). When every vehicle has failed, the backup state postpones
         the one that has waited longest by dt_i and tries it again at the later instant."""
         by_id = {v.vehicle: v for v in vehicles}
-        order = rank(vehicles, failed)
+        order = rank(vehicles, failed, self.params.lookahead)
         selected: set[int] = set(failed)
         failures: list[FailedChoice] = []
         postponements: dict[int, float] = {}
