@@ -23,6 +23,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from fleet.params import LOOKAHEAD_S
+from fleet.runtime.argtypes import lookahead_text
 from fleet.world.generator import MIN_DEPTH, Shape, generate_toml
 
 STACKS_PER_FORKLIFT = 10
@@ -120,14 +122,15 @@ def watch(args: list[str], timeout_s: float) -> Watched:
 
 
 def run_one(layout: Path, vehicles: int, mode: str, strategy: str, timeout_s: float,
-            keep: Path | None = None) -> dict:
+            keep: Path | None = None, lookahead: float = LOOKAHEAD_S) -> dict:
     """One fill mission; its row of the report. Its directory (`fleet run --out`) is `keep`,
     kept; without, a temporary one, kept and named in the row (`recording`) only when the run
     did not complete, so a mission given up can still be looked at."""
     out_dir = keep or Path(tempfile.mkdtemp(prefix=f"fleet-bench-scale-{vehicles}-{mode}-"))
     args = ["run", "--layout", str(layout), "--vehicles", str(vehicles), "--mission",
             "fill", "--strategy", strategy, "--json", "--out", str(out_dir),
-            *(["--inprocess"] if mode == "inprocess" else [])]
+            *(["--inprocess"] if mode == "inprocess" else []),
+            *(["--lookahead", lookahead_text(lookahead)] if lookahead != LOOKAHEAD_S else [])]
     seen = watch(args, timeout_s)
     row = _row(vehicles, mode, seen)
     if keep is None and row["completed"]:
@@ -186,7 +189,7 @@ def growth(rows: list[dict]) -> dict[str, list[dict]]:
 
 def run(sizes: list[int], modes: tuple[str, ...] = MODES, strategy: str = "greedy",
         timeout_s: float = 1800.0, progress: Callable[[str], None] | None = None,
-        keep: Path | None = None) -> dict:
+        keep: Path | None = None, lookahead: float = LOOKAHEAD_S) -> dict:
     """The report; with `keep` (a directory not there yet), every run's directory is kept in
     it as VEHICLES-MODE."""
     rows = []
@@ -201,7 +204,7 @@ def run(sizes: list[int], modes: tuple[str, ...] = MODES, strategy: str = "greed
                     progress(f"{vehicles} forklifts, {mode}: a {shape.aisles} x {shape.depth} "
                              f"x {shape.lane_depth} floor ...")
                 row = run_one(layout, vehicles, mode, strategy, timeout_s,
-                              keep / f"{vehicles}-{mode}" if keep else None)
+                              keep / f"{vehicles}-{mode}" if keep else None, lookahead)
                 row["floor"] = {"aisles": shape.aisles, "depth": shape.depth,
                                 "lane_depth": shape.lane_depth}
                 rows.append(row)
@@ -211,7 +214,8 @@ def run(sizes: list[int], modes: tuple[str, ...] = MODES, strategy: str = "greed
     for row in rows:
         if row.get("completed"):
             digests.setdefault(row["vehicles"], set()).add(row["digest"])
-    return {"strategy": strategy, "sizes": sizes, "modes": list(modes), "rows": rows,
+    return {"strategy": strategy, "lookahead": None if math.isinf(lookahead) else lookahead,
+            "sizes": sizes, "modes": list(modes), "rows": rows,
             "same_record": {v: len(d) == 1 for v, d in digests.items()},
             "growth": growth(rows), "cpus": os.cpu_count()}
 

@@ -58,6 +58,14 @@ class SearchParams:
     relaxation_check_at: int = 300
 
 
+# Not from the seed: Algorithm 1 decides for a forklift at most this long after the earliest
+# instant one with work is free (4 Δt_i, about one leg on `paper`). Without a bound the one
+# whose plans succeed while the others' fail runs thousands of seconds ahead of them, and its
+# commitments wall in the way they plan through (docs/dispatching.md). A mission may set
+# another (`fleet run --lookahead`); its record names it then.
+LOOKAHEAD_S = 40.0
+
+
 @dataclass(frozen=True)
 class DispatchParams:
     """Dispatching constants (Table 3)."""
@@ -75,11 +83,6 @@ class DispatchParams:
     iter_pre: int = 500
     iter_dispatch: int = 10
     dt_postpone: float = 10.0  # Δt_i
-    # Not from the seed: a forklift is decided for at most this long after the earliest
-    # instant one with work is free (4 Δt_i, about one leg on `paper`). Without a bound the one
-    # whose plans succeed while the others' fail runs thousands of seconds ahead of them, and
-    # its commitments wall in the way they plan through (docs/dispatching.md).
-    lookahead: float = 40.0
     # Table 3's "time period to evaluate H"; cover_time's window is dt_entry, as long.
     dt_cover: float = 20.0
     dt_entry: float = 20.0

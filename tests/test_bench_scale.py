@@ -58,18 +58,22 @@ def test_two_forklifts_fill_their_floor_the_same_in_process_and_as_processes(cap
 
 def test_a_mission_given_up_reports_how_far_it_got_and_keeps_its_recording(tmp_path, capsys):
     """32 forklifts cannot fill their floor in 15 s of wall time: the run is stopped, its row
-    says how many stacks were done by when, and its directory is kept in --keep."""
+    says how many stacks were done by when, and its directory is kept in --keep. (Run with
+    no lookahead, which the report and the recording name.)"""
     from fleet.analysis.analyze import analyze
     from fleet.recording.reader import read_recording
 
     keep = tmp_path / "kept"
     assert main(["bench", "scale", "--fleets", "32", "--modes", "inprocess", "--timeout",
-                 "0.25", "--keep", str(keep), "--json"]) == 1
-    (row,) = json.loads(capsys.readouterr().out)["rows"]
+                 "0.25", "--keep", str(keep), "--lookahead", "none", "--json"]) == 1
+    result = json.loads(capsys.readouterr().out)
+    assert result["lookahead"] is None
+    (row,) = result["rows"]
     assert row["timed_out"] and not row["completed"] and not row["passed"]
     assert row["recording"] == str(keep / "32-inprocess")
     assert (keep / "scale-32.toml").is_file()
     report = analyze(read_recording(keep / "32-inprocess"))
+    assert report.mission["lookahead"] is None
     assert row["stacks"] == len(generate_layout(floor_for(32)).stacks)
     assert row["stacks_done"] == report.stacks_done < row["stacks"]
     assert main(["bench", "scale", "--fleets", "2", "--keep", str(keep)]) == 2

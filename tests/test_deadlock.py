@@ -114,7 +114,7 @@ def test_a_generated_floor_that_wedged_completes_without_a_trap():
 
 
 # One choice a dispatch for two forklifts, and no lookahead: how the clock was pinned.
-PINNING = dataclasses.replace(DispatchParams(), iter_dispatch=1, lookahead=math.inf)
+PINNING = dataclasses.replace(DispatchParams(), iter_dispatch=1)
 
 
 def test_a_forklift_passed_over_by_a_dispatch_does_not_pin_the_clock():
@@ -123,7 +123,7 @@ def test_a_forklift_passed_over_by_a_dispatch_does_not_pin_the_clock():
     would postpone it is never reached, and the clock stood at its free instant for good
     while the others were postponed without end. It is tried again dt_postpone later. (Made
     with no lookahead: the other forklift then runs ahead, as Algorithm 1 alone lets it.)"""
-    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY, lookahead=math.inf)
     options = EngineOptions(params=PINNING)
     engine = Engine(mission, options)
     record = engine.run()
@@ -135,7 +135,7 @@ def test_a_clock_that_stands_still_ends_the_mission_stuck_rather_than_hanging():
     """The last resort: were the clock pinned again, the mission ends stuck once it stood at
     one instant for max_consecutive_failures decisions, even while forklifts are said to
     move after it."""
-    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY)
+    mission = Mission("small", MissionKind.FILL, Strategy.GREEDY, lookahead=math.inf)
     options = EngineOptions(params=PINNING)
     engine = Engine(mission, options)
     engine._passed_over = lambda active, outcome: None  # the pin, as it was
@@ -204,7 +204,9 @@ def test_a_forklift_whose_plans_succeed_does_not_run_ahead_of_the_others(tmp_pat
     assert {s["vehicle"] for s in late} == {1, 2, 3, 4}
 
 
-@pytest.mark.parametrize("killed,cut", list(itertools.permutations(range(1, 5), 2)))
+# Forklift 3 killed and 1 cut off: the test above, which asserts more.
+@pytest.mark.parametrize("killed,cut", [pair for pair in itertools.permutations(range(1, 5), 2)
+                                        if pair != (3, 1)])
 def test_any_pair_of_forklifts_disturbed_completes(killed, cut, tmp_path):
     """The compose fault test's faults, scheduled: one forklift killed, another cut off 7.3 s
     later, whichever the pair (the compose test draws one from a seed). Halted where they

@@ -83,7 +83,7 @@ from fleet.analysis.windows import (
 from fleet.mission.driving import state_period
 from fleet.mission.record import MissionSummary, SubtaskRecord
 from fleet.mission.spec import EXTERNAL, ClockMode, MissionKind
-from fleet.params import DispatchParams
+from fleet.params import LOOKAHEAD_S, DispatchParams
 from fleet.recording.format import NS
 from fleet.recording.mission_record import (
     Final,
@@ -346,6 +346,8 @@ def _mission(info: MissionInfo) -> dict:
     if info.kind == MissionKind.ORDERS.value:
         out.update(orders=info.orders, order_area=info.order_area,
                    charge_below=info.charge_below)
+    if info.lookahead != LOOKAHEAD_S:  # a JSON number, or null: none
+        out["lookahead"] = info.lookahead
     return out
 
 

@@ -313,7 +313,7 @@ class Report:
         out += [
             f"  mission            {m.get('kind')} on {m.get('layout')} with "
             f"{m.get('vehicles')} {self.vehicle_noun}s, strategy {m.get('strategy')}, clock "
-            f"{m.get('clock')}, seed {m.get('seed')}",
+            f"{m.get('clock')}, seed {m.get('seed')}" + _lookahead(m),
             f"  finished           {'yes' if self.finished else 'no'}"
             + (f" ({self.mission_error})" if self.mission_error else ""),
             *self.numbers_lines(),
@@ -420,3 +420,11 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
     return value
+
+
+def _lookahead(mission: dict) -> str:
+    """", lookahead 30 s" when the mission ran with one of its own (the default goes unsaid)."""
+    if "lookahead" not in mission:
+        return ""
+    value = mission["lookahead"]
+    return ", no lookahead" if value is None else f", lookahead {value:g} s"

@@ -14,10 +14,13 @@ from fleet.commands.progress import ProgressBar
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.spec import ClockMode
+from fleet.params import LOOKAHEAD_S
 from fleet.recording.rundir import RUNS, default_name
 from fleet.runtime.argtypes import (
     integer,
     layout_arg,
+    lookahead_arg,
+    lookahead_text,
     non_negative_int,
     positive_float,
     positive_floats,
@@ -163,6 +166,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     scale.add_argument("--strategy", choices=[s.value for s in Strategy], default="greedy",
                        help="dispatch strategy (default greedy: the ANN's networks are "
                        "trained for paper)")
+    scale.add_argument("--lookahead", type=lookahead_arg, default=LOOKAHEAD_S,
+                       metavar="SECONDS", help=f"Algorithm 1's lookahead, as fleet run takes it "
+                       f"(none: no bound; default {LOOKAHEAD_S:g})")
     scale.add_argument("--timeout", type=positive_float, default=30.0, metavar="MINUTES",
                        help="give a mission up after this many minutes of wall time "
                        "(default 30)")
@@ -301,11 +307,14 @@ def run_scale(args: argparse.Namespace) -> int:
             raise UserError(f"--keep {args.keep}: already there; give a new directory, so "
                             f"no earlier run's recordings are mixed in or replaced") from None
     result = scale.run(args.fleets, modes, args.strategy, args.timeout * 60,
-                       lambda line: print(line, file=sys.stderr, flush=True), args.keep)
+                       lambda line: print(line, file=sys.stderr, flush=True), args.keep,
+                       args.lookahead)
     code = 0 if all(r.get("completed") and r["passed"] for r in result["rows"]) else 1
     if emitted_json(result, args.json):
         return code
-    print(f"fill missions, strategy {result['strategy']}, fast clock:")
+    lookahead = "" if args.lookahead == LOOKAHEAD_S else \
+        f", lookahead {lookahead_text(args.lookahead)}"
+    print(f"fill missions, strategy {result['strategy']}{lookahead}, fast clock:")
     for row in result["rows"]:
         print(f"  {row['vehicles']:4d} forklifts {row['mode']:10s} {scale.describe(row)}")
     for mode, steps in result["growth"].items():

@@ -30,7 +30,7 @@ from fleet.dispatching.decision import (
     VehicleView,
 )
 from fleet.dispatching.prelim import cover_time, preliminary_astar, travel_floor
-from fleet.params import DispatchParams
+from fleet.params import LOOKAHEAD_S, DispatchParams
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
 
@@ -127,6 +127,8 @@ class Algorithm1:
     # Score every target, as Algorithm 1 enumerates them (what training learns from); when
     # False, targets are scored best bound first and those that cannot win are skipped.
     every_target: bool = False
+    # Forklifts free more than this after the earliest are not decided for (`rank`).
+    lookahead: float = LOOKAHEAD_S
 
     def score_clusters(self, vehicle: VehicleView, t_i: float, targets: Sequence[Target],
                        u: list[float]) -> list[Score]:
@@ -253,7 +255,7 @@ class Algorithm1:
         cannot starve the others). When every vehicle has failed, the backup state postpones
         the one that has waited longest by dt_i and tries it again at the later instant."""
         by_id = {v.vehicle: v for v in vehicles}
-        order = rank(vehicles, failed, self.params.lookahead)
+        order = rank(vehicles, failed, self.lookahead)
         selected: set[int] = set(failed)
         failures: list[FailedChoice] = []
         postponements: dict[int, float] = {}

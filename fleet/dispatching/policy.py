@@ -26,7 +26,7 @@ from fleet.dispatching.decision import (
     VehicleView,
 )
 from fleet.dispatching.order_book_policy import OrderBookPolicy
-from fleet.params import DispatchParams
+from fleet.params import LOOKAHEAD_S, DispatchParams
 from fleet.planning.gridmap import GridMap
 from fleet.planning.reservations import ReservationView
 from fleet.world.layout import Layout
@@ -54,13 +54,15 @@ class PolicySetup:
     params: DispatchParams = field(default_factory=DispatchParams)
     mlp: MlpFn | None = None  # the trained scorer, for a strategy that uses one
     every_target: bool = False  # score every target, even those that cannot win (training)
+    lookahead: float = LOOKAHEAD_S  # Algorithm 1's (the mission's)
 
 
 def algorithm1(setup: PolicySetup) -> Algorithm1:
     return Algorithm1(grid_for=setup.grid_for, store=setup.store, strategy=setup.strategy,
                       params=setup.params,
                       cluster_names=tuple(c.name for c in setup.layout.clusters),
-                      mlp=setup.mlp, every_target=setup.every_target)
+                      mlp=setup.mlp, every_target=setup.every_target,
+                      lookahead=setup.lookahead)
 
 
 def order_book(setup: PolicySetup) -> DispatchPolicy:

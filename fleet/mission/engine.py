@@ -193,7 +193,7 @@ class Engine:
         self.policy = dispatch_policy(PolicySetup(
             mission.strategy, self.layout, self.executor.store,
             lambda: self.layout.grid_map(self.work.filled), self.options.params,
-            self.options.mlp, self.options.score_every_target))
+            self.options.mlp, self.options.score_every_target, mission.lookahead))
 
     def active(self) -> list[VehicleSlot]:
         """Vehicles with something left to do (any return, or a delivery while work waits)

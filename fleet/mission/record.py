@@ -17,6 +17,7 @@ from typing import Any
 
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.spec import Mission
+from fleet.params import LOOKAHEAD_S
 from fleet.planning.geometry import Cell
 from fleet.planning.trajectory import Pose, Trajectory
 from fleet.wire.convert import intervals_to_wire
@@ -112,10 +113,17 @@ class MissionHeader:
     strategy: str
     vehicles: int
     seed: int
+    lookahead: float = LOOKAHEAD_S  # Algorithm 1's (inf: none)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"layout": self.layout, "kind": self.kind, "strategy": self.strategy,
-                "vehicles": self.vehicles, "seed": self.seed}
+        """As JSON-able data; the lookahead only when it is not the default, so that the
+        records (and digests) of missions run with it are as they were before it could be
+        set."""
+        out = {"layout": self.layout, "kind": self.kind, "strategy": self.strategy,
+               "vehicles": self.vehicles, "seed": self.seed}
+        if self.lookahead != LOOKAHEAD_S:
+            out["lookahead"] = _time(self.lookahead)
+        return out
 
 
 @dataclass(frozen=True)
@@ -233,7 +241,8 @@ class MissionSummary:
         """The engine's record of a finished mission."""
         m = rec.mission
         return cls(
-            MissionHeader(m.layout, m.kind.value, m.strategy.value, len(rec.vehicles), m.seed),
+            MissionHeader(m.layout, m.kind.value, m.strategy.value, len(rec.vehicles), m.seed,
+                          m.lookahead),
             tuple(str(p) for p in rec.starts), rec.end_time, rec.all_parked_time,
             rec.decision_failures, dict(rec.wait_s), dict(rec.busy_s),
             tuple(StackRecord(*s) for s in rec.stacks_done),

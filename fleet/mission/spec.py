@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from enum import Enum, StrEnum
 
 from fleet.dispatching.decision import Strategy
+from fleet.params import LOOKAHEAD_S
 from fleet.planning.trajectory import Pose
 
 # The kind a recording names for a run with no mission of ours (fleet run --dispatch
@@ -47,3 +48,5 @@ class Mission:
     # Seed 004's heat cost: w_heat (0: off), on T_value from the mission's history run
     # (fleet/mission/heat004.py, `history_heat`).
     heat: float = 0.0
+    # Algorithm 1's lookahead (fleet/params.py; inf: none), for fill and empty missions.
+    lookahead: float = LOOKAHEAD_S

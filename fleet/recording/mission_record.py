@@ -130,7 +130,8 @@ def summary_of(recording: Recording,
     if account:  # the dispatcher's own, which also counts postponements as waiting
         busy, wait = account.busy_s, account.wait_s
     return MissionSummary(
-        MissionHeader(info.layout, info.kind, info.strategy, info.vehicles, info.seed),
+        MissionHeader(info.layout, info.kind, info.strategy, info.vehicles, info.seed,
+                      info.lookahead_s),
         tuple(info.starts),
         end_time_s=max((s.t for s in stacks), default=0.0),
         all_parked_s=max((s.t_end for s in subtasks), default=0.0),

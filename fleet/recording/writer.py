@@ -24,6 +24,7 @@ from fleet.mission.battery import start_piles
 from fleet.mission.heat004 import history_heat
 from fleet.mission.order_work import mission_battery, mission_charges, mission_orders
 from fleet.mission.spec import Mission, MissionKind
+from fleet.params import LOOKAHEAD_S
 from fleet.planning.trajectory import Pose
 from fleet.recording.format import (
     LAYOUT_ATTACHMENT,
@@ -77,7 +78,8 @@ def mission_info(mission: Mission, layout: Layout, vehicles: int, clock: str,
                        [str(p) for p in starts], command or " ".join(sys.argv), versions,
                        mission.orders, mission.order_area, released,
                        list(mission_charges(mission, vehicles)) if orders else [],
-                       battery.drain_per_s, battery.charge_per_s, battery.threshold)
+                       battery.drain_per_s, battery.charge_per_s, battery.threshold,
+                       lookahead=None if math.isinf(mission.lookahead) else mission.lookahead)
 
 
 def _package_version(name: str) -> str:
@@ -93,6 +95,8 @@ def run_metadata(info: MissionInfo) -> dict[str, str]:
             "vehicles": str(info.vehicles), "seed": str(info.seed), "clock": info.clock,
             "speed": repr(info.speed), "starts": " ".join(info.starts),
             "command": info.command, "fleet_version": __version__}
+    if info.lookahead != LOOKAHEAD_S:
+        data["lookahead"] = repr(info.lookahead_s)
     data.update({f"version_{k}": str(v) for k, v in info.versions.items()})
     return data
 

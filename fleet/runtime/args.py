@@ -17,11 +17,14 @@ from fleet.mission.engine import EngineOptions
 from fleet.mission.order_work import DEFAULT_ORDERS, order_fleet
 from fleet.mission.orders004 import fleet004
 from fleet.mission.spec import Mission, MissionKind
+from fleet.params import LOOKAHEAD_S
 from fleet.runtime.argtypes import (
     battery_arg,
     endpoint,
     integer,
     layout_arg,
+    lookahead_arg,
+    lookahead_text,
     non_negative_float,
     orders_arg,
     positive_float,
@@ -152,6 +155,11 @@ def add_mission_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--heat", type=non_negative_float, default=0.0, metavar="W",
                    help="seed 004's heat cost: w_heat, on the T_value of a history run with "
                    "the orders of --seed + 1000 (the seed's runs: 2; default 0, off)")
+    p.add_argument("--lookahead", type=lookahead_arg, default=LOOKAHEAD_S, metavar="SECONDS",
+                   help=f"fill and empty missions: decide for a forklift only when it is free "
+                   f"at most this long after the earliest one with work (not seed 000's: "
+                   f"docs/dispatching.md); none: no bound, as Algorithm 1 alone (default "
+                   f"{LOOKAHEAD_S:g})")
     p.add_argument("--weights", type=text_file, metavar="FILE",
                    help="MLP weights for --strategy ann (default: the weights shipped for the "
                    "layout)")
@@ -187,6 +195,9 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
     if args.heat and layout is not None and layout.floor is None:
         raise UserError(f"--heat is seed 004's heat cost, for its lifting AGVs on a seed-004 "
                         f"floor (paper004), not for layout {layout.name}")
+    if args.lookahead != LOOKAHEAD_S and orders:
+        raise UserError("--lookahead is Algorithm 1's, for fill and empty missions: an order "
+                        "mission's dispatcher does not rank forklifts")
     if args.strategy is None:
         strategy = Strategy.NEAREST if orders else Strategy.ANN
     else:
@@ -199,7 +210,8 @@ def mission_from_args(args: argparse.Namespace, layout: Layout | None = None) ->
                    orders=0 if not orders else len(args.orders) if given_shelves
                    else args.orders or DEFAULT_ORDERS,
                    order_area=args.order_area, battery=args.battery,
-                   shelves=args.orders if given_shelves else (), heat=args.heat)
+                   shelves=args.orders if given_shelves else (), heat=args.heat,
+                   lookahead=args.lookahead)
 
 
 def mission_argv(mission: Mission) -> list[str]:
@@ -213,6 +225,8 @@ def mission_argv(mission: Mission) -> list[str]:
         orders += ["--battery", mission.battery]
     if mission.heat:
         orders += ["--heat", repr(mission.heat)]
+    if mission.lookahead != LOOKAHEAD_S:
+        orders += ["--lookahead", lookahead_text(mission.lookahead)]
     return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
             "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
 

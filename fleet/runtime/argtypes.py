@@ -51,6 +51,21 @@ def non_negative_float(text: str) -> float:
     return value
 
 
+def lookahead_arg(text: str) -> float:
+    """Seconds from 0 up, or "none" (no bound: infinity)."""
+    if text.strip().lower() == "none":
+        return math.inf
+    try:
+        return non_negative_float(text)
+    except argparse.ArgumentTypeError:
+        raise _refuse(text, "must be 0 or a positive number of seconds, or none") from None
+
+
+def lookahead_text(value: float) -> str:
+    """The flag's text for `value` (lookahead_arg's inverse)."""
+    return "none" if math.isinf(value) else repr(value)
+
+
 MAX_SIM_SECONDS = 1e6  # days of simulated time: beyond any mission (as fault scenarios say)
 
 

@@ -17,6 +17,7 @@ from typing import Annotated, Any, ClassVar
 
 import msgpack
 
+from fleet.params import LOOKAHEAD_S
 from fleet.planning.rules004 import Direction
 from fleet.planning.rules004 import Task as Task004
 from fleet.planning.trajectory import Pose, step_manner
@@ -335,6 +336,12 @@ class MissionInfo(Message):
     # Who gives the work: "internal" (the dispatcher to the agents), "vda5050" (the dispatcher
     # as a VDA 5050 master, through the gateway) or "external" (a master of the user's)
     dispatch: str = "internal"
+    # Algorithm 1's lookahead, s (fleet/params.py; None: none, inf having no JSON form).
+    lookahead: float | None = LOOKAHEAD_S
+
+    @property
+    def lookahead_s(self) -> float:
+        return math.inf if self.lookahead is None else self.lookahead
 
 
 @dataclass(frozen=True)
