@@ -76,7 +76,7 @@ def _candidate_edges(moves: tuple[Move, ...], x: int, y: int) -> tuple[_Edge, ..
                  for move in moves)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Node:
     key: Key
     parent: _Node | None
@@ -215,7 +215,13 @@ class HybridAStar:
                         return True
             return False
 
-        child_times = self.velocity.child_times
+        child_window = self.velocity.child_window
+        stop, turn, lane = Manner.STOP, Kind.TURN, Kind.LANE  # locals: the hot loop reads them
+        p_turn, p_lane, p_inv = p.p_turn, p.p_lane, p.p_inv
+        # Many nodes end at the same instants (the same maneuvers in another order or place):
+        # their children's times are computed once a search.
+        windows: dict[tuple[tuple[float, float, float], int],
+                      tuple[EndTimes, float, float, float]] = {}
         while open_heap:
             f, _, node = heapq.heappop(open_heap)
             if node.key in closed or best_f.get(node.key) != f:
@@ -233,42 +239,39 @@ class HybridAStar:
                                    f"no path within iter_search={p.iter_search} expansions",
                                    expansions - 1)
             x, y, heading, _ = node.key
-            parent_at = node.times.at
+            last_dir, parent_times = node.last_dir, node.times
             # The child times depend only on the edge's kind and whether it starts from
             # rest: a few values an expansion, each computed once.
             timed: list[tuple[EndTimes, float, float, float] | None] = [None] * _TIMED_SLOTS
             for edge in self.edges(x, y, heading):
-                manner = edge.manner
-                d = edge.direction
-                reverses = d != 0 and node.last_dir != 0 and d != node.last_dir
-                from_rest = manner is Manner.STOP or reverses
-                slot = 2 * edge.kind_slot + from_rest
+                manner, kind, d, ex, ey, eh, end_cells, body_cells, kind_slot = edge
+                reverses = d != 0 and last_dir != 0 and d != last_dir
+                from_rest = manner is stop or reverses
+                slot = 2 * kind_slot + from_rest
                 known = timed[slot]
                 if known is None:
-                    times = child_times(node.times, edge.kind, from_rest)
-                    known = timed[slot] = (
-                        times, times.at[0],
-                        min(parent_at[v] for v in times.start_level if v is not None),
-                        max(t for t in times.at if t < INF))
+                    memo = (parent_times.at, slot)
+                    known = windows.get(memo)
+                    if known is None:
+                        known = windows[memo] = child_window(parent_times, kind, from_rest)
+                    timed[slot] = known
                 times, tz, t_from, t_to = known
-                ex, ey, eh = edge.x, edge.y, edge.heading
                 key = (ex, ey, eh, tz)
                 if key in closed:
                     continue
-                if held(edge.end_cells, t_from, t_to):
+                if held(end_cells, t_from, t_to):
                     closed.add(key)  # gamma = 1
                     continue
-                if held(edge.body_cells, t_from, t_to):
+                if held(body_cells, t_from, t_to):
                     continue  # gamma = 2
                 at_goal = ((ex, ey), eh) in goal_set
-                if at_goal and held(edge.end_cells, tz, INF):
+                if at_goal and held(end_cells, tz, INF):
                     closed.add(key)  # cannot park here at this time
                     continue
-                turns = node.turns + (edge.kind is Kind.TURN)
-                lanes = node.lanes + (edge.kind is Kind.LANE)
+                turns = node.turns + (kind is turn)
+                lanes = node.lanes + (kind is lane)
                 inversions = node.inversions + reverses
-                g = (tz - t_start + p.p_turn * turns + p.p_lane * lanes
-                     + p.p_inv * inversions)
+                g = tz - t_start + p_turn * turns + p_lane * lanes + p_inv * inversions
                 hc = h_cache.get((ex, ey, eh))
                 if hc is None:
                     hc = h_cache[ex, ey, eh] = h((ex, ey), eh)
@@ -276,7 +279,7 @@ class HybridAStar:
                 previous = best_f.get(key)
                 if previous is not None and previous <= fc:
                     continue
-                child = _Node(key, node, manner, times, d or node.last_dir, turns, lanes,
+                child = _Node(key, node, manner, times, d or last_dir, turns, lanes,
                               inversions, g, fc)
                 if at_goal:
                     return self._build(vehicle, start, child, expansions)

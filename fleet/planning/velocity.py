@@ -13,8 +13,8 @@ level, so a found trajectory can be timed exactly by walking back from v_zero at
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 from fleet.params import ManeuverTimes
 from fleet.planning.maneuvers import Kind
@@ -42,10 +42,10 @@ def link_durations(times: ManeuverTimes) -> dict[tuple[Kind, Speed, Speed], floa
     }
 
 
-@dataclass(frozen=True)
-class EndTimes:
+class EndTimes(NamedTuple):
     """Earliest end instant per end level (INF: level not reachable), and the start level
-    that achieves it (None for unreachable or the trajectory start)."""
+    that achieves it (None for unreachable or the trajectory start). A named tuple: the
+    search makes millions."""
 
     at: tuple[float, float, float]
     start_level: tuple[Speed | None, Speed | None, Speed | None]
@@ -65,27 +65,38 @@ class VelocityPlanner:
 
     def __init__(self, times: ManeuverTimes = ManeuverTimes()) -> None:
         self.links = link_durations(times)
-        # Per kind: (start level, end level, duration, start level as a Speed); plain ints
-        # index faster than IntEnum members in the search's innermost loop.
-        self._by_kind: dict[Kind, list[tuple[int, int, float, Speed]]] = {}
-        for (kind, v0, v1), dt in self.links.items():
-            self._by_kind.setdefault(kind, []).append((int(v0), int(v1), dt, v0))
+        # Per (kind, from rest): (start level, end level, duration, start level as a Speed);
+        # plain ints index faster than IntEnum members in the search's innermost loop.
+        self._links: dict[tuple[Kind, bool], tuple[tuple[int, int, float, Speed], ...]] = {}
+        for kind in Kind:
+            for from_rest in (False, True):
+                self._links[kind, from_rest] = tuple(
+                    (int(v0), int(v1), dt, v0) for (k, v0, v1), dt in self.links.items()
+                    if k is kind and not (from_rest and v0))
 
     def child_times(self, parent: EndTimes, kind: Kind, from_rest: bool) -> EndTimes:
         """End times of a maneuver of this kind after a parent that ends as `parent` says.
         from_rest (the stopping flag mu = 1): the maneuver must start at v_zero, as after a
         stop or when the direction of travel reverses."""
+        return self.child_window(parent, kind, from_rest)[0]
+
+    def child_window(self, parent: EndTimes, kind: Kind, from_rest: bool
+                     ) -> tuple[EndTimes, float, float, float]:
+        """`child_times`, with the window the maneuver may occupy: its end at v_zero, the
+        earliest instant it may start (the soonest parent level a best end starts from) and
+        the latest finite end."""
         best = [INF, INF, INF]
         via: list[Speed | None] = [None, None, None]
         at = parent.at
-        for v0, v1, dt, level in self._by_kind[kind]:
-            if from_rest and v0:
-                continue
+        for v0, v1, dt, level in self._links[kind, from_rest]:
             t = at[v0] + dt
             if t < best[v1]:
                 best[v1] = t
                 via[v1] = level
-        return EndTimes((best[0], best[1], best[2]), (via[0], via[1], via[2]))
+        b0, b1, b2 = best
+        t_from = min([at[v] for v in via if v is not None])
+        t_to = max([t for t in best if t < INF])
+        return EndTimes((b0, b1, b2), (via[0], via[1], via[2])), b0, t_from, t_to
 
 
 def fix_ending_levels(chain: list[EndTimes]) -> list[Speed]:
