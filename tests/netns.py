@@ -24,6 +24,7 @@ class NetnsHost:
     namespace: str
     address: str
     port: str  # the switch's port of this host: set down, the host is cut off
+    switch: str  # the switch's namespace
 
     @property
     def exec(self) -> list[str]:
@@ -79,11 +80,16 @@ def namespace_hosts(names: list[str]) -> Iterator[list[NetnsHost]]:
             _ip("-n", namespace, "addr", "add", f"{address}/24", "dev", "eth0")
             _ip("-n", namespace, "link", "set", "eth0", "up")
             _ip("-n", namespace, "link", "set", "lo", "up")
-            hosts.append(NetnsHost(name, namespace, address, port))
+            hosts.append(NetnsHost(name, namespace, address, port, switch))
         yield hosts
     finally:
         for namespace in reversed(made):
             subprocess.run(["ip", "netns", "del", namespace], capture_output=True)
+
+
+def cut_off(host: NetnsHost) -> None:
+    """Unplug the host from the switch: it reaches no other host."""
+    _ip("-n", host.switch, "link", "set", host.port, "down")
 
 
 def hosts_toml(hosts: list[NetnsHost], services: dict[str, list[str]],

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from cryptography import x509
-from netns import hosts_toml, namespace_hosts, require_netns
+from netns import cut_off, hosts_toml, namespace_hosts, require_netns
 
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
@@ -202,6 +202,29 @@ def run_on_hosts(tmp_path: Path, extra: list[str]) -> tuple[dict, Path]:
     for (name, text), host in zip(routers.items(), hosts, strict=True):
         assert f"routing on tcp/{host.address}:7447" in text, name  # bound on its own host
     return json.loads(done.stdout), out
+
+
+def test_a_host_whose_router_cannot_link_is_named_before_anything_runs_there(tmp_path):
+    """Host b is unplugged: its router starts but never links to a's. fleet run waits for
+    the link (the router's token, which reaches a's router once linked) and says which
+    router did not link, where to, and what to check, before it starts any process of the
+    run."""
+    require_netns()
+    out = tmp_path / "run"
+    with namespace_hosts(["a", "b"]) as hosts:
+        cut_off(hosts[1])
+        path = hosts_file(tmp_path, hosts_toml(
+            hosts, {"a": ["reservation", "dispatcher", "recorder"]}, {"a": [1, 2], "b": [3, 4]}))
+        done = subprocess.run(
+            [*hosts[0].exec, sys.executable, "-m", "fleet", "run", "--layout", "paper",
+             "--vehicles", "4", "--hosts", str(path), "--out", str(out)],
+            capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1
+    assert (f"router-b did not link to the first host's router (at tcp/{hosts[0].address}:7447) "
+            f"within 30 s: are the hosts file's addresses and ports right") in done.stderr
+    assert "Traceback" not in done.stderr
+    started = {p.stem for p in (out / "logs").glob("*.log")}
+    assert started == {"router", "router-b"}  # no service or agent
 
 
 def test_a_fleet_on_three_hosts_records_what_one_host_records(tmp_path):

@@ -46,7 +46,7 @@ at = 100.0
 duration = 30.0
 cells = "6,1..7,1"
 """
-SAMPLE = {"vehicle": 7, "principal": "vehicle-7"}  # a value for each placeholder
+SAMPLE = {"vehicle": 7, "principal": "vehicle-7", "host": "b"}  # a value for each placeholder
 
 
 def test_every_key_of_a_run_is_of_exactly_one_topic_and_names_its_vehicle():

@@ -66,6 +66,15 @@ def lookahead_text(value: float) -> str:
     return "none" if math.isinf(value) else repr(value)
 
 
+def key_expr(text: str) -> str:
+    """A concrete zenoh key: chunks of anything but `*`, `$`, `?`, `#` and spaces,
+    separated by single slashes."""
+    chunks = text.split("/")
+    if not text or any(not c or re.search(r"[*$?#\s]", c) for c in chunks):
+        raise _refuse(text, "is no concrete zenoh key (e.g. fleet/RUN/router/b/linked)")
+    return text
+
+
 MAX_SIM_SECONDS = 1e6  # days of simulated time: beyond any mission (as fault scenarios say)
 
 

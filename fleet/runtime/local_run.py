@@ -278,18 +278,26 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
             return secrets.router(host, config) if secrets else config
 
         router = launcher.start("router", router_config(hosts.first, ()).argv())
+        linking = []  # each other host's router, and where it links to the first host's
         for host in hosts.hosts[1:]:  # linked to the first host's, through a fault's forwarder
             if host.name in host_links:
                 link = host_links[host.name].endpoint
             else:
                 link = hosts.first.link_endpoint if spec.secure else endpoint
-            launcher.start(hosts.router_name(host), router_config(host, (link,)).argv(),
-                           host.exec)
+            config = dataclasses.replace(router_config(host, (link,)),
+                                         announce=keys.router_linked(host.name))
+            linking.append((launcher.start(hosts.router_name(host), config.argv(), host.exec),
+                            config.announce, link))
         operator = secrets.logins[OPERATOR] if secrets else None
         session = _open_when_up(BusConfig("client", (endpoint,),
                                           user=operator.user if operator else "",
                                           password=operator.password if operator else ""),
                                 router)
+        for child, token, link in linking:  # nothing of its host's reaches this one before
+            _wait_started(session, token, inbox, child, f"{child.name} did not link to the "
+                          f"first host's router (at {link}) within {ROUTER_TIMEOUT_MS / 1000:g} "
+                          f"s: are the hosts file's addresses and ports right, and open "
+                          f"between the hosts?")
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         clock_started = threading.Event()  # every forklift was up: the mission runs
@@ -395,9 +403,11 @@ def _open_when_up(config: BusConfig, router: Child) -> zenoh.Session:
                 said = True
 
 
-def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child) -> None:
+def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child,
+                  late: str = "") -> None:
     """Wait for a child's liveliness token; fail at once, saying why, if a child exits first
-    (nothing else comes through the inbox before the dispatcher starts)."""
+    (nothing else comes through the inbox before the dispatcher starts). `late` says what
+    it means when the token does not come in time."""
     alive = session.liveliness().declare_subscriber(
         token, lambda sample: inbox.put(("alive", sample))
         if sample.kind == zenoh.SampleKind.PUT else None, history=True)
@@ -413,8 +423,9 @@ def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child:
             if kind == "exit" and not item.killed:
                 raise RunFailed(Launcher.death(item, f"before {child.name} was up"
                                                if item is not child else "as it started"))
-        raise RunFailed(f"{child.name} was not up within {ROUTER_TIMEOUT_MS / 1000:g} s "
-                        f"(no {token} token); its log: {child.log}")
+        raise RunFailed((late or f"{child.name} was not up within "
+                                 f"{ROUTER_TIMEOUT_MS / 1000:g} s (no {token} token)")
+                        + f"; its log: {child.log}")
     finally:
         alive.undeclare()
 

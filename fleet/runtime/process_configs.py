@@ -26,6 +26,7 @@ from fleet.runtime.args import (
 )
 from fleet.runtime.argtypes import (
     endpoint,
+    key_expr,
     layout_arg,
     mqtt_url,
     port,
@@ -92,6 +93,9 @@ class RouterConfig(ProcessConfig):
     user: str = ""  # logs in to the routers it connects to as this user ...
     password_file: Path | None = None  # ... with the password in this file
     tls: TlsFiles | None = None  # its TLS links to other routers: CA, certificate, key
+    # A liveliness token it holds while it routes: another host's router, announced on the
+    # first host's once it has linked to it (`fleet run --hosts` waits for that).
+    announce: str = ""
 
     @property
     def endpoints(self) -> tuple[str, ...]:
@@ -125,6 +129,10 @@ class RouterConfig(ProcessConfig):
                        help="its tls/ links, listened on or connected to, show this "
                        "certificate (with its private key) and take only peers whose "
                        "certificate the CA signed (PEM files; default: no tls/ links)")
+        p.add_argument("--announce", type=key_expr, metavar="KEY",
+                       help="hold a liveliness token on this key while routing: the routers "
+                       "it links to learn it once linked (fleet run --hosts waits for each "
+                       "other host's router so; default: none)")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> RouterConfig:
@@ -132,7 +140,7 @@ class RouterConfig(ProcessConfig):
             raise UserError("--password-file needs --user: the password is that user's")
         return cls(tuple(args.listen), tuple(args.connect), args.acl, args.users,
                    args.exit_when_idle, args.user, args.password_file,
-                   TlsFiles(*args.tls) if args.tls else None)
+                   TlsFiles(*args.tls) if args.tls else None, args.announce or "")
 
     def argv(self) -> list[str]:
         return [self.COMMAND, *(a for e in self.listen for a in ("--listen", e)),
@@ -141,7 +149,8 @@ class RouterConfig(ProcessConfig):
                 *_flag("--exit-when-idle", self.exit_when_idle_s),
                 *_flag("--user", self.user, ""), *_flag("--password-file", self.password_file),
                 *(["--tls", str(self.tls.ca), str(self.tls.certificate),
-                   str(self.tls.private_key)] if self.tls else [])]
+                   str(self.tls.private_key)] if self.tls else []),
+                *_flag("--announce", self.announce or None)]
 
 
 @dataclass(frozen=True)

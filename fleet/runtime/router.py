@@ -85,6 +85,8 @@ def serve(config: RouterConfig) -> int:
                                 users_file=str(config.users or ""), tls=config.tls,
                                 user=user, password=password)) as session:
         clients = Clients(session)
+        token = session.liveliness().declare_token(config.announce) if config.announce \
+            else None
         with clients.listener:
             log.info("routing on %s", ", ".join(config.endpoints))
             if config.exit_when_idle_s is not None:
@@ -95,4 +97,6 @@ def serve(config: RouterConfig) -> int:
             if not clients.none.wait(LAST_OUT_S):
                 log.warning("stopping with %d sessions still connected",
                             len(clients.connected))
+        if token is not None:
+            token.undeclare()
     return 0

@@ -68,7 +68,7 @@ GATEWAY = "vda5050"  # the VDA 5050 gateway (fleet run --dispatch external)
 PRINCIPAL = "{principal}"  # whoever the key names (a request key names who asks)
 
 # What a placeholder in a pattern (or a sender) stands for in a concrete key.
-PLACEHOLDERS = {"vehicle": r"\d+", "principal": r"[^/]+"}
+PLACEHOLDERS = {"vehicle": r"\d+", "principal": r"[^/]+", "host": r"[^/]+"}
 
 
 class TopicKind(Flag):
@@ -200,6 +200,10 @@ class Keys:
     recorder_status = Topic("recorder/status", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
                             (RecorderStatus,), RECORDER)
     recorder_alive = Topic("recorder/alive", TopicKind.TOKEN, sender=RECORDER)
+    # Another host's router (fleet run --hosts), once linked to the first host's: held by
+    # the router itself, so no login is granted it (the first host's router takes anything
+    # of the run from the routers it links with, and from them alone).
+    router_linked = Topic("router/{host}/linked", TopicKind.TOKEN)
 
     @property
     def root(self) -> str:
