@@ -257,23 +257,34 @@ def test_a_secure_fleet_on_three_hosts_survives_a_host_cut_off_as_on_one_host(tm
     summary, out = run_on_hosts(tmp_path, ["--secure", "--faults", str(tmp_path / "cut.toml")])
     assert summary["verdicts"]["passed"] and summary["stacks_done"] == 136
     assert summary["digest"] == reference_digest((out / "faults.toml").read_text())
+    # A bundle per host, each with what that host needs and no more.
     secrets = out / "secrets"
-    assert {p.name for p in secrets.glob("acl*.json")} == {
-        "acl.json", "acl-b.json", "acl-c.json"}
-    # The first host's router takes the others' links by login and certificate, theirs the
-    # first's by its certificate; the run reached every host, so each link was taken so.
-    def linked(acl: str) -> list[tuple[list[str], list[str]]]:
+    assert {p.name for p in secrets.iterdir()} == {"a", "b", "c"}
+
+    def linked(host: str) -> list[tuple[list[str], list[str]]]:
+        """Whom the host's router takes links from: by certificate, and by login."""
         return [(s["cert_common_names"], s.get("usernames", []))
-                for s in json.loads((secrets / acl).read_text())["subjects"]
+                for s in json.loads((secrets / host / "acl.json").read_text())["subjects"]
                 if "cert_common_names" in s]
 
-    assert linked("acl.json") == [(["router-b"], ["router-b"]), (["router-c"], ["router-c"])]
-    assert linked("acl-b.json") == linked("acl-c.json") == [(["router"], [])]
-    ca = x509.load_pem_x509_certificate((secrets / "ca.pem").read_bytes())
-    for name in ("router", "router-b", "router-c"):  # each signed by the run's own CA
-        assert (secrets / f"{name}.key").stat().st_mode & 0o777 == 0o600
-        x509.load_pem_x509_certificate((secrets / f"{name}.pem").read_bytes(
-            )).verify_directly_issued_by(ca)
-    # The CA's key is nowhere: no one signs another certificate of the run.
-    assert {p.name for p in secrets.iterdir() if p.suffix in (".key", ".pem")} == {
-        "ca.pem", *(f"{n}.{e}" for n in ("router", "router-b", "router-c") for e in ("key", "pem"))}
+    assert linked("a") == [(["router-b"], ["router-b"]), (["router-c"], ["router-c"])]
+    assert linked("b") == linked("c") == [(["router"], [])]
+    ca_pem = (secrets / "a" / "ca.pem").read_bytes()
+    ca = x509.load_pem_x509_certificate(ca_pem)
+    # (the VDA 5050 gateway's login too, on the first host, where it runs when it does)
+    runs = {"a": ({"operator", "dispatcher", "reservation", "vda5050", "vehicle-1"}, "router"),
+            "b": ({"recorder", "vehicle-2"}, "router-b"),
+            "c": ({"vehicle-3", "vehicle-4"}, "router-c")}
+    for host, (processes, router) in runs.items():
+        bundle = secrets / host
+        assert (bundle / "ca.pem").read_bytes() == ca_pem
+        assert (bundle / f"{router}.key").stat().st_mode & 0o777 == 0o600
+        x509.load_pem_x509_certificate((bundle / f"{router}.pem").read_bytes(
+            )).verify_directly_issued_by(ca)  # signed by the run's own CA
+        # Its own router's key alone: the CA's is nowhere, no one signs another.
+        assert {p.name for p in bundle.iterdir() if p.suffix in (".key", ".pem")} == {
+            "ca.pem", f"{router}.key", f"{router}.pem"}
+        logs_in = processes | ({router} if host != "a" else set())
+        assert {p.stem for p in bundle.glob("*.password")} == logs_in
+        checked = {line.split(":")[0] for line in (bundle / "users.txt").read_text().split()}
+        assert checked == processes | ({"router-b", "router-c"} if host == "a" else set())

@@ -37,6 +37,7 @@ vehicles = [1]
 name = "b"
 address = "127.0.0.1"
 port = {b}
+services = ["recorder"]
 vehicles = [2]
 """
 ROUTE_S = 20.0  # a route across both routers is up within this (some 100 ms here)
@@ -172,7 +173,25 @@ def test_the_first_hosts_router_takes_a_link_only_with_a_certificate_of_the_run(
     assert ask(link(a.link_endpoint, linked.secrets.tls[a.name]), keys.dispatch_mission) == []
     # A certificate of the same name from another CA: the TLS handshake is refused.
     (tmp_path / "other").mkdir()
-    forged = RunAuthority(tmp_path / "other", "other").issue(name, a.address)
+    forged = RunAuthority("other").issue(name, a.address, tmp_path / "other")
     with pytest.raises(zenoh.ZError):
         link(a.link_endpoint, TlsFiles(linked.secrets.tls[b.name].ca, forged.certificate,
                                        forged.private_key))
+
+
+def test_each_host_has_a_bundle_of_its_own_and_its_router_takes_its_own_processes_logins(
+        linked: Linked):
+    """Host b's bundle holds its router's key and the logins of what runs on b, nothing of
+    host a's: b's router knows no login of a's processes, nor a's router one of b's (but
+    router b's own, which links to it)."""
+    a, b = linked.hosts.hosts
+    assert {p.name for p in linked.secrets.bundle(b).iterdir()} == {
+        "users.txt", "acl.json", "ca.pem", "router-b.pem", "router-b.key",
+        "router-b.password", "recorder.password", "vehicle-2.password"}
+    for principal, host in ((vehicle_sender(1), b), (RECORDER, a), (vehicle_sender(2), a)):
+        with pytest.raises(zenoh.ZError):  # refused in the handshake
+            open_session(BusConfig("client", (host.endpoint,), connect_timeout_ms=3000,
+                                   user=principal,
+                                   password=linked.secrets.logins[principal].password))
+    linked.login(vehicle_sender(1), a)
+    linked.login(RECORDER, b)

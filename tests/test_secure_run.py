@@ -38,7 +38,7 @@ def test_a_secure_mission_refuses_a_rogue_with_no_or_a_forklifts_credentials(tmp
         # No credentials: the router refuses the session during the handshake.
         with pytest.raises(zenoh.ZError):
             open_session(BusConfig("client", (endpoint,), connect_timeout_ms=3000))
-        password = (tmp_path / "secrets" / "vehicle-1.password").read_text()
+        password = (tmp_path / "secrets" / "local" / "vehicle-1.password").read_text()
         rogue = open_session(BusConfig("client", (endpoint,), connect_timeout_ms=30_000,
                                        user="vehicle-1", password=password))
         try:
@@ -91,7 +91,7 @@ def test_a_secure_seed004_run_gives_the_in_process_record_and_refuses_a_rogue_ag
 
     def on_ready(session, keys, launcher):
         assert wait_alive(session, keys.vehicle_alive(2), 60.0)  # the agent a get would reach
-        password = (tmp_path / "run" / "secrets" / "vehicle-1.password").read_text()
+        password = (tmp_path / "run" / "secrets" / "local" / "vehicle-1.password").read_text()
         session = rogue["session"] = open_session(BusConfig(
             "client", (f"tcp/127.0.0.1:{port}",), connect_timeout_ms=30_000, user="vehicle-1",
             password=password))
@@ -136,7 +136,7 @@ def test_a_secure_seed004_run_gives_the_in_process_record_and_refuses_a_rogue_ag
            .replay().changes]
     assert not any(i.startswith("rogue") for i in ids)
     # The router ran a seed-004 run's rules: an AGV's login may put nothing at all.
-    acl = json.loads((tmp_path / "run" / "secrets" / "acl.json").read_text())
+    acl = json.loads((tmp_path / "run" / "secrets" / "local" / "acl.json").read_text())
     rules = {r["id"]: r for r in acl["rules"]}
     (agv1,) = [p for p in acl["policies"] if p["id"] == "vehicle-1"]
     assert not any("put" in rules[i]["messages"] for i in agv1["rules"]

@@ -86,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--secure", action="store_true",
                    help="the router (each host's, with --hosts) runs zenoh access control "
                    "and every process logs in with credentials made for this run (kept in "
-                   "OUT/secrets): a forklift may publish only as itself and commit only its "
+                   "OUT/secrets/HOST): a forklift may publish only as itself and commit only its "
                    "own reservations, only the dispatcher assigns tasks, the recorder only "
                    "reads; the routers of several hosts link over TLS with certificates made "
                    "for this run (docs/faults.md, docs/deployment.md)")

@@ -37,28 +37,29 @@ def _san(address: str) -> x509.GeneralName:
 
 
 class RunAuthority:
-    """A CA of one run: its certificate in `folder/ca.pem`, its key only in memory."""
+    """A CA of one run: its key only in memory, its certificate written beside each router's
+    key and certificate it issues."""
 
-    def __init__(self, folder: Path, run: str) -> None:
-        self.folder = folder
+    def __init__(self, run: str) -> None:
         self.key = ec.generate_private_key(ec.SECP256R1())
         self.name = _name(f"fleet run {run}")
         self.certificate = self._sign(self.name, self.key, x509.BasicConstraints(
             ca=True, path_length=0))
-        self.ca = folder / "ca.pem"
-        self.ca.write_bytes(self.certificate.public_bytes(serialization.Encoding.PEM))
 
-    def issue(self, common_name: str, address: str) -> TlsFiles:
-        """A key and a certificate for the router `common_name` that listens at `address`."""
+    def issue(self, common_name: str, address: str, folder: Path) -> TlsFiles:
+        """A key and a certificate for the router `common_name` that listens at `address`,
+        written in `folder` with the CA's certificate (`ca.pem`)."""
+        ca = folder / "ca.pem"
+        ca.write_bytes(self.certificate.public_bytes(serialization.Encoding.PEM))
         key = ec.generate_private_key(ec.SECP256R1())
         certificate = self._sign(_name(common_name), key, x509.BasicConstraints(
             ca=False, path_length=None), x509.SubjectAlternativeName([_san(address)]))
-        cert_path = self.folder / f"{common_name}.pem"
+        cert_path = folder / f"{common_name}.pem"
         cert_path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
-        key_path = write_private(self.folder / f"{common_name}.key", key.private_bytes(
+        key_path = write_private(folder / f"{common_name}.key", key.private_bytes(
             serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
             serialization.NoEncryption()).decode())
-        return TlsFiles(self.ca, cert_path, key_path)
+        return TlsFiles(ca, cert_path, key_path)
 
     def _sign(self, subject: x509.Name, key: ec.EllipticCurvePrivateKey,
               constraints: x509.BasicConstraints,

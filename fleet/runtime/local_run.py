@@ -28,9 +28,9 @@ from fleet.runtime.access import (
     OPERATOR,
     LinkedRouter,
     TlsFiles,
+    dictionary_text,
     generate_credentials,
     router_acl,
-    write_dictionary,
     write_private,
 )
 from fleet.runtime.args import BusFlags
@@ -67,6 +67,7 @@ from fleet.wire.topics import (
     Keys,
     genuine,
     published_by,
+    vehicle_of,
     vehicle_sender,
 )
 from fleet.world.layout_file import load_layout
@@ -139,11 +140,15 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
 
 
 class Secrets:
-    """A secure run's logins (fleet/runtime/access.py), kept in the run directory readable by its
-    owner only: the routers' dictionary, one password file each, each host's router its
-    access control (`lifting`: the rules of seed 004's lifting AGVs), and on several hosts
-    the certificates the routers link with (fleet/runtime/certificates.py). Another host's
-    router logs in to the first host's under its process name (router-NAME)."""
+    """A secure run's logins (fleet/runtime/access.py) and, on several hosts, the certificates
+    its routers link with (fleet/runtime/certificates.py), kept in the run directory as a
+    bundle per host (`secrets/NAME/`, readable by its owner only) that holds what that host
+    needs and no more: its router's dictionary of the logins it checks (its own processes',
+    and on the first host the other routers'), its access control (`lifting`: the rules of
+    seed 004's lifting AGVs), the run's CA certificate with its router's key and
+    certificate, and the password of each process it runs (another host's router logs in to
+    the first host's under its process name, router-NAME). A host given its bundle alone
+    can pose as none of the other hosts' routers or processes."""
 
     def __init__(self, folder: Path, run: str, root: str, vehicles: int, hosts: Hosts,
                  lifting: bool = False) -> None:
@@ -151,39 +156,57 @@ class Secrets:
         self.folder = folder
         self.hosts = hosts
         first, others = hosts.first, hosts.hosts[1:]
-        credentials = generate_credentials(run, vehicles,
-                                           [hosts.router_name(h) for h in others])
-        self.logins = credentials.logins
-        self.users = write_dictionary(credentials, folder / "users.txt")
+        routers = [hosts.router_name(h) for h in others]
+        self.logins = generate_credentials(run, vehicles, routers).logins
+        authority = RunAuthority(run) if others else None
         self.tls: dict[str, TlsFiles] = {}
-        if others:  # the first host's link port is checked (hosts_for)
-            authority = RunAuthority(folder, run)
-            self.tls = {h.name: authority.issue(hosts.router_name(h), h.address)
-                        for h in hosts.hosts}
         for host in hosts.hosts:
+            bundle = self.bundle(host)
+            bundle.mkdir(mode=0o700, exist_ok=True)
+            here = [p for p in self.logins if self.host_of(p) == host]
+            checked = [p for p in here if p not in routers] + (routers if host == first else [])
+            write_private(self.users(host), dictionary_text(self.logins[p] for p in checked))
             if host == first:  # the others log in, with their certificates
-                linked = tuple(LinkedRouter(hosts.router_name(h), hosts.router_name(h))
-                               for h in others)
+                linked = tuple(LinkedRouter(name, name) for name in routers)
             else:  # the first's certificate: it accepts the link, so it logs in nowhere
                 linked = (LinkedRouter(hosts.router_name(first)),)
             write_private(self.acl(host), json.dumps(router_acl(root, vehicles, lifting,
                                                                 linked), indent=1))
-        for name, login in self.logins.items():
-            write_private(folder / f"{name}.password", login.password)
+            for principal in here:
+                write_private(self.password_file(principal), self.logins[principal].password)
+            if authority is not None:
+                self.tls[host.name] = authority.issue(hosts.router_name(host), host.address,
+                                                      bundle)
+
+    def bundle(self, host: Host) -> Path:
+        """What the host needs, alone: give it this directory and nothing else of `secrets/`."""
+        return self.folder / host.name
+
+    def host_of(self, principal: str) -> Host:
+        """Where the process that logs in as `principal` runs (the operator: with fleet run,
+        on the first host; a router on its own)."""
+        for host in self.hosts.hosts[1:]:
+            if principal == self.hosts.router_name(host):
+                return host
+        vehicle = vehicle_of(principal)
+        return self.hosts.of_process(f"agent-{vehicle}" if vehicle is not None else principal)
 
     def password_file(self, principal: str) -> Path:
-        return self.folder / f"{principal}.password"
+        return self.bundle(self.host_of(principal)) / f"{principal}.password"
+
+    def users(self, host: Host) -> Path:
+        """The dictionary of the host's router."""
+        return self.bundle(host) / "users.txt"
 
     def acl(self, host: Host) -> Path:
         """The access control of the host's router."""
-        return self.folder / ("acl.json" if host == self.hosts.first
-                              else f"acl-{host.name}.json")
+        return self.bundle(host) / "acl.json"
 
     def router(self, host: Host, config: RouterConfig) -> RouterConfig:
         """The host's router `config`, secured: its access control and the dictionary, and
         on several hosts its certificate; the first host's also takes the others' links on
         its TLS endpoint, another logs in to the first's under its name."""
-        config = dataclasses.replace(config, acl=self.acl(host), users=self.users,
+        config = dataclasses.replace(config, acl=self.acl(host), users=self.users(host),
                                      tls=self.tls.get(host.name))
         if not self.tls:
             return config
