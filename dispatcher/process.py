@@ -47,6 +47,7 @@ from fleet.runtime.bus import (
     Requester,
     RequestFailed,
     Stream,
+    asked,
     follow_recorded,
     open_session,
 )
@@ -54,6 +55,8 @@ from fleet.runtime.lifecycle import Stopped, process_main, stop_on_signals
 from fleet.runtime.process_configs import DispatcherConfig
 from fleet.wire.protocol import (
     ZONE,
+    AgvEvent,
+    AgvHistory,
     Message,
     MissionDone,
     MissionInfo,
@@ -159,6 +162,11 @@ def serve(config: DispatcherConfig) -> int:
         streams = _streams(scope, session, keys)
         scope.enter_context(session.declare_queryable(  # for a recorder that joins late
             keys.dispatch_mission, lambda q: q.reply(q.key_expr, encode(info, SENDER, 0, 0.0))))
+        scope.enter_context(session.declare_queryable(  # for a recorder that restarted
+            keys.dispatch_agv_history, lambda q: _history(q, streams[AgvEvent])))
+        scope.enter_context(session.declare_queryable(  # ... after the mission ended
+            keys.dispatch_done, lambda q: [q.reply(q.key_expr, payload)
+                                           for payload in streams[MissionDone].since(0)]))
         liveness = scope.enter_context(closing(Liveness(session, keys)))
         recorded = threading.Event()
         scope.enter_context(follow_recorded(session, keys, recorded, log))
@@ -202,10 +210,22 @@ def _claimed_fleet(scope: ExitStack, session: zenoh.Session, keys: Keys,
 
 def _streams(scope: ExitStack, session: zenoh.Session, keys: Keys) -> dict[type[Message], Stream]:
     """Each of the dispatcher's topics, by the message it carries (every event must reach
-    the recorder: its publishers wait rather than drop)."""
+    the recorder: its publishers wait rather than drop). A seed-004 run's events are kept
+    too: they are its recording's whole account, and a restarted recorder asks for those
+    its predecessor did not write (seed 000's record carries its subtasks instead); and
+    the mission's result, for a recorder restarted after it."""
     return {cls: scope.enter_context(Stream(session, topic.key(keys.run), topic.sender,
-                                            topic.reliable))
+                                            topic.reliable,
+                                            keep=cls in (AgvEvent, MissionDone)))
             for cls, topic in published_by(DISPATCHER).items()}
+
+
+def _history(query: zenoh.Query, events: Stream) -> None:
+    """A restarted recorder's ask: every event numbered after the one it names, each as
+    it was published."""
+    if (request := asked(query, AgvHistory, log)) is not None:
+        for payload in events.since(request.after):
+            query.reply(query.key_expr, payload)
 
 
 def read_roster(path: Path) -> dict[str, int]:

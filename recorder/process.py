@@ -29,9 +29,9 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.recording.format import VDA5050_PREFIX
-from fleet.recording.reader import Recorded
+from fleet.recording.reader import Recorded, last_numbered_before
 from fleet.recording.rundir import claim_new
-from fleet.recording.segments import RUN_FILE, next_segment
+from fleet.recording.segments import RUN_FILE, next_segment, segment_number
 from fleet.recording.writer import RecordingWriter
 from fleet.runtime.argtypes import port_problem
 from fleet.runtime.bus import Stream, open_session
@@ -41,6 +41,7 @@ from fleet.vda5050 import TOPICS as VDA_TOPICS
 from fleet.vda5050.messages import serial_number
 from fleet.vda5050.schemas import schema_text
 from fleet.wire.protocol import (
+    AgvHistory,
     MissionDone,
     MissionInfo,
     MqttTraffic,
@@ -56,6 +57,7 @@ from fleet.world.layout_file import parse_layout
 log = logging.getLogger("fleet.recorder")
 SENDER = RECORDER
 FLUSH_PERIOD_S = 1.0
+HISTORY_TIMEOUT_S = 30.0  # a long mission's events come back in one answer
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -75,6 +77,11 @@ class Recorder:
         self.done_seen = False
         self.exit_when_done = exit_when_done
         self.lock = threading.Lock()  # status answers read what the writer thread counts
+        # What this segment holds of the messages a recorder also asks for (the seed-004
+        # events, the result), by key and number: one both heard live and answered is
+        # written once.
+        self.asked_keys = (keys.dispatch_agv, keys.dispatch_done)
+        self.written: set[tuple[str, int]] = set()
 
     def run(self) -> None:
         with ExitStack() as scope:
@@ -88,6 +95,8 @@ class Recorder:
             scope.enter_context(
                 self.session.liveliness().declare_token(self.keys.recorder_alive))
             self._ask_for_mission()
+            if (segment_number(self.writer.path) or 1) > 1:
+                self._catch_up()
             log.info("recording %s to %s", self.keys.everything, self.writer.path)
             self._write_until_stopped()
         log.info("wrote %d messages to %s", self.writer.messages, self.writer.path)
@@ -120,14 +129,38 @@ class Recorder:
         self.inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
 
     def _ask_for_mission(self) -> None:
-        """A recorder started mid-run asks the dispatcher what the run is."""
+        """A recorder started mid-run asks the dispatcher what the run is, and its result if
+        it has ended (one restarted after the end of a seed-004 run, which does not wait for
+        a recorder)."""
         def ask() -> None:
-            for reply in self.session.get(self.keys.dispatch_mission, timeout=5.0):
-                if reply.ok is not None:
-                    self.inbox.put((self.keys.dispatch_mission, reply.ok.payload.to_bytes(),
-                                    time.time_ns()))
+            for key in (self.keys.dispatch_mission, self.keys.dispatch_done):
+                for reply in self.session.get(key, timeout=5.0):
+                    if reply.ok is not None:
+                        self.inbox.put((key, reply.ok.payload.to_bytes(), time.time_ns()))
 
         threading.Thread(target=ask, daemon=True, name="ask-mission").start()
+
+    def _catch_up(self) -> None:
+        """A restarted recorder (its file a later segment of the run) asks the dispatcher
+        for the seed-004 events its predecessors did not write: those numbered after the
+        last one in the earlier segments. Asked once this recorder's subscriber is up, so
+        every later one comes live; a seed-000 dispatcher keeps none and answers nothing."""
+        def ask() -> None:
+            after = last_numbered_before(self.writer.path, self.keys.dispatch_agv)
+            request = encode(AgvHistory(after), SENDER, 0, 0.0)
+            caught = 0
+            # Every reply is on the one key: unconsolidated, or zenoh keeps only the last.
+            for reply in self.session.get(self.keys.dispatch_agv_history, payload=request,
+                                          timeout=HISTORY_TIMEOUT_S,
+                                          consolidation=zenoh.ConsolidationMode.NONE):
+                if reply.ok is not None:
+                    self.inbox.put((self.keys.dispatch_agv, reply.ok.payload.to_bytes(),
+                                    time.time_ns()))
+                    caught += 1
+            if caught:
+                log.info("caught up on %d seed-004 events after event %d", caught, after)
+
+        threading.Thread(target=ask, daemon=True, name="catch-up").start()
 
     def _record(self, key: str, payload: bytes, log_ns: int) -> None:
         """Write the message as it came; then what it tells (the run's description, the
@@ -137,6 +170,10 @@ class Recorder:
         except ProtocolError as exc:  # recorded as it came: the analyzer reports it
             log.warning("recording a malformed message on %s: %s", key, exc)
             envelope = None
+        if envelope is not None and key in self.asked_keys:
+            if (key, envelope.seq) in self.written:
+                return  # live, and again in an answer
+            self.written.add((key, envelope.seq))
         sim_time = envelope.sim_time if envelope is not None else 0.0
         with self.lock:
             self.writer.write(key, payload, log_ns, sim_time)

@@ -31,7 +31,7 @@ from fleet.planning.reservations import INF
 from fleet.recording.reader import read_recording
 from fleet.runtime.bus import wait_alive
 from fleet.runtime.local_run import RunSpec, run_processes
-from fleet.wire.protocol import CellRequest, RouteRequest, encode
+from fleet.wire.protocol import AgvEvent, CellRequest, RouteRequest, encode
 from fleet.world.floor004 import Floor004Shape, build
 from fleet.world.layout_file import load_layout
 from reservation.journal import Journal
@@ -258,6 +258,45 @@ def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_pat
     ids = [c.request_id for c in Journal(journal).replay().changes if c.request_id]
     assert len(ids) == len(set(ids))
     assert analyze004(read_recording(tmp_path / "run")).passed
+
+
+def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_whole(tmp_path):
+    """The injector kills the recorder at t = 40 and starts a new one 2 s of wall time
+    later; the tracker does not wait for it, so the events of those 2 s and what the dead
+    one had not written reach no recorder live. The new one writes run-2.mcap and asks the
+    dispatcher for every event after the last one run.mcap holds (and for the result, had
+    the mission ended meanwhile): the two segments hold every event once, in the
+    dispatcher's numbering, and are judged as the run without the fault."""
+    layout_file = small_floor_file(tmp_path)
+    floor = load_layout(str(layout_file)).floor
+    scenario = tmp_path / "kill.toml"
+    scenario.write_text('[[fault]]\nkind = "kill_service"\nat = 40.0\n'
+                        'service = "recorder"\ndowntime = 2.0\n')
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
+    outcome = run_processes(RunSpec(
+        mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
+        faults_source=str(scenario), clocked_agents=False))
+    assert outcome.error == ""
+    assert outcome.done.record == record_of(reference)
+    assert [(a.what, a.t) for a in outcome.injected] == [("kill the recorder for 2 s", 40.0)]
+    assert "caught up on" in (tmp_path / "run" / "logs" / "recorder-2.log").read_text()
+    recording = read_recording(tmp_path / "run")
+    report = analyze004(recording)
+    assert [s.split()[0] for s in report.segments] == ["run.mcap", "run-2.mcap"]
+    assert report.passed and report.events_missing == []
+    assert report.orders_picked == 8
+    numbers = [r.envelope.seq for r, _ in recording.of(AgvEvent)]
+    assert sorted(numbers) == list(range(1, len(reference.events) + 1))  # each once
+
+
+def test_the_events_no_segment_holds_are_counted_up_to_what_the_result_says_was_sent():
+    """The dispatcher numbers its events 1, 2, ...; those missing, in runs, up to the count
+    its recorded result gives (after the last one recorded too)."""
+    from fleet.analysis.analyze004 import missing_runs
+
+    assert missing_runs([1, 2, 5, 6, 9], published=12) == [(3, 4), (7, 8), (10, 12)]
+    assert missing_runs([2, 3]) == [(1, 1)] and missing_runs([], 0) == []
 
 
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from fleet.analysis.traffic004 import Breach
 from fleet.analysis.verdicts004 import Verdict004, judge
@@ -80,6 +81,10 @@ class Report004:
     heat_w: float = 0.0  # the heat cost's weight the AGVs planned with (0: off)
     faults: int = 0  # breakdowns and zones closed
     fault_breaches: list[Breach] = field(default_factory=list)
+    # The dispatcher's events (numbered 1, 2, ...) that no segment holds, as (first, last)
+    # runs: what no recorder wrote and no restarted one caught up on.
+    events_missing: list[tuple[int, int]] = field(default_factory=list)
+    segments: list[str] = field(default_factory=list)  # of a recording in several, each
 
     # What `fleet runs` keeps of a judged run (fleet/commands/runs.py, summary_of), as seed
     # 000's report has it.
@@ -96,7 +101,7 @@ class Report004:
 
     @property
     def messages_whole(self) -> bool:
-        return not self.unreadable
+        return not self.unreadable and not self.events_missing
 
     incomplete: tuple[str, ...] = ()
 
@@ -107,7 +112,7 @@ class Report004:
 
     @property
     def passed(self) -> bool:
-        return self.verdict.passed and self.work_done and not self.unreadable and \
+        return self.verdict.passed and self.work_done and self.messages_whole and \
             not self.fault_breaches
 
 
@@ -141,9 +146,11 @@ def shelf_slips(floor: Floor004, events: list[Event]) -> list[ShelfSlip]:
 
 
 def recorded_events(recording: Recording, floor: Floor004) -> tuple[list[Event], list[str]]:
-    """The tracking events the recording holds, and why any recorded one names no event."""
+    """The tracking events the recording holds, in the order the dispatcher numbered them
+    (a restarted recorder writes those its predecessor lost after the live ones it heard
+    first), and why any recorded one names no event."""
     events, unreadable = [], []
-    for _, m in recording.of(AgvEvent):
+    for _, m in sorted(recording.of(AgvEvent), key=lambda entry: entry[0].envelope.seq):
         try:
             events.append(event_from_wire(m, floor))
         except NotAnEvent as exc:
@@ -171,7 +178,31 @@ def analyze004(recording: Recording) -> Report004:
                      shelf_slips(floor, events), unreadable, mission_finished(recording),
                      info.heat_w,
                      sum(isinstance(e, BrokeDown | ZoneClosed) for e in events),
-                     fault_breaches(events))
+                     fault_breaches(events),
+                     missing_runs([r.envelope.seq for r, _ in recording.of(AgvEvent)],
+                                  events_published(recording)),
+                     [f"{Path(s.path).name}" + ("" if s.complete else " (torn)")
+                      for s in recording.segments] if len(recording.segments) > 1 else [])
+
+
+def events_published(recording: Recording) -> int:
+    """How many events the dispatcher published, as its recorded result says (0: unknown)."""
+    done = [m for _, m in recording.of(MissionDone)]
+    count = done[-1].record.get("events") if done else None
+    return count if isinstance(count, int) and not isinstance(count, bool) else 0
+
+
+def missing_runs(numbers: list[int], published: int = 0) -> list[tuple[int, int]]:
+    """The numbers from 1 to `published` (or to the highest of `numbers`) that are not
+    among `numbers`, as (first, last) runs."""
+    runs, expected = [], 1
+    for n in sorted(set(numbers)):
+        if n > expected:
+            runs.append((expected, n - 1))
+        expected = n + 1
+    if published >= expected:
+        runs.append((expected, published))
+    return runs
 
 
 def recorded_starts(recording: Recording, floor: Floor004) -> dict[int, tuple[int, int]]:
@@ -215,6 +246,8 @@ def report_lines(r: Report004) -> list[str]:
         f"  {'conflicts':<19}{c.get('head-on', 0)} head-on, {c.get('crossing', 0)} crossing, "
         f"{c.get('rear-end', 0)} rear-end",
     ]
+    if r.segments:
+        lines.append(f"  {'segments':<19}{len(r.segments)}: {', '.join(r.segments)}")
     return lines
 
 
@@ -242,6 +275,11 @@ def verdict_lines(r: Report004) -> list[str]:
     if r.unreadable:
         lines.append(f"  {'events':<19}FAIL: {len(r.unreadable)} name no event of the floor: "
                      f"{r.unreadable[0]}")
+    if r.events_missing:
+        missing = sum(b - a + 1 for a, b in r.events_missing)
+        lines.append(f"  {'events':<19}FAIL: {missing} of the dispatcher's not recorded (" +
+                     ", ".join(f"{a}" if a == b else f"{a} to {b}"
+                               for a, b in r.events_missing[:3]) + ")")
     return lines
 
 
@@ -254,6 +292,6 @@ def report_json(r: Report004) -> dict:
             "recording": r.path,
             "verdicts": {"cells": not (v.clashes or v.bad_moves),
                          "rules": not v.rule_breaches, "giving_way": not v.yield_breaches,
-                         "work": r.work_done, "events": not r.unreadable,
+                         "work": r.work_done, "events": r.messages_whole,
                          "faults": not r.fault_breaches, "passed": r.passed},
             "faults": r.faults}

@@ -8,9 +8,10 @@ restores its link (if ever): the tracker strikes it as a breakdown told by its c
 its seam asks the injector to act when it strikes and when it is over
 (dispatcher/remote004.py). A killed reservation service changes nothing the tracker
 decides: its seam holds the instant while the injector kills it, and the requests wait for
-its successor, which reads the journal. A killed dispatcher or recorder (a seed-004
-dispatcher does not pick its mission up, nor its analysis a recording in segments) and a
-slowed planner (which no seed-004 decision waits for) are refused by name."""
+its successor, which reads the journal. A killed recorder changes nothing either: its
+successor asks the dispatcher for the events it did not write (recorder/process.py). A
+killed dispatcher (a seed-004 dispatcher does not pick its mission up) and a slowed planner
+(which no seed-004 decision waits for) are refused by name."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VE
 # what the injector does to the run's processes
 INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
                FaultKind.KILL_SERVICE)
-SERVICES004 = ("reservation",)  # the services a seed-004 run survives the death of
+SERVICES004 = ("reservation", "recorder")  # the services a seed-004 run survives the death of
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
 
 
@@ -53,7 +54,7 @@ def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
                                 f"{', '.join(k.value for k in KINDS004)} are built yet")
         if not taken004(fault):
             raise ScenarioError(f"{where}: on a seed-004 floor only the "
-                                f"{', '.join(SERVICES004)} service can be killed yet (a "
+                                f"{' and '.join(SERVICES004)} services can be killed yet (a "
                                 f"seed-004 run does not recover a killed {fault.service})")
         if fault.vehicle is not None and not 1 <= fault.vehicle <= vehicles:
             raise ScenarioError(f"{where}: the run has AGVs 1 to {vehicles}")

@@ -34,7 +34,7 @@ from fleet.recording.format import (
     VIEW_PREFIXES,
 )
 from fleet.recording.rundir import MARKER, run_id_of
-from fleet.recording.segments import RUN_FILE, run_dir_of, segment_paths
+from fleet.recording.segments import RUN_FILE, run_dir_of, segment_number, segment_paths
 from fleet.wire.protocol import Envelope, Message, MissionDone, MissionInfo, ProtocolError, decode
 from fleet.wire.topics import genuine, message_type
 from fleet.world.layout import Layout
@@ -440,3 +440,22 @@ def result_recorded(segment: Path) -> bool | None:
     counts = summary.statistics.channel_message_counts
     return any(message_type(channel.topic) is MissionDone and counts.get(number, 0) > 0
                for number, channel in summary.channels.items())
+
+
+def last_numbered_before(segment: Path, key: str) -> int:
+    """The highest number of the genuine messages on `key` in the segments of the run that
+    come before `segment` (a restarted recorder's: how far its predecessors got); 0 for
+    none. A segment that cannot be read counts as empty."""
+    number = segment_number(segment) or 1
+    last = 0
+    for path in segment_paths(segment.parent):
+        if (segment_number(path) or 1) >= number:
+            continue
+        try:
+            earlier, _ = _read_segment(path)
+        except RecordingError:
+            continue
+        last = max([last, *(r.envelope.seq for r in earlier.messages
+                            if r.key == key and r.genuine)])
+    return last
+

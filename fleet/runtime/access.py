@@ -21,12 +21,14 @@ watch its own liveliness token: a container's health check logs in as the servic
   commit it is, and the dispatcher for an id (dispatch/claim); it reads the clock, the
   table's changes, the mission's end and the service's token.
 - `dispatcher`: assigns tasks (get on vehicle/*/task), asks the service under its own name,
-  publishes the mission (dispatch/**) and the clock, serves dispatch/mission to a late
-  recorder and dispatch/claim to forklifts, reads acks, states, faults, table changes and
-  the recorder's status, and everyone's liveliness.
+  publishes the mission (dispatch/**) and the clock, serves dispatch/mission, dispatch/done
+  and dispatch/agv/history to a late or restarted recorder and dispatch/claim to
+  forklifts, reads acks, states, faults, table changes and the recorder's status, and
+  everyone's liveliness.
 - `reservation`: serves reservation/request/** (every principal's request key), publishes
   reservation/change, and its token; reads the mission's end.
-- `recorder`: reads everything (a subscriber on the whole run, a get of dispatch/mission);
+- `recorder`: reads everything (a subscriber on the whole run, a get of dispatch/mission,
+  dispatch/done and dispatch/agv/history);
   the one thing it writes is its own status (published and served on recorder/status) and
   its token.
 - `operator`, `fleet run` with its fault injector: injects faults (get on vehicle/*/inject),
@@ -43,7 +45,8 @@ vehicles, the dispatcher and the gateway get only what that run uses:
 - `dispatcher`: asks the AGVs on vehicle/*/task and the service under its own name (a closed
   zone is its commit, as ZONE; so are the cells of an AGV whose agent a fault killed, until
   its new one is up), publishes dispatch/** and the clock (which ticks only for the fault
-  injector, at an agent's fault), serves dispatch/mission and dispatch/claim, reads the
+  injector, at an agent's fault), serves dispatch/mission, dispatch/done,
+  dispatch/agv/history and dispatch/claim, reads the
   acks, the recorder's status and everyone's liveliness; not the table's changes (it keeps
   the mission's table itself), no states or faults (a lifting AGV sends none).
 - `vda5050`: nothing (no gateway runs on a seed-004 floor).
@@ -174,7 +177,8 @@ def _grants(root: str, vehicles: int, lifting: bool = False) -> Grants:
         DISPATCHER: [
             (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
             (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
-            (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
+            (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim",
+                     f"{root}/dispatch/agv/history", f"{root}/dispatch/done"]),
             (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/vehicle/*/state",
                          f"{root}/vehicle/*/fault", f"{root}/reservation/change",
                          f"{root}/recorder/status", f"{root}/vda5050/*/leg"]),
@@ -187,7 +191,8 @@ def _grants(root: str, vehicles: int, lifting: bool = False) -> Grants:
             (TOKEN + WATCH, [f"{root}/reservation/alive"])],
         RECORDER: [
             (SUBSCRIBE, [f"{root}/**"]),
-            (ASK, [f"{root}/dispatch/mission"]),
+            (ASK, [f"{root}/dispatch/mission", f"{root}/dispatch/agv/history",
+                   f"{root}/dispatch/done"]),
             (PUBLISH + SERVE, [f"{root}/recorder/status"]),
             (TOKEN + WATCH, [f"{root}/recorder/alive"])],
         GATEWAY: [  # the VDA 5050 gateway: a master's orders as tasks, its MQTT traffic
@@ -223,7 +228,8 @@ def _lifting_grants(root: str, vehicles: int) -> Grants:
     grants[DISPATCHER] = [
         (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{DISPATCHER}"]),
         (PUBLISH, [f"{root}/dispatch/**", f"{root}/clock"]),
-        (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim"]),
+        (SERVE, [f"{root}/dispatch/mission", f"{root}/dispatch/claim",
+                 f"{root}/dispatch/agv/history", f"{root}/dispatch/done"]),
         (SUBSCRIBE, [f"{root}/clock/ack/*", f"{root}/recorder/status"]),
         (TOKEN, [f"{root}/dispatch/alive"]),
         (WATCH, [f"{root}/**"])]

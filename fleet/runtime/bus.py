@@ -117,14 +117,28 @@ class Stream:
     count the messages it missed."""
 
     def __init__(self, session: zenoh.Session, key: str, sender: str,
-                 reliable: bool = False) -> None:
+                 reliable: bool = False, keep: bool = False) -> None:
         options = {"congestion_control": RELIABLE} if reliable else {}
         self.publisher = session.declare_publisher(key, **options)
         self.sender = sender
         self.seq = itertools.count(1)  # next() is atomic: threads may share a stream
+        # keep: every message put, as sent (message n at n - 1), for whoever missed some
+        self.kept: list[bytes] | None = [] if keep else None
+        self.lock = threading.Lock()  # numbers and keeps in one order
 
     def put(self, message: Message, sim_time: float) -> None:
-        self.publisher.put(encode(message, self.sender, next(self.seq), sim_time))
+        if self.kept is None:
+            self.publisher.put(encode(message, self.sender, next(self.seq), sim_time))
+            return
+        with self.lock:
+            payload = encode(message, self.sender, next(self.seq), sim_time)
+            self.kept.append(payload)
+        self.publisher.put(payload)
+
+    def since(self, after: int) -> list[bytes]:
+        """The messages kept that are numbered after `after`, in order."""
+        with self.lock:
+            return list((self.kept or [])[max(0, after):])
 
     def undeclare(self) -> None:
         self.publisher.undeclare()

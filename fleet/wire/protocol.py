@@ -671,6 +671,15 @@ class AgvEvent(Message):
 
 
 @dataclass(frozen=True)
+class AgvHistory(Message):
+    """A restarted recorder asks the dispatcher for the seed-004 events numbered after
+    `after` (what its predecessor did not write); each comes back as it was published."""
+
+    TYPE: ClassVar[str] = "agv004.history"
+    after: int
+
+
+@dataclass(frozen=True)
 class MqttTraffic(Message):
     """One VDA 5050 message the gateway sent (`received` False) or took from the broker
     (True) on a forklift's MQTT topic, as it was: the recording's copy of the MQTT traffic
@@ -715,7 +724,7 @@ TYPES: dict[str, type[Message]] = {
                               ResumeRequest, Halt, Resume, StackReopened, ZoneClosed,
                               VehicleFault, InjectFault, StatusRequest, VehicleStatus,
                               VehicleClaim, ClaimReply, CellRequest, CellReply, RouteRequest,
-                              RouteReply, AgvEvent, MqttTraffic, LegCommitted)
+                              RouteReply, AgvEvent, AgvHistory, MqttTraffic, LegCommitted)
 }
 
 

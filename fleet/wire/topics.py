@@ -20,6 +20,7 @@ from enum import Flag, auto
 
 from fleet.wire.protocol import (
     AgvEvent,
+    AgvHistory,
     AmendRequest,
     CellRequest,
     ClockAck,
@@ -189,7 +190,12 @@ class Keys:
     dispatch_stopped = Topic("dispatch/stopped", TopicKind.PUBLICATION, (MissionStopped,),
                              DISPATCHER)
     dispatch_agv = Topic("dispatch/agv", TopicKind.PUBLICATION, (AgvEvent,), DISPATCHER)
-    dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION, (MissionDone,), DISPATCHER)
+    # What a restarted recorder missed of them, asked of the dispatcher.
+    dispatch_agv_history = Topic("dispatch/agv/history", TopicKind.QUERYABLE, (AgvHistory,),
+                                 RECORDER)
+    # Also answered, once the mission has ended: to a recorder restarted after it did.
+    dispatch_done = Topic("dispatch/done", TopicKind.PUBLICATION | TopicKind.QUERYABLE,
+                          (MissionDone,), DISPATCHER)
     dispatch_claim = Topic("dispatch/claim", TopicKind.QUERYABLE, (VehicleClaim,))  # any agent
     dispatcher_alive = Topic("dispatch/alive", TopicKind.TOKEN, sender=DISPATCHER)
     # The VDA 5050 gateway: each forklift's MQTT traffic, for the recording.
