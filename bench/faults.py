@@ -1,8 +1,12 @@
 """`fleet bench faults`: every shipped fault scenario on paper with four forklifts (or on a lane
-layout such as paper002, its own scenarios on an order mission), as real processes on the
-fast or the real-time clock, beside the fault-free run on the same clock: how fast each fault
-is detected and recovered from (wall clock), what it costs the mission (sim time), and what
-the recording's verdicts say (docs/reliability.md).
+layout such as paper002, or a seed-004 floor such as paper004, its own scenarios on an order
+mission), as real processes on the fast or the real-time clock, beside the fault-free run on
+the same clock: how fast each fault is detected and recovered from (wall clock), what it
+costs the mission (sim time), whether the record is the fault-free run's, and what the
+recording's verdicts say (docs/reliability.md). A seed-004 run's faults are struck by its
+tracker at their instants, not detected: its rows have no detection times, and its
+overlaps, moves outside and messages lost are its cells shared, bad moves and events no
+segment holds.
 
 Detection: from the injector applying the fault (its wall clock) to the dispatcher seeing it
 (a liveliness token gone, a forklift's report). Recovery: from there to the engine asking the
@@ -20,12 +24,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fleet.analysis.analyze import analyze
+from fleet.analysis.analyze004 import analyze004
 from fleet.dispatching.decision import Strategy
 from fleet.mission.faults import DETECT_TIMEOUT_S, VEHICLE_KINDS, builtin_scenarios, load_scenario
+from fleet.mission.faults004 import injected004, taken004
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.recording.reader import Recording, read_recording
 from fleet.runtime.local_run import RunOutcome, RunSpec, run_processes
 from fleet.wire.protocol import Halt, MissionDone, Resume
+from fleet.world.layout_file import load_layout
 
 MISSION = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)
 ORDERS, AGVS = 40, 6  # a lane layout's order mission: long enough for every fault
@@ -39,8 +46,9 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print,
         clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
         mission: Mission = MISSION) -> dict:
     """One row per scenario (a kind's own scenario is named after the kind; the layout's own
-    version where it ships one), and the fault-free run's as "fault_free"."""
-    names = names or builtin_scenarios()
+    version where it ships one; on a seed-004 floor those it takes), and the fault-free
+    run's as "fault_free"."""
+    names = names or scenarios_for(mission.layout)
     with tempfile.TemporaryDirectory() as tmp:
         say(f"fault-free run ({clock} clock) ...")
         base = _run(Path(tmp) / "none", None, clock, speed, mission)
@@ -52,15 +60,26 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print,
             row = _run(Path(tmp) / name, name, clock, speed, mission)
             row["extra_s"] = round(row["end_time_s"] - base_end, 2) \
                 if row["end_time_s"] is not None else None
+            row["same_record"] = row["digest"] == base["digest"]
             rows[name] = row
             say(f"  {_line(name, row)}")
     return rows
+
+
+def scenarios_for(layout: str) -> list[str]:
+    """The shipped scenarios a run on the layout takes (a seed-004 floor: not every kind)."""
+    if load_layout(layout).floor is None:
+        return builtin_scenarios()
+    return [name for name in builtin_scenarios()
+            if all(taken004(f) for f in load_scenario(name, layout).faults)]
 
 
 def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
          mission: Mission) -> dict:
     scenario = load_scenario(name, mission.layout) if name else None
     assert mission.vehicles is not None
+    if load_layout(mission.layout).floor is not None:
+        return _run004(out, name, clock, speed, mission)
     outcome = run_processes(RunSpec(mission, mission.vehicles, out, clock, speed,
                                     faults=scenario, faults_source=name or ""))
     recording = read_recording(out)
@@ -74,6 +93,7 @@ def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
         "error": outcome.error,
         "end_time_s": report.end_time_s,
         "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
+        "injected": len(outcome.injected),  # the injector's actions (kills, restarts, ...)
         "faults": sum(not a.ends for a in outcome.injected if _timed(a.fault)),
         "detected": len(detect),
         "detect_s": _median(detect), "detect_max_s": max(detect, default=None),
@@ -85,6 +105,37 @@ def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
         "messages_lost": report.messages_lost,
         "messages_not_recorded": report.messages_not_recorded,
         "verdicts_pass": report.passed,
+        "digest": outcome.done.digest if outcome.done else "",
+    }
+
+
+def _run004(out: Path, name: str | None, clock: ClockMode, speed: float,
+            mission: Mission) -> dict:
+    """A seed-004 order mission with the scenario, its row in the same columns."""
+    scenario = load_scenario(name, mission.layout) if name else None
+    assert mission.vehicles is not None
+    outcome = run_processes(RunSpec(
+        mission, mission.vehicles, out, clock, speed,
+        faults=injected004(scenario) if scenario is not None else None,
+        faults_source=name or "", clocked_agents=False))
+    report = analyze004(read_recording(out))
+    v = report.verdict
+    return {
+        "completed": outcome.done is not None and outcome.done.ok,
+        "error": outcome.error,
+        "end_time_s": report.end_time_s,
+        "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
+        "injected": len(outcome.injected),  # the injector's actions (kills, restarts, ...)
+        "faults": 0, "detected": 0,  # struck by the tracker itself, at their instants
+        "detect_s": None, "detect_max_s": None, "recover_s": None, "rejoin_s": None,
+        "overlaps": len(v.clashes),
+        "outside_reservation": len(v.bad_moves),
+        "stacks_lost": report.orders_expected - report.orders_picked,  # orders
+        "stacks_duplicated": 0,
+        "messages_lost": sum(b - a + 1 for a, b in report.events_missing),
+        "messages_not_recorded": 0,
+        "verdicts_pass": report.passed,
+        "digest": outcome.done.digest if outcome.done else "",
     }
 
 
@@ -161,14 +212,20 @@ def _line(name: str, row: dict) -> str:
             f"extra {_fmt(row['extra_s'], ' s'):>9}  overlaps {row['overlaps']}  outside "
             f"{row['outside_reservation']}  lost {row['stacks_lost']} twice "
             f"{row['stacks_duplicated']}  messages lost {row['messages_lost']} (not recorded "
-            f"{row['messages_not_recorded']})  {'pass' if row['verdicts_pass'] else 'FAIL'}")
+            f"{row['messages_not_recorded']})  record {_record(row)}  "
+            f"{'pass' if row['verdicts_pass'] else 'FAIL'}")
+
+
+def _record(row: dict) -> str:
+    """Whether the run's record is the fault-free run's."""
+    return "-" if "same_record" not in row else "same" if row["same_record"] else "other"
 
 
 def table(result: dict) -> str:
     """The markdown table of docs/reliability.md."""
     lines = ["| scenario | seen | detect | recover | rejoin | extra mission time | overlaps | "
              "outside reservation | stacks (orders) lost / twice | messages lost (not recorded) | "
-             "verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "record | verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, row in result.items():
         if not isinstance(row, dict):
             continue  # the machine's stamp
@@ -178,5 +235,6 @@ def table(result: dict) -> str:
             f"{_fmt(row['rejoin_s'], ' s')} | {_fmt(row['extra_s'], ' s')} | "
             f"{row['overlaps']} | {row['outside_reservation']} | {row['stacks_lost']} / "
             f"{row['stacks_duplicated']} | {row['messages_lost']} "
-            f"({row['messages_not_recorded']}) | {'pass' if row['verdicts_pass'] else 'FAIL'} |")
+            f"({row['messages_not_recorded']}) | {_record(row)} | "
+            f"{'pass' if row['verdicts_pass'] else 'FAIL'} |")
     return "\n".join(lines)

@@ -307,6 +307,23 @@ def test_bench_faults_on_an_order_mission_json(capsys):
     assert main(["bench", "faults", "--layout", "small"]) == 2
 
 
+def test_bench_faults_on_a_seed004_floor_json(capsys):
+    """On paper004 the bench runs an order mission with the floor's own scenarios: a killed
+    recorder (its successor catches up on the events) leaves the fault-free record and
+    every verdict; a scenario the floor does not take is refused by name."""
+    assert main(["bench", "faults", "--layout", "paper004", "--orders", "10", "--vehicles",
+                 "4", "--scenarios", "kill_recorder", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    row, base = result["kill_recorder"], result["fault_free"]
+    assert row["completed"] and row["verdicts_pass"] and base["verdicts_pass"]
+    assert row["injected"] == 1  # the kill (and the restart 2 s later)
+    assert row["same_record"] and row["extra_s"] == 0
+    assert (row["overlaps"], row["outside_reservation"], row["stacks_lost"],
+            row["messages_lost"]) == (0, 0, 0, 0)
+    assert main(["bench", "faults", "--layout", "paper004", "--scenarios", "slow_planner"]) == 2
+    assert "'slow_planner' is not for paper004" in capsys.readouterr().err
+
+
 def test_a_reader_that_leaves_early_gets_no_traceback():
     """`fleet faults list | head -1`: the reader is gone before the output comes; the
     command stops quietly, with the shell's status for a broken pipe."""

@@ -249,11 +249,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="sim seconds per wall second with --clock realtime (default 20)")
     faults.add_argument("--layout", default="paper", type=layout_arg,
                         help="paper: its fill with four forklifts (default); a lane layout "
-                        "(paper002): an order mission, with the layout's own scenarios")
+                        "(paper002) or a seed-004 floor (paper004): an order mission, with "
+                        "the layout's own scenarios")
     faults.add_argument("--orders", type=positive_int, default=40,
-                        help="a lane layout's orders (default 40)")
+                        help="an order mission's orders (default 40)")
     faults.add_argument("--vehicles", type=positive_int, default=6,
-                        help="a lane layout's AGVs (default 6)")
+                        help="an order mission's AGVs (default 6)")
     faults.set_defaults(handler=run_faults)
     campaign = which.add_parser("campaign", help="seeded random fault scenarios, fill and "
                                 "empty, each run judged as fleet analyze judges it "
@@ -582,11 +583,16 @@ def run_faults(args: argparse.Namespace) -> int:
     from fleet.world.layout_file import load_layout
 
     layout = load_layout(args.layout)
-    if not layout.has_lanes and args.layout != "paper":
+    orders = layout.has_lanes or layout.floor is not None
+    if not orders and args.layout != "paper":
         raise UserError(f"--layout {args.layout}: the fault bench runs paper's fill, or an "
-                        f"order mission on a lane layout")
+                        f"order mission on a lane layout or a seed-004 floor")
+    taken = faults.scenarios_for(args.layout)
+    if names and set(names) - set(taken):
+        raise UserError(f"--scenarios: {sorted(set(names) - set(taken))[0]!r} is not for "
+                        f"{args.layout} (it takes {', '.join(taken)})")
     mission = faults.order_mission(args.layout, args.orders, args.vehicles) \
-        if layout.has_lanes else faults.MISSION
+        if orders else faults.MISSION
     result = faults.run(names, say, ClockMode(args.clock), args.speed, mission)
     if not emitted_json(result, args.json):
         print(faults.table(result))
