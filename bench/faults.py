@@ -88,12 +88,7 @@ def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
     lost, twice = len(report.stacks_lost), len(report.stacks_duplicated)
     if mission.kind is MissionKind.ORDERS:  # the work verdict counts stacks: the record
         lost, twice = _orders(recording, mission.orders)
-    return {
-        "completed": outcome.done is not None and outcome.done.ok,
-        "error": outcome.error,
-        "end_time_s": report.end_time_s,
-        "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
-        "injected": len(outcome.injected),  # the injector's actions (kills, restarts, ...)
+    return _outcome(outcome, report.end_time_s) | {
         "faults": sum(not a.ends for a in outcome.injected if _timed(a.fault)),
         "detected": len(detect),
         "detect_s": _median(detect), "detect_max_s": max(detect, default=None),
@@ -105,6 +100,17 @@ def _run(out: Path, name: str | None, clock: ClockMode, speed: float,
         "messages_lost": report.messages_lost,
         "messages_not_recorded": report.messages_not_recorded,
         "verdicts_pass": report.passed,
+    }
+
+
+def _outcome(outcome: RunOutcome, end_time_s: float | None) -> dict:
+    """What every row says of the run itself."""
+    return {
+        "completed": outcome.done is not None and outcome.done.ok,
+        "error": outcome.error,
+        "end_time_s": end_time_s,
+        "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
+        "injected": len(outcome.injected),  # the injector's actions (kills, restarts, ...)
         "digest": outcome.done.digest if outcome.done else "",
     }
 
@@ -120,12 +126,7 @@ def _run004(out: Path, name: str | None, clock: ClockMode, speed: float,
         faults_source=name or "", clocked_agents=False))
     report = analyze004(read_recording(out))
     v = report.verdict
-    return {
-        "completed": outcome.done is not None and outcome.done.ok,
-        "error": outcome.error,
-        "end_time_s": report.end_time_s,
-        "wall_s": round(outcome.done.wall_s, 1) if outcome.done else None,
-        "injected": len(outcome.injected),  # the injector's actions (kills, restarts, ...)
+    return _outcome(outcome, report.end_time_s) | {
         "faults": 0, "detected": 0,  # struck by the tracker itself, at their instants
         "detect_s": None, "detect_max_s": None, "recover_s": None, "rejoin_s": None,
         "overlaps": len(v.clashes),
@@ -135,7 +136,6 @@ def _run004(out: Path, name: str | None, clock: ClockMode, speed: float,
         "messages_lost": sum(b - a + 1 for a, b in report.events_missing),
         "messages_not_recorded": 0,
         "verdicts_pass": report.passed,
-        "digest": outcome.done.digest if outcome.done else "",
     }
 
 

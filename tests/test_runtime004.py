@@ -230,28 +230,37 @@ def test_a_stalled_or_cut_off_agent_is_left_alone_until_its_fault_ends(kind, clo
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
 
 
-def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_path):
-    """The injector kills the reservation service at t = 40 (the tracker's instant holds
-    until it has) and starts a new one from the journal 2 s of wall time later; the AGVs'
-    takes and let-goes wait for it. The events are those of the run without the fault, the
-    table never held a cell twice, no request was applied twice, and every verdict
-    passes."""
+def run_with_service_killed(tmp_path: Path, service: str):
+    """8 orders for 4 AGVs on the small floor as processes, `service` killed at t = 40 and
+    started again 2 s of wall time later, which must give the in-process run's record: that
+    run."""
     layout_file = small_floor_file(tmp_path)
     floor = load_layout(str(layout_file)).floor
     scenario = tmp_path / "kill.toml"
-    scenario.write_text('[[fault]]\nkind = "kill_service"\nat = 40.0\n'
-                        'service = "reservation"\ndowntime = 2.0\n')
-    faults = load_scenario(scenario).faults
+    scenario.write_text(f'[[fault]]\nkind = "kill_service"\nat = 40.0\n'
+                        f'service = "{service}"\ndowntime = 2.0\n')
     reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
-    assert Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run().events \
-        == reference.events  # in one process there is no service to kill
     mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
     outcome = run_processes(RunSpec(
         mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
         faults_source=str(scenario), clocked_agents=False))
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)
-    assert [(a.what, a.t) for a in outcome.injected] == [("kill the reservation for 2 s", 40.0)]
+    assert [(a.what, a.t) for a in outcome.injected] == [(f"kill the {service} for 2 s", 40.0)]
+    return reference
+
+
+def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_path):
+    """The injector kills the reservation service at t = 40 (the tracker's instant holds
+    until it has) and starts a new one from the journal 2 s of wall time later; the AGVs'
+    takes and let-goes wait for it. The events are those of the run without the fault, the
+    table never held a cell twice, no request was applied twice, and every verdict
+    passes."""
+    reference = run_with_service_killed(tmp_path, "reservation")
+    floor = load_layout(str(tmp_path / "small004.toml")).floor
+    faults = load_scenario(tmp_path / "kill.toml").faults
+    assert Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run().events \
+        == reference.events  # in one process there is no service to kill
     assert "reservation-2.log" in {p.name for p in (tmp_path / "run" / "logs").iterdir()}
     journal = tmp_path / "run" / "reservation.journal"
     assert journal_overlaps(journal) == []
@@ -267,19 +276,7 @@ def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_who
     dispatcher for every event after the last one run.mcap holds (and for the result, had
     the mission ended meanwhile): the two segments hold every event once, in the
     dispatcher's numbering, and are judged as the run without the fault."""
-    layout_file = small_floor_file(tmp_path)
-    floor = load_layout(str(layout_file)).floor
-    scenario = tmp_path / "kill.toml"
-    scenario.write_text('[[fault]]\nkind = "kill_service"\nat = 40.0\n'
-                        'service = "recorder"\ndowntime = 2.0\n')
-    reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
-    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
-    outcome = run_processes(RunSpec(
-        mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
-        faults_source=str(scenario), clocked_agents=False))
-    assert outcome.error == ""
-    assert outcome.done.record == record_of(reference)
-    assert [(a.what, a.t) for a in outcome.injected] == [("kill the recorder for 2 s", 40.0)]
+    reference = run_with_service_killed(tmp_path, "recorder")
     assert "caught up on" in (tmp_path / "run" / "logs" / "recorder-2.log").read_text()
     recording = read_recording(tmp_path / "run")
     report = analyze004(recording)
