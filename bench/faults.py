@@ -60,7 +60,7 @@ def run(names: list[str] | None = None, say: Callable[[str], None] = print,
             row = _run(Path(tmp) / name, name, clock, speed, mission)
             row["extra_s"] = round(row["end_time_s"] - base_end, 2) \
                 if row["end_time_s"] is not None else None
-            row["same_record"] = row["digest"] == base["digest"]
+            row["same_record"] = bool(row["digest"]) and row["digest"] == base["digest"]
             rows[name] = row
             say(f"  {_line(name, row)}")
     return rows

@@ -29,7 +29,7 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.recording.format import VDA5050_PREFIX
-from fleet.recording.reader import Recorded, last_numbered_before
+from fleet.recording.reader import Recorded, numbers_before
 from fleet.recording.rundir import claim_new
 from fleet.recording.segments import RUN_FILE, next_segment, segment_number
 from fleet.recording.writer import RecordingWriter
@@ -82,6 +82,9 @@ class Recorder:
         # written once.
         self.asked_keys = (keys.dispatch_agv, keys.dispatch_done)
         self.written: set[tuple[str, int]] = set()
+        # A restarted recorder's catch-up is in its inbox: until then it does not say the
+        # result is recorded, so nobody stops it (or the dispatcher) before it has asked.
+        self.caught_up = threading.Event()
 
     def run(self) -> None:
         with ExitStack() as scope:
@@ -97,6 +100,8 @@ class Recorder:
             self._ask_for_mission()
             if (segment_number(self.writer.path) or 1) > 1:
                 self._catch_up()
+            else:
+                self.caught_up.set()
             log.info("recording %s to %s", self.keys.everything, self.writer.path)
             self._write_until_stopped()
         log.info("wrote %d messages to %s", self.writer.messages, self.writer.path)
@@ -146,7 +151,12 @@ class Recorder:
         last one in the earlier segments. Asked once this recorder's subscriber is up, so
         every later one comes live; a seed-000 dispatcher keeps none and answers nothing."""
         def ask() -> None:
-            after = last_numbered_before(self.writer.path, self.keys.dispatch_agv)
+            held = numbers_before(self.writer.path, self.keys.dispatch_agv)
+            with self.lock:  # what an earlier segment holds is not written again
+                self.written |= {(self.keys.dispatch_agv, n) for n in held}
+            # After the unbroken run from 1: a predecessor killed during its own catch-up
+            # may hold later events and miss earlier ones.
+            after = next(n for n in range(len(held) + 1) if n + 1 not in held)
             request = encode(AgvHistory(after), SENDER, 0, 0.0)
             caught = 0
             # Every reply is on the one key: unconsolidated, or zenoh keeps only the last.
@@ -159,6 +169,12 @@ class Recorder:
                     caught += 1
             if caught:
                 log.info("caught up on %d seed-004 events after event %d", caught, after)
+            with self.lock:  # one of this thread and the writer sees both: it ends the file
+                self.caught_up.set()
+                done = self.exit_when_done and self.done_seen
+            self._announce()
+            if done:
+                self.inbox.put(None)  # after every answer
 
         threading.Thread(target=ask, daemon=True, name="catch-up").start()
 
@@ -170,14 +186,15 @@ class Recorder:
         except ProtocolError as exc:  # recorded as it came: the analyzer reports it
             log.warning("recording a malformed message on %s: %s", key, exc)
             envelope = None
-        if envelope is not None and key in self.asked_keys:
-            if (key, envelope.seq) in self.written:
-                return  # live, and again in an answer
-            self.written.add((key, envelope.seq))
+        recorded = Recorded(key, log_ns, 0, envelope)
+        if recorded.genuine and key in self.asked_keys:  # a forgery takes no number's place
+            with self.lock:
+                if (key, envelope.seq) in self.written:
+                    return  # live, and again in an answer (or held by an earlier segment)
+                self.written.add((key, envelope.seq))
         sim_time = envelope.sim_time if envelope is not None else 0.0
         with self.lock:
             self.writer.write(key, payload, log_ns, sim_time)
-        recorded = Recorded(key, log_ns, 0, envelope)
         if not recorded.genuine:
             return
         message = envelope.message
@@ -189,9 +206,10 @@ class Recorder:
             if isinstance(message, MissionDone):
                 with self.lock:
                     self.done_seen = True
+                    done = self.exit_when_done and self.caught_up.is_set()
                 self.writer.flush()
                 self._announce()
-                if self.exit_when_done:
+                if done:
                     self.inbox.put(None)  # this thread reads the inbox: no lock to wait on
             if self.views is not None:
                 self._show(self.views.on_message(key, message, sim_time))
@@ -221,7 +239,8 @@ class Recorder:
 
     def _current_status(self) -> RecorderStatus:
         with self.lock:
-            return RecorderStatus(str(self.writer.path), self.writer.messages, self.done_seen)
+            return RecorderStatus(str(self.writer.path), self.writer.messages,
+                                  self.done_seen and self.caught_up.is_set())
 
     def _describe(self, info: MissionInfo, log_ns: int) -> None:
         from fleet.views.scene004 import scene_views

@@ -230,23 +230,24 @@ def test_a_stalled_or_cut_off_agent_is_left_alone_until_its_fault_ends(kind, clo
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
 
 
-def run_with_service_killed(tmp_path: Path, service: str):
-    """8 orders for 4 AGVs on the small floor as processes, `service` killed at t = 40 and
-    started again 2 s of wall time later, which must give the in-process run's record: that
-    run."""
+def run_with_service_killed(tmp_path: Path, service: str, before_end: bool = False):
+    """8 orders for 4 AGVs on the small floor as processes, `service` killed at t = 40 (or
+    at the last order's last second) and started again 2 s of wall time later, which must
+    give the in-process run's record: that run."""
     layout_file = small_floor_file(tmp_path)
     floor = load_layout(str(layout_file)).floor
-    scenario = tmp_path / "kill.toml"
-    scenario.write_text(f'[[fault]]\nkind = "kill_service"\nat = 40.0\n'
-                        f'service = "{service}"\ndowntime = 2.0\n')
     reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
+    at = reference.completion_s - 1.0 if before_end else 40.0
+    scenario = tmp_path / "kill.toml"
+    scenario.write_text(f'[[fault]]\nkind = "kill_service"\nat = {at}\n'
+                        f'service = "{service}"\ndowntime = 2.0\n')
     mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
     outcome = run_processes(RunSpec(
         mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
         faults_source=str(scenario), clocked_agents=False))
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)
-    assert [(a.what, a.t) for a in outcome.injected] == [(f"kill the {service} for 2 s", 40.0)]
+    assert [(a.what, a.t) for a in outcome.injected] == [(f"kill the {service} for 2 s", at)]
     return reference
 
 
@@ -269,14 +270,17 @@ def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_pat
     assert analyze004(read_recording(tmp_path / "run")).passed
 
 
-def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_whole(tmp_path):
-    """The injector kills the recorder at t = 40 and starts a new one 2 s of wall time
-    later; the tracker does not wait for it, so the events of those 2 s and what the dead
-    one had not written reach no recorder live. The new one writes run-2.mcap and asks the
-    dispatcher for every event after the last one run.mcap holds (and for the result, had
-    the mission ended meanwhile): the two segments hold every event once, in the
-    dispatcher's numbering, and are judged as the run without the fault."""
-    reference = run_with_service_killed(tmp_path, "recorder")
+@pytest.mark.parametrize("before_end", [False, True], ids=["mid-mission", "at-the-end"])
+def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_whole(
+        before_end, tmp_path):
+    """The injector kills the recorder at t = 40 (or a second before the last order, so
+    that the mission ends while none runs) and starts a new one 2 s of wall time later;
+    the tracker does not wait for it, so the events of those 2 s and what the dead one had
+    not written reach no recorder live. The new one writes run-2.mcap and asks the
+    dispatcher for every event after those run.mcap holds, and for the result: the two
+    segments hold every event once, in the dispatcher's numbering, and are judged as the
+    run without the fault."""
+    reference = run_with_service_killed(tmp_path, "recorder", before_end)
     assert "caught up on" in (tmp_path / "run" / "logs" / "recorder-2.log").read_text()
     recording = read_recording(tmp_path / "run")
     report = analyze004(recording)

@@ -148,9 +148,10 @@ def shelf_slips(floor: Floor004, events: list[Event]) -> list[ShelfSlip]:
 def recorded_events(recording: Recording, floor: Floor004) -> tuple[list[Event], list[str]]:
     """The tracking events the recording holds, in the order the dispatcher numbered them
     (a restarted recorder writes those its predecessor lost after the live ones it heard
-    first), and why any recorded one names no event."""
+    first), each once, and why any recorded one names no event."""
     events, unreadable = [], []
-    for _, m in sorted(recording.of(AgvEvent), key=lambda entry: entry[0].envelope.seq):
+    numbered = {r.envelope.seq: m for r, m in reversed(recording.of(AgvEvent))}  # the first
+    for _, m in sorted(numbered.items()):
         try:
             events.append(event_from_wire(m, floor))
         except NotAnEvent as exc:

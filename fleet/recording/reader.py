@@ -442,20 +442,28 @@ def result_recorded(segment: Path) -> bool | None:
                for number, channel in summary.channels.items())
 
 
-def last_numbered_before(segment: Path, key: str) -> int:
-    """The highest number of the genuine messages on `key` in the segments of the run that
-    come before `segment` (a restarted recorder's: how far its predecessors got); 0 for
-    none. A segment that cannot be read counts as empty."""
+def numbers_before(segment: Path, key: str) -> set[int]:
+    """The numbers of the genuine messages on `key` in the segments of the run that come
+    before `segment` (a restarted recorder's: what its predecessors wrote). Only that key's
+    messages are decoded, and each file is read up to a torn end."""
     number = segment_number(segment) or 1
-    last = 0
+    held: set[int] = set()
     for path in segment_paths(segment.parent):
         if (segment_number(path) or 1) >= number:
             continue
         try:
-            earlier, _ = _read_segment(path)
-        except RecordingError:
+            with open(path, "rb") as stream:
+                channels: set[int] = set()
+                for record in StreamReader(stream, record_size_limit=1 << 30).records:
+                    if isinstance(record, Channel) and record.topic == key:
+                        channels.add(record.id)
+                    elif isinstance(record, McapMessage) and record.channel_id in channels:
+                        try:
+                            envelope = decode(record.data)
+                        except ProtocolError:
+                            continue
+                        if genuine(key, envelope):
+                            held.add(envelope.seq)
+        except Exception:  # mcap, struct, zstd or OS errors: a torn file, what was read counts
             continue
-        last = max([last, *(r.envelope.seq for r in earlier.messages
-                            if r.key == key and r.genuine)])
-    return last
-
+    return held

@@ -432,7 +432,7 @@ def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child:
     (nothing else comes through the inbox before the dispatcher starts). `late` says what
     it means when the token does not come in time."""
     alive = session.liveliness().declare_subscriber(
-        token, lambda sample: inbox.put(("alive", sample))
+        token, lambda sample: inbox.put(("alive", str(sample.key_expr)))
         if sample.kind == zenoh.SampleKind.PUT else None, history=True)
     try:
         deadline = time.monotonic() + ROUTER_TIMEOUT_MS / 1000
@@ -441,7 +441,7 @@ def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child:
                 kind, item = inbox.get(timeout=left)
             except queue.Empty:
                 break
-            if kind == "alive":
+            if kind == "alive" and item == token:  # not a late one of an earlier wait
                 return
             if kind == "exit" and not item.killed:
                 raise RunFailed(Launcher.death(item, f"before {child.name} was up"
