@@ -29,7 +29,7 @@ import zenoh
 
 from fleet.errors import UserError
 from fleet.recording.format import VDA5050_PREFIX
-from fleet.recording.reader import Recorded, numbers_before
+from fleet.recording.reader import Recorded, numbers_before, unbroken_run
 from fleet.recording.rundir import claim_new
 from fleet.recording.segments import RUN_FILE, next_segment, segment_number
 from fleet.recording.writer import RecordingWriter
@@ -154,9 +154,7 @@ class Recorder:
             held = numbers_before(self.writer.path, self.keys.dispatch_agv)
             with self.lock:  # what an earlier segment holds is not written again
                 self.written |= {(self.keys.dispatch_agv, n) for n in held}
-            # After the unbroken run from 1: a predecessor killed during its own catch-up
-            # may hold later events and miss earlier ones.
-            after = next(n for n in range(len(held) + 1) if n + 1 not in held)
+            after = unbroken_run(held)
             request = encode(AgvHistory(after), SENDER, 0, 0.0)
             caught = 0
             # Every reply is on the one key: unconsolidated, or zenoh keeps only the last.

@@ -300,6 +300,17 @@ def test_the_events_no_segment_holds_are_counted_up_to_what_the_result_says_was_
     assert missing_runs([2, 3]) == [(1, 1)] and missing_runs([], 0) == []
 
 
+def test_a_restarted_recorder_asks_after_the_first_gap_its_predecessors_left():
+    """A recorder killed during its own catch-up wrote later events live and only some of
+    the earlier ones: its successor asks from the first number missing, and writes none of
+    those already held again."""
+    from fleet.recording.reader import unbroken_run
+
+    assert unbroken_run(set()) == 0 and unbroken_run({2, 3}) == 0
+    assert unbroken_run({1, 2, 3}) == 3
+    assert unbroken_run({1, 2, 3, 5, 3000, 3001}) == 3
+
+
 def test_every_event_kind_goes_over_the_wire_and_back_unchanged():
     floor = build(Floor004Shape(**SHAPE), "small004")
     events = Mission004(floor, 8, generate_orders(floor, 20, 2)).run().events

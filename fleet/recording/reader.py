@@ -442,6 +442,13 @@ def result_recorded(segment: Path) -> bool | None:
                for number, channel in summary.channels.items())
 
 
+def unbroken_run(numbers: set[int]) -> int:
+    """The last of 1, 2, ... that `numbers` holds without a gap (0: not 1): what a
+    restarted recorder asks after, since a predecessor killed during its own catch-up may
+    hold later numbers and miss earlier ones."""
+    return next(n for n in range(len(numbers) + 1) if n + 1 not in numbers)
+
+
 def numbers_before(segment: Path, key: str) -> set[int]:
     """The numbers of the genuine messages on `key` in the segments of the run that come
     before `segment` (a restarted recorder's: what its predecessors wrote). Only that key's
