@@ -165,8 +165,7 @@ def serve(config: DispatcherConfig) -> int:
         scope.enter_context(session.declare_queryable(  # for a recorder that restarted
             keys.dispatch_agv_history, lambda q: _history(q, streams[AgvEvent])))
         scope.enter_context(session.declare_queryable(  # ... after the mission ended
-            keys.dispatch_done, lambda q: [q.reply(q.key_expr, payload)
-                                           for payload in streams[MissionDone].since(0)]))
+            keys.dispatch_done, lambda q: _answer(q, streams[MissionDone].since(0))))
         liveness = scope.enter_context(closing(Liveness(session, keys)))
         recorded = threading.Event()
         scope.enter_context(follow_recorded(session, keys, recorded, log))
@@ -224,8 +223,13 @@ def _history(query: zenoh.Query, events: Stream) -> None:
     """A restarted recorder's ask: every event numbered after the one it names, each as
     it was published."""
     if (request := asked(query, AgvHistory, log)) is not None:
-        for payload in events.since(request.after):
-            query.reply(query.key_expr, payload)
+        _answer(query, events.since(request.after))
+
+
+def _answer(query: zenoh.Query, payloads: list[bytes]) -> None:
+    """Each message kept, as it was published, in order."""
+    for payload in payloads:
+        query.reply(query.key_expr, payload)
 
 
 def read_roster(path: Path) -> dict[str, int]:

@@ -114,7 +114,7 @@ class Fleet:
         self.keys = Keys(f"acl{os.getpid()}{'l' if lifting else ''}")
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.credentials = generate_credentials(self.keys.run, VEHICLES)
-        dictionary = write_dictionary(self.credentials, tmp / "users.txt")
+        dictionary = write_dictionary(self.credentials.logins.values(), tmp / "users.txt")
         acl = tmp / "acl.json"
         acl.write_text(json.dumps(router_acl(self.keys.root, VEHICLES, lifting)))
         self.log = tmp / "router.log"
@@ -222,7 +222,7 @@ def test_credentials_and_acl_shape(tmp_path):
     assert len(set(passwords)) == len(passwords)
     assert all(len(p) >= 32 and ":" not in p for p in passwords)
     assert generate_credentials("r", 2).vehicle(1).password != credentials.vehicle(1).password
-    path = write_dictionary(credentials, tmp_path / "d")
+    path = write_dictionary(credentials.logins.values(), tmp_path / "d")
     assert path.stat().st_mode & 0o777 == 0o600
     lines = path.read_text().splitlines()
     assert sorted(lines) == sorted(f"{u}:{login.password}"

@@ -71,7 +71,7 @@ from __future__ import annotations
 import json
 import os
 import secrets
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,10 +138,10 @@ def write_private(path: str | Path, text: str) -> Path:
     return path
 
 
-def write_dictionary(credentials: Credentials, path: str | Path) -> Path:
-    """The router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`): one
-    `user:password` line each, readable by its owner only."""
-    return write_private(path, dictionary_text(credentials.logins.values()))
+def write_dictionary(logins: Iterable[Login], path: str | Path) -> Path:
+    """A router's user/password dictionary (`transport/auth/usrpwd/dictionary_file`) of the
+    logins it checks: one `user:password` line each, readable by its owner only."""
+    return write_private(path, dictionary_text(logins))
 
 
 def dictionary_text(logins) -> str:

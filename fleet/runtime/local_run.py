@@ -28,9 +28,9 @@ from fleet.runtime.access import (
     OPERATOR,
     LinkedRouter,
     TlsFiles,
-    dictionary_text,
     generate_credentials,
     router_acl,
+    write_dictionary,
     write_private,
 )
 from fleet.runtime.args import BusFlags
@@ -165,7 +165,7 @@ class Secrets:
             bundle.mkdir(mode=0o700, exist_ok=True)
             here = [p for p in self.logins if self.host_of(p) == host]
             checked = [p for p in here if p not in routers] + (routers if host == first else [])
-            write_private(self.users(host), dictionary_text(self.logins[p] for p in checked))
+            write_dictionary((self.logins[p] for p in checked), self.users(host))
             if host == first:  # the others log in, with their certificates
                 linked = tuple(LinkedRouter(name, name) for name in routers)
             else:  # the first's certificate: it accepts the link, so it logs in nowhere
