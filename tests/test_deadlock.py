@@ -333,3 +333,73 @@ def test_a_way_that_cannot_be_opened_gives_way_to_another_goal():
     returned = [s for s in record.subtasks if s.vehicle == 1]
     assert returned and returned[-1].target == "p2"
     assert mission_problems(record, layout) == []
+
+
+# A stack at the end of a dead-end corridor, another in the room beyond it.
+DEAD_END = """name = "dead-end"
+description = "a stack at the end of a dead-end corridor, the other in the room beyond"
+cell_size = 2.0
+starts = ["15,3,S", "4,2,E"]
+
+[bounds]
+x = [0.0, 32.0]
+y = [0.0, 14.0]
+
+[[cluster]]
+name = "b"
+fill = ["0,2"]
+
+[[cluster]]
+name = "a"
+fill = ["14,0"]
+
+[[obstacle]]
+name = "walls"
+kind = "wall"
+cells = ["0,0..7,1", "0,3..7,4", "0,5..15,5"]
+
+[[station]]
+name = "p"
+cell = "15,4"
+dock = "15,3,S"
+
+# A dock behind the wall nobody can reach: two docks for two forklifts, so none is held back.
+[[station]]
+name = "far"
+cell = "0,6"
+dock = "1,6,E"
+"""
+
+
+def test_a_forklift_waits_for_whoever_blocks_the_stacks_it_is_offered():
+    """Forklift 1, loaded, is offered only the stack at the end of the corridor; forklift 2,
+    offered nothing meanwhile, stands in the corridor. The way to the room's stack is open,
+    but it is not offered: forklift 1 waits for forklift 2, which is sent aside at once (the
+    wait-for graph once sought ways to every stack, offered or not, and found no deadlock)."""
+    from fleet.mission.pickup import Recovered
+    from fleet.world.layout_file import parse_layout
+
+    layout = parse_layout(DEAD_END, "dead-end.toml")
+    mission = Mission("dead-end", MissionKind.FILL, Strategy.GREEDY, 2, 0)
+    poses = {1: Pose.parse("15,3,S"), 2: Pose.parse("4,2,E")}
+    both_loaded = Recovered((), (), poses, dict.fromkeys(poses, 100.0), {1: True, 2: True},
+                            {}, 100.0)
+    engine = Engine(mission, EngineOptions(), layout, recovered=both_loaded)
+    offered = engine.work.targets
+
+    def corridor_first(view, poses):
+        """The corridor's stack to forklift 1 alone while it is left, as a work holding the
+        room's stack back would offer (FillWork's traps)."""
+        targets = offered(view, poses)
+        if not engine.work.queue["b"]:
+            return targets
+        return [t for t in targets if t.name == "b"] if view.vehicle == 1 else []
+
+    engine.work.targets = corridor_first
+    record = engine.run()
+    first = record.deadlocks[0]
+    assert (first.waiting, first.chain, first.moved) == (1, [1, 2], 2)
+    assert first.t < 200.0
+    assert record.stacks_done[0][0] == "b"
+    assert sorted(cluster for cluster, _, _ in record.stacks_done) == ["a", "b"]
+    assert mission_problems(record, layout) == []

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
 from fleet.dispatching.algorithm1 import MlpFn
@@ -63,6 +63,11 @@ REPLANS_BEFORE_SHORTEST = 2
 # comprehensive, which breaks no deadlock: a lower count would move vehicles there that the
 # way of fewest moves only seems to need).
 DECISIONS_BEFORE_SHORTEST = 100
+
+
+def goals_of(targets: Sequence[Target]) -> tuple[Pose, ...]:
+    """Every pose the targets' subtasks may end at, each once, in the targets' order."""
+    return tuple(dict.fromkeys(goal for target in targets for goal in target.goals))
 
 
 class MissionStuck(UserError):
@@ -449,7 +454,8 @@ class Engine:
         for v in active:
             if v.vehicle not in idle:
                 continue
-            if not self.work.targets(v.view(), poses):
+            offered = self.work.targets(v.view(), poses)
+            if not offered:
                 # Offered nothing to do now: it cannot move by itself. It waits for the
                 # held-back vehicles in the way of its work, if any: they never move by
                 # themselves (any other in its way will, once it is decided for again).
@@ -465,7 +471,7 @@ class Engine:
             known = self.waits.get(v.vehicle)
             if known is None or (not known.shortest and not known.blockers
                                  and self._replanned(v.vehicle)):
-                self.waits[v.vehicle] = self._wait(v, planner, movable)
+                self.waits[v.vehicle] = self._wait(v, goals_of(offered), planner, movable)
             self.waiting_since.setdefault(v.vehicle, self.now)
         # A held-back vehicle in the way that cannot step aside has the ones walling it in
         # sent aside first: its way to another parking place.
@@ -484,7 +490,7 @@ class Engine:
             waiting = self.fleet[deadlock.waiting]
             sent = break_deadlock(deadlock, held_ways | self.waits, planner, store, poses,
                                   self.work.keep_clear(), self._move_aside,
-                                  lambda w=waiting: self._ways(w, planner, movable))
+                                  lambda w=waiting: self._ways(w, planner, movable, poses))
             if sent is not None:
                 self._seen(DeadlockSeen(self.now, deadlock.waiting, deadlock.kind.value,
                                         list(deadlock.chain), sent.vehicle,
@@ -498,25 +504,28 @@ class Engine:
                 self._let_go((set(deadlock.chain) | self.waits[deadlock.waiting].blockers)
                              & held)
 
-    def _wait(self, v: VehicleSlot, planner: Planner, movable: Callable[[int], bool]) -> Wait:
-        """The vehicle's way as the wait-for graph sees it. A way that crosses nobody parked
-        for good but that its plans kept failing to find (the search gives up on long
-        detours) counts as blocked by whoever stands on its shortest way."""
-        store, goals = self.executor.store, self.work.wanted(v.view())
+    def _wait(self, v: VehicleSlot, goals: tuple[Pose, ...], planner: Planner,
+              movable: Callable[[int], bool]) -> Wait:
+        """The vehicle's way to the goals the work offers it, as the wait-for graph sees it.
+        Only what is offered: a way open to a stack the work holds back does not move it. A
+        way that crosses nobody parked for good but that its plans kept failing to find (the
+        search gives up on long detours) counts as blocked by whoever stands on its shortest
+        way."""
+        store = self.executor.store
         way = planner.blockage(v.vehicle, v.pose, goals, store, movable)
         if way is not None and not way.blockers and self._replanned(v.vehicle):
             way = planner.blockage(v.vehicle, v.pose, goals, store, movable, shortest=True)
             return Wait(v.vehicle, way, store.revision, shortest=True)
         return Wait(v.vehicle, way, store.revision)
 
-    def _ways(self, v: VehicleSlot, planner: Planner,
-              movable: Callable[[int], bool]) -> list[Blockage]:
-        """The vehicle's way to each pose its next subtask could end at, fewest blockers
+    def _ways(self, v: VehicleSlot, planner: Planner, movable: Callable[[int], bool],
+              poses: dict[int, Pose]) -> list[Blockage]:
+        """The vehicle's way to each pose the work offers its next subtask, fewest blockers
         first: where the way past fewest vehicles cannot be opened, another may (24
         forklifts on 16 docks, docs/dispatching.md)."""
         store = self.executor.store
         ways = (planner.blockage(v.vehicle, v.pose, [goal], store, movable)
-                for goal in self.work.wanted(v.view()))
+                for goal in goals_of(self.work.targets(v.view(), poses)))
         return sorted((w for w in ways if w is not None), key=lambda w: len(w.blockers))
 
     def _replanned(self, vehicle: int) -> bool:

@@ -234,10 +234,6 @@ class OrderWork:
         """The packing dwell at a station; lifting and putting down take no time (note A.3)."""
         return self.dwell if kind is TaskKind.PACK else 0.0
 
-    def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
-        trip = self.trips.get(view.vehicle)
-        return () if trip is None else trip.goals
-
     def keep_clear(self) -> frozenset[Cell]:
         return frozenset()
 

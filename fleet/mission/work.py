@@ -136,10 +136,6 @@ class MissionWork(Protocol):
         it was to take stay there (their cell is an obstacle again from the cancel on); False
         if the goods it was to place never come (their reservation goes)."""
 
-    def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
-        """Every pose the vehicle's next subtask could end at, whoever stands where: what the
-        wait-for graph (fleet/mission/deadlock.py) asks its way to."""
-
     def keep_clear(self) -> frozenset[Cell]:
         """Cells a vehicle sent aside should not stop on (where the work still goes)."""
 
@@ -305,13 +301,6 @@ class StackWork(ABC):
 
     def in_the_way(self, view: VehicleView, poses: dict[int, Pose]) -> Blockage | None:
         return None
-
-    def wanted(self, view: VehicleView) -> tuple[Pose, ...]:
-        if view.next_task is TaskKind.RETURN:
-            return tuple(st.dock for st in self.layout.stations)
-        return tuple(pose for queue in self.queue.values() if queue
-                     for pose in self.layout.unload_poses(queue[0].cell,
-                                                          self.present - {queue[0].cell}))
 
     def keep_clear(self) -> frozenset[Cell]:
         return frozenset({st.dock.cell for st in self.layout.stations}
