@@ -146,6 +146,9 @@ class FastClock(_Clock):
         if self.recorded:  # sim time stands still while no recorder runs (a killed one)
             self.liveness.wait_for_recorder(RECORDER_WAIT_S)
 
+    def held_down(self, down: frozenset[int]) -> None:
+        self.down = down  # ticks go out only as the clock advances, with the next look
+
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         self.down = down
         _recovered(self.detected)
@@ -278,9 +281,11 @@ class RealtimeClock(_Clock):
             self._send(ClockTick(self.tick, ClockMode.REALTIME.value, t, self.speed, wall,
                                  down=sorted(self.down)))
 
-    def _held_down(self, down: frozenset[int]) -> None:
+    def held_down(self, down: frozenset[int]) -> None:
         """Say at once who is down: a forklift must hear it before its freeze instant (it
-        then stays silent), and one resumed must not hear it again afterwards."""
+        then stays silent), and one resumed must not hear it again afterwards (the engine
+        says so as soon as it has resumed one, not at its next look at the clock: the ticker
+        would meanwhile list it as down at instants after its resumption)."""
         if down != self.down:
             self.down = down
             self._publish()
@@ -321,7 +326,7 @@ class RealtimeClock(_Clock):
         """Wait for the next decision's time, returning early with whatever happens
         meanwhile. With nobody to decide for (every forklift left is down), wait for one to
         come back until the scenario's last instant, plus DETECT_TIMEOUT_S."""
-        self._held_down(down)
+        self.held_down(down)
         _recovered(self.detected)
         target = t_next - self.lead if math.isfinite(t_next) else \
             max(self.last_instant, self.now()) + DETECT_TIMEOUT_S * self.speed
@@ -332,7 +337,7 @@ class RealtimeClock(_Clock):
                 ahead = self._wall_until(min([target, *(z.at for z in self.zones)]))
                 self.liveness.changed.wait(min(ahead, 0.5))
         # The new ones are down from now on; one back stays listed until it is resumed.
-        self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
+        self.held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:
             self.detected.append(_sighting(d))
             log.info("noticed %s at t=%.2f", d, self.now())

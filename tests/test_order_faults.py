@@ -27,7 +27,7 @@ from fleet.mission.order_work import OrderWork
 from fleet.mission.orders import OrderBook, Phase, release_orders
 from fleet.mission.pickup import HeldLeg, recovered_orders
 from fleet.mission.record import digest
-from fleet.mission.seam import LocalExecutor
+from fleet.mission.seam import LocalExecutor, NoPacer
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.lane_schedule import timed
 from fleet.planning.reservations import INF, Interval, ReservationTable
@@ -387,7 +387,7 @@ def test_any_journal_replays_or_is_refused_naming_the_record(raws):
         assert str(exc).startswith("the order book's journal, record ")
 
 
-class _StopAfter:
+class _StopAfter(NoPacer):
     """A pacer that ends the run (as a killed dispatcher's) before its n-th decision."""
 
     def __init__(self, decisions: int) -> None:
@@ -398,15 +398,6 @@ class _StopAfter:
         if self.left < 0:
             raise Interrupted("killed")
         return t_free
-
-    def finish(self, t_end: float) -> None:
-        pass
-
-    def disruptions(self, t_next: float, down: frozenset[int]) -> list:
-        return []
-
-    def instant(self, t: float) -> float:
-        return t
 
 
 class _Parked(LocalExecutor):

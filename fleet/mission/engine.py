@@ -175,7 +175,8 @@ class Engine:
         # states from it.
         self.drive_log: DriveLog = {v: [] for v in self.fleet}
         self.faults = FaultResponse(self.fleet, self.record.starts, self.executor, self.work,
-                                    self.record, self.drive_log, self.layout, self._emit)
+                                    self.record, self.drive_log, self.layout, self._emit,
+                                    self.pacer)
         self.streak = FailureStreak()
         self.waits: dict[int, Wait] = {}  # the wait-for graph, as of the table's revision
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first

@@ -25,7 +25,7 @@ from fleet.mission.freeze import (
     cascade,
 )
 from fleet.mission.record import MissionRecord
-from fleet.mission.seam import Executor
+from fleet.mission.seam import Executor, Pacer
 from fleet.mission.vehicle_slot import VehicleSlot
 from fleet.mission.work import MissionWork
 from fleet.planning.geometry import Cell
@@ -41,7 +41,7 @@ class FaultResponse:
 
     def __init__(self, fleet: dict[int, VehicleSlot], starts: tuple[Pose, ...],
                  executor: Executor, work: MissionWork, record: MissionRecord,
-                 drive_log: DriveLog, layout: Layout, emit: Emit) -> None:
+                 drive_log: DriveLog, layout: Layout, emit: Emit, pacer: Pacer) -> None:
         self.fleet = fleet
         self.starts = starts
         self.executor = executor
@@ -50,6 +50,7 @@ class FaultResponse:
         self.drive_log = drive_log
         self.layout = layout
         self.emit = emit
+        self.pacer = pacer
         self.down: dict[int, Freeze] = {}  # forklifts that cannot move, and where they stopped
         self.before: list[VehicleSlot] = []  # each forklift's slot before each subtask
         self.driven: dict[int, list[Trajectory]] = {v: [] for v in fleet}
@@ -218,6 +219,7 @@ class FaultResponse:
         v.t_still = t_stand
         self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task),
                              battery=self._charge_at(up.vehicle, freeze.t))
+        self.pacer.held_down(frozenset(self.down))  # told now, it hears no tick to the contrary
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))
         self.emit(Resume(up.vehicle, up.t, t_stand), up.t)

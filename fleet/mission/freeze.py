@@ -197,6 +197,9 @@ class ScheduledPacer:
     def instant(self, t: float) -> float:
         return t
 
+    def held_down(self, down: frozenset[int]) -> None:
+        pass
+
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         while self.pending and self.pending[0] <= t_next:
             found = scheduled_at(self.scenario, self.pending.pop(0))
