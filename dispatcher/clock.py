@@ -146,8 +146,8 @@ class FastClock(_Clock):
         if self.recorded:  # sim time stands still while no recorder runs (a killed one)
             self.liveness.wait_for_recorder(RECORDER_WAIT_S)
 
-    def held_down(self, down: frozenset[int]) -> None:
-        self.down = down  # ticks go out only as the clock advances, with the next look
+    def resumed(self, vehicle: int) -> None:
+        pass  # ticks go out only as the clock advances, with the engine's down set then
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         self.down = down
@@ -281,11 +281,15 @@ class RealtimeClock(_Clock):
             self._send(ClockTick(self.tick, ClockMode.REALTIME.value, t, self.speed, wall,
                                  down=sorted(self.down)))
 
-    def held_down(self, down: frozenset[int]) -> None:
+    def resumed(self, vehicle: int) -> None:
+        """Not listed from now on, though the engine is still handling what it noticed with
+        the forklift's return: meanwhile the ticker would list it at instants after its
+        resumption (others that went down stay listed)."""
+        self._held_down(self.down - {vehicle})
+
+    def _held_down(self, down: frozenset[int]) -> None:
         """Say at once who is down: a forklift must hear it before its freeze instant (it
-        then stays silent), and one resumed must not hear it again afterwards (the engine
-        says so as soon as it has resumed one, not at its next look at the clock: the ticker
-        would meanwhile list it as down at instants after its resumption)."""
+        then stays silent), and one resumed must not hear it again afterwards."""
         if down != self.down:
             self.down = down
             self._publish()
@@ -326,7 +330,7 @@ class RealtimeClock(_Clock):
         """Wait for the next decision's time, returning early with whatever happens
         meanwhile. With nobody to decide for (every forklift left is down), wait for one to
         come back until the scenario's last instant, plus DETECT_TIMEOUT_S."""
-        self.held_down(down)
+        self._held_down(down)
         _recovered(self.detected)
         target = t_next - self.lead if math.isfinite(t_next) else \
             max(self.last_instant, self.now()) + DETECT_TIMEOUT_S * self.speed
@@ -337,7 +341,7 @@ class RealtimeClock(_Clock):
                 ahead = self._wall_until(min([target, *(z.at for z in self.zones)]))
                 self.liveness.changed.wait(min(ahead, 0.5))
         # The new ones are down from now on; one back stays listed until it is resumed.
-        self.held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
+        self._held_down(down | {d.vehicle for d in found if isinstance(d, VehicleDown)})
         for d in found:
             self.detected.append(_sighting(d))
             log.info("noticed %s at t=%.2f", d, self.now())

@@ -128,19 +128,21 @@ def test_the_clock_hears_that_a_forklift_is_up_as_soon_as_it_is_resumed():
     """A real-time clock lists the forklifts held down in every tick, and a forklift that
     hears itself listed at an instant after its resumption stands for good: a new dispatcher
     found forklift 1 of paper002's real-time mixed run down, where the engine was slow after
-    resuming it (a sleep there makes it happen every time). The engine tells the pacer who is
-    down as soon as the forklift is told to move, before it asks or commits anything else."""
+    resuming it (a sleep there makes it happen every time). The engine tells the pacer which
+    forklift it resumed as soon as it is told to move, before it asks or commits anything
+    else; forklift 2 goes down as forklift 1 comes back, in the same news."""
     mission = Mission("small")
     layout = load_layout("small")
     told: list[tuple] = []
 
     class Listening(NewsComesLate):
-        def held_down(self, down: frozenset[int]) -> None:
-            told.append(("held down", down))
+        def resumed(self, vehicle: int) -> None:
+            told.append(("resumed", vehicle))
 
         def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
-            told.append(("disruptions",))
-            return super().disruptions(t_next, down)
+            found = super().disruptions(t_next, down)
+            told.append(("disruptions", *found))
+            return found
 
     class Resuming(LocalExecutor):
         def execute(self, task: Task):
@@ -151,12 +153,14 @@ def test_the_clock_hears_that_a_forklift_is_up_as_soon_as_it_is_resumed():
                    battery: float | None = None) -> None:
             told.append(("resume", vehicle))
 
-    news = Listening([VehicleDown(1, 31.0, BREAKDOWN), VehicleUp(1, 32.0),
-                      VehicleDown(2, 50.0, BREAKDOWN), VehicleUp(2, 55.0)], lag=10.0)
+    news = Listening([VehicleDown(1, 31.0, BREAKDOWN), VehicleUp(1, 40.0),
+                      VehicleDown(2, 40.0, BREAKDOWN), VehicleUp(2, 50.0)], lag=10.0)
     executor = Resuming(layout.vehicle_kind, planners_for(layout))
     record = Engine(mission, engine_options(mission, layout, None), layout, executor,
                     news).run()
+    news_of_1_back = next(call for call in told if VehicleUp(1, 40.0) in call)
+    assert VehicleDown(2, 40.0, BREAKDOWN) in news_of_1_back
     resumed = [i for i, call in enumerate(told) if call[0] == "resume"]
     assert [told[i][1] for i in resumed] == [1, 2]
-    assert [told[i + 1] for i in resumed] == [("held down", frozenset())] * 2
+    assert [told[i + 1] for i in resumed] == [("resumed", 1), ("resumed", 2)]
     assert len(record.stacks_done) == 24

@@ -219,7 +219,7 @@ class FaultResponse:
         v.t_still = t_stand
         self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task),
                              battery=self._charge_at(up.vehicle, freeze.t))
-        self.pacer.held_down(frozenset(self.down))  # told now, it hears no tick to the contrary
+        self.pacer.resumed(up.vehicle)
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))
         self.emit(Resume(up.vehicle, up.t, t_stand), up.t)

@@ -197,7 +197,7 @@ class ScheduledPacer:
     def instant(self, t: float) -> float:
         return t
 
-    def held_down(self, down: frozenset[int]) -> None:
+    def resumed(self, vehicle: int) -> None:
         pass
 
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:

@@ -102,10 +102,11 @@ class Pacer(Protocol):
         schedule there (forklifts down or back, zones closed; [] if nothing did). `down` are
         the forklifts the engine holds as down: nobody waits for them."""
 
-    def held_down(self, down: frozenset[int]) -> None:
-        """The forklifts the engine holds as down, as soon as it has told one to move again
-        (and before anything else). A clock that tells the forklifts who is down says so at
-        once: one resumed must not hear afterwards that it is down, or it stands for good."""
+    def resumed(self, vehicle: int) -> None:
+        """The engine has just told the forklift to move again (its `ResumeRequest` was
+        answered), before it does anything else. A clock that tells the forklifts who is
+        down stops listing it at once: one resumed must not hear afterwards that it is down
+        at an instant after its resumption, or it stands for good."""
 
     def instant(self, t: float) -> float:
         """The first sim instant at which a change decided now, while deciding for t, can
@@ -202,7 +203,7 @@ class NoPacer:
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         return []
 
-    def held_down(self, down: frozenset[int]) -> None:
+    def resumed(self, vehicle: int) -> None:
         pass
 
     def instant(self, t: float) -> float:

@@ -110,8 +110,8 @@ class StopBetweenDecisions:
     def disruptions(self, t_next: float, down: frozenset[int]) -> list[Disruption]:
         return self.pacer.disruptions(t_next, down)
 
-    def held_down(self, down: frozenset[int]) -> None:
-        self.pacer.held_down(down)
+    def resumed(self, vehicle: int) -> None:
+        self.pacer.resumed(vehicle)
 
     def instant(self, t: float) -> float:
         return self.pacer.instant(t)
