@@ -92,6 +92,23 @@ def test_an_agent_computes_the_dispatchers_now_from_its_ticks(monkeypatch, wall)
     assert agent.wall_at(105.0) == pytest.approx(p.wall_at(105.0))
 
 
+
+def test_a_resumed_agent_heeds_a_down_list_only_where_it_can_be_news(monkeypatch):
+    """Resumed at t=215 (its answer sent at t=230, the engine already late): a tick the
+    dispatcher sent before it heard the answer may list the forklift at t=230.x, and must
+    not hold it down for good. A forklift newly down is listed only once its token has
+    gone, a lease (1 s, 20 sim s here) after it last spoke: from t=250 a list is news."""
+    p = pacing()
+    agent = SimClock()
+    t, wall = p.anchor(START + 10.0)
+    agent.tick = ClockTick(9, "realtime", t, SPEED, wall)
+    monkeypatch.setattr(agent_clock.time, "time", lambda: p.wall_at(230.0))
+    assert agent.heeds_down_from(215.0, lease_s=1.0) == pytest.approx(250.0)
+    assert agent.heeds_down_from(260.0, lease_s=1.0) == 260.0  # resumed further ahead
+    agent.tick = ClockTick(9, "fast", 230.0)  # its ticks come in the engine's order
+    assert agent.heeds_down_from(215.0, lease_s=1.0) == 215.0
+
+
 class NewsComesLate(ScheduledPacer):
     """The engine's pacer in process, with each disruption heard only once the engine
     decides `lag` after its instant: as on the real-time clock, which decides a lead ahead

@@ -31,7 +31,7 @@ from fleet.mission.seam import Task
 from fleet.mission.spec import ClockMode
 from fleet.planning.reservations import Interval
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
-from fleet.runtime.bus import Requester, Stream, asked, received
+from fleet.runtime.bus import LEASE_MS, Requester, Stream, asked, received
 from fleet.runtime.lifecycle import Stopped
 from fleet.runtime.tasks import result_to_wire, task_from_wire
 from fleet.vehicles.kind import Commitment
@@ -128,7 +128,8 @@ class Agent:
         # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`.
         self.status_lock = threading.Lock()
         self.broken = False  # reported a breakdown: it stands when the dispatcher says when
-        self.resumed_at = 0.0  # ticks before this may still list us as down
+        self.resumed_at = 0.0  # nothing before it is said once resumed
+        self.down_heeded_from = 0.0  # ticks before this may still list us as down
         self.fault_pub: Stream | None = None
         self.last_kind = ""  # what the last committed leg was for (a restarted dispatcher asks)
 
@@ -346,6 +347,8 @@ class Agent:
                                message.battery)
         with self.status_lock:  # ticks before t_resume may still list us as down
             self.resumed_at, self.down, self.broken = message.t_resume, False, False
+            self.down_heeded_from = self.clock.heeds_down_from(message.t_resume,
+                                                               LEASE_MS / 1000)
         self.last_kind = ""
         log.info("resumed at t=%.2f from %s (table at revision %d)", message.t_resume,
                  step.start if step else pose, self.mirror.revision)
@@ -411,7 +414,8 @@ class Agent:
             log.warning("ignored tick %d on %s: %s", tick.tick, self.keys.clock, problem)
             return False
         with self.status_lock:
-            if self.vehicle in tick.down and tick.t >= self.resumed_at and not self.broken:
+            if self.vehicle in tick.down and tick.t >= self.down_heeded_from \
+                    and not self.broken:
                 self.down = True  # held as down: we were cut off, stalled or restarted
         self.clock.take(tick)  # after `down`: the state thread reads them unlocked
         return True

@@ -69,6 +69,17 @@ class SimClock:
             return tick.t + tick.speed * max(0.0, time.time() - tick.wall)
         return tick.t
 
+    def heeds_down_from(self, t_resume: float, lease_s: float) -> float:
+        """The first instant at which a tick listing this forklift as down holds it down
+        again, once it is resumed at t_resume. On the real-time clock a tick sent before the
+        dispatcher heard the resume answered may still list it at a later instant, and one
+        that lists it anew comes only after its token has gone, a lease after it last spoke:
+        not before a lease from now."""
+        tick = self.tick
+        if tick is None or tick.mode != ClockMode.REALTIME:
+            return t_resume
+        return max(t_resume, self.now() + lease_s * tick.speed)
+
     def wall_at(self, t: float) -> float | None:
         """Real time: the Unix time at which sim time is t (None on the fast clock)."""
         tick = self.tick
