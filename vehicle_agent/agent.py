@@ -125,7 +125,8 @@ class Agent:
         # the forklift stands and that it moves again (ResumeRequest). Says nothing meanwhile.
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
-        # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`.
+        # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`,
+        # `down_heeded_from`.
         self.status_lock = threading.Lock()
         self.broken = False  # reported a breakdown: it stands when the dispatcher says when
         self.resumed_at = 0.0  # nothing before it is said once resumed
@@ -345,7 +346,7 @@ class Agent:
         with self.drive_lock:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume,
                                message.battery)
-        with self.status_lock:  # ticks before t_resume may still list us as down
+        with self.status_lock:  # ticks sent before our answer may still list us as down
             self.resumed_at, self.down, self.broken = message.t_resume, False, False
             self.down_heeded_from = self.clock.heeds_down_from(message.t_resume,
                                                                LEASE_MS / 1000)
