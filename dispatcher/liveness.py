@@ -10,6 +10,11 @@ import zenoh
 from fleet.errors import UserError
 from fleet.wire.topics import Keys
 
+# An agent whose token is here may not yet be reachable: when a cut link or host comes back,
+# zenoh may propagate the token before the queryable (eclipse-zenoh/zenoh#588, #2767), so a
+# request nobody serves is asked again for this long while the token stays.
+UNSERVED_RETRY_S = 10.0
+
 
 class ParticipantLost(UserError):
     """A process the mission depends on went away (its liveliness token is gone)."""

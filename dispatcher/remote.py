@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import zenoh
 
-from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.liveness import UNSERVED_RETRY_S, Liveness, ParticipantLost
 from fleet.mission.freeze import Freeze
 from fleet.mission.seam import Task, VehicleLost, freeze_changes
 from fleet.planning.geometry import Cell
@@ -53,8 +53,9 @@ class RemoteExecutor:
         self.mirror = mirror
         self.liveness = liveness
         self.vehicles = vehicles
-        # no retry: an agent that does not answer is gone (liveliness says so)
-        self.task_requester = Requester(session, SENDER, TASK_TIMEOUT_S, retry_s=0.0)
+        # Asked again only while its token is here and nothing serves its key (a timeout is
+        # longer than the retry: an agent that does not answer in time is not asked again)
+        self.task_requester = Requester(session, SENDER, TASK_TIMEOUT_S, UNSERVED_RETRY_S)
         self.rejections: list[str] = []  # commits the store refused before an agent replanned
         self.amended: list[Trajectory] = []  # others' legs the commits postponed, not taken
 
@@ -81,8 +82,7 @@ class RemoteExecutor:
     def execute(self, task: Task) -> Trajectory | PlanFailure:
         message = task_to_wire(task, self.task_requester.next_id(), self.mirror.revision)
         try:
-            reply = self.task_requester.request(self.keys.vehicle_task(task.vehicle), message,
-                                                task.t_i).message
+            reply = self._ask(task.vehicle, message, task.t_i)
         except RequestFailed as exc:
             self.liveness.wait_gone(task.vehicle, 2.0)  # a dead agent: say so, not "no reply"
             raise VehicleLost(task.vehicle, f"forklift {task.vehicle}: {exc}") from None
@@ -135,9 +135,7 @@ class RemoteExecutor:
     def status(self, vehicle: int) -> VehicleStatus:
         """What a forklift holds (a restarted dispatcher asks)."""
         try:
-            reply = self.task_requester.request(
-                self.keys.vehicle_task(vehicle),
-                StatusRequest(self.task_requester.next_id(), vehicle)).message
+            reply = self._ask(vehicle, StatusRequest(self.task_requester.next_id(), vehicle))
         except RequestFailed as exc:
             raise ParticipantLost(f"forklift {vehicle} did not say what it holds: "
                                   f"{exc}") from None
@@ -147,14 +145,20 @@ class RemoteExecutor:
 
     def _tell(self, vehicle: int, message: Message, t: float) -> None:
         try:
-            reply = self.task_requester.request(self.keys.vehicle_task(vehicle), message,
-                                                t).message
+            reply = self._ask(vehicle, message, t)
         except RequestFailed as exc:
             raise ParticipantLost(f"forklift {vehicle} did not take {message.TYPE}: "
                                   f"{exc}") from None
         if not isinstance(reply, Reply) or not reply.ok:
             raise ParticipantLost(f"forklift {vehicle} refused {message.TYPE}: "
                                   f"{getattr(reply, 'reason', reply)}")
+
+    def _ask(self, vehicle: int, message: Message, t: float = 0.0) -> Message:
+        """A forklift agent's reply; asked again while nothing serves its key but its token is
+        here (the token may come back before the queryable does)."""
+        return self.task_requester.request(
+            self.keys.vehicle_task(vehicle), message, t,
+            retry_while=lambda: vehicle in self.liveness.alive).message
 
     def _sync(self, revision: int) -> None:
         if not self.mirror.wait_for(revision, SYNC_TIMEOUT_S):

@@ -38,7 +38,7 @@ from typing import TypeVar
 import zenoh
 
 from dispatcher.clock import FastClock
-from dispatcher.liveness import Liveness, ParticipantLost
+from dispatcher.liveness import UNSERVED_RETRY_S, Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
 from fleet.errors import UserError
 from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
@@ -89,8 +89,9 @@ class RemoteVehicles:
         self.fault_clock = fault_clock  # stops the fault injector at an agent's fault
         # AGVs whose agent a fault took, not back yet: how often its token had come before
         self.absent: dict[int, int] = {}
-        # no retry: an agent that does not answer is gone (liveliness says so)
-        self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, retry_s=0.0)
+        # asked again only while nothing serves an AGV's key but its token is here (as seed
+        # 000's RemoteExecutor): one that does not answer in time is gone
+        self.requester = Requester(session, DISPATCHER, REQUEST_TIMEOUT_S, UNSERVED_RETRY_S)
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
         # the last request about each cell the store was asked about, not yet settled
         self.pending: dict[Cell, Future[None]] = {}
@@ -218,7 +219,9 @@ class RemoteVehicles:
     def _ask(self, vehicle: int, message: CellRequest | RouteRequest,
              expected: type[Answer], t: float) -> Answer:
         try:
-            reply = self.requester.request(self.keys.vehicle_task(vehicle), message, t).message
+            reply = self.requester.request(
+                self.keys.vehicle_task(vehicle), message, t,
+                retry_while=lambda: vehicle in self.liveness.alive).message
         except RequestFailed as exc:
             gone = self.liveness.wait_gone(vehicle, 2.0)
             raise ParticipantLost(f"AGV {vehicle}{' is gone' if gone else ''}: "

@@ -34,16 +34,18 @@ from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
     BusConfig,
     Requester,
+    RequestFailed,
     free_port,
     open_session,
     wait_alive,
 )
-from fleet.runtime.lifecycle import PARENT_ENV
+from fleet.runtime.lifecycle import ORPHAN_GRACE_S, PARENT_ENV
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import (
     Progress,
     Reply,
     StackDone,
+    StatusRequest,
     TaskRequest,
     TaskResult,
     VehicleState,
@@ -351,6 +353,34 @@ def test_conflicting_commits_one_wins_the_other_is_told_why_and_replans(tmp_path
 
 # -- stopping ---------------------------------------------------------------------------------
 
+def test_a_request_nobody_serves_is_asked_again_only_while_its_server_may_come():
+    """When a cut link comes back, zenoh may bring an agent's liveliness token before its
+    queryable: the dispatcher asks again while the token is here (`retry_while`), and gives
+    up at once on an agent whose token is gone."""
+    with open_session(BusConfig("peer", (), ())) as session:
+        requester = Requester(session, "test", timeout_s=5.0, retry_s=10.0)
+        key = f"t{os.getpid()}/vehicle/1/task"
+        served = []
+
+        def answer(query):
+            query.reply(query.key_expr, encode(Reply(asked.request_id, True, 0), "agent-1", 1, 0))
+
+        def token_here() -> bool:  # the queryable comes after the first request found none
+            if not served:
+                served.append(session.declare_queryable(key, answer))
+            return True
+
+        asked = StatusRequest(requester.next_id(), 1)
+        assert requester.request(key, asked, retry_while=token_here).message == \
+            Reply(asked.request_id, True, 0)
+        assert len(served) == 1  # the first request found nobody, the second its agent
+        checked = []
+        with pytest.raises(RequestFailed, match="nobody answered"):
+            requester.request(f"t{os.getpid()}/vehicle/2/task", asked,
+                              retry_while=lambda: bool(checked.append(1)))
+        assert checked == [1]  # asked once: the token is gone
+
+
 def children_of(pid: int) -> list[int]:
     """Processes started by `fleet run` with this pid (they carry it in their environment)."""
     marker = f"{PARENT_ENV}={pid}".encode()
@@ -417,9 +447,39 @@ def test_fleet_run_stopped_by_a_signal_stops_every_process_and_leaves_its_record
 
 def test_children_of_a_killed_fleet_run_stop_by_themselves(tmp_path):
     run, children = started_run(tmp_path)
+    names = {pid: Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[2:4] for pid in children}
     run.kill()  # no chance to stop anything
     run.wait()
-    assert all(exited(pid, 30) for pid in children)
+    assert [names[pid] for pid in children if not exited(pid, 30)] == []
+
+
+STUCK_CHILD = """
+import threading, time
+from fleet.runtime.lifecycle import setup_logging, stop_on_signals
+setup_logging()
+stop_on_signals(lambda: None)  # a stop that cannot cut its wait short
+print("ready", flush=True)
+threading.Event().wait()
+"""
+
+
+def test_an_orphan_that_cannot_stop_cleanly_exits_with_its_stacks_in_its_log(tmp_path):
+    """Its fleet run killed, a child asks itself to stop; one stuck all the same exits
+    ORPHAN_GRACE_S later and its log says where it was."""
+    log = tmp_path / "child.log"
+    parent = subprocess.Popen(  # stands for fleet run: starts the child, then waits
+        [sys.executable, "-c", f"import os, subprocess, sys; os.environ['{PARENT_ENV}'] = "
+         "str(os.getpid()); subprocess.Popen(sys.argv[1:]); sys.stdin.read()",
+         sys.executable, "-c", STUCK_CHILD],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log.open("wb"), cwd=ROOT)
+    assert parent.stdout.readline() == b"ready\n"
+    child, = children_of(parent.pid)
+    parent.kill()
+    parent.wait()
+    assert exited(child, ORPHAN_GRACE_S + 10)
+    said = log.read_text()
+    assert f"fleet run (pid {parent.pid}) is gone" in said
+    assert "Timeout (0:00:20)!" in said and "in <module>" in said  # every thread's stack
 
 
 def test_the_live_view_shows_the_forklifts_of_a_running_mission(tmp_path):

@@ -159,8 +159,8 @@ class Requester:
 
     A request nobody answers (no queryable reachable: the server is starting, restarting, or
     its router has not yet propagated it), or whose reply does not come within `timeout_s`,
-    is sent again with backoff for up to `retry_s`; every request we send is idempotent
-    (commits carry request ids, tasks task ids)."""
+    is sent again with backoff for up to `retry_s`, and only while `retry_while()` holds;
+    every request we send is idempotent (commits carry request ids, tasks task ids)."""
 
     def __init__(self, session: zenoh.Session, sender: str, timeout_s: float = 5.0,
                  retry_s: float = 15.0) -> None:
@@ -179,7 +179,8 @@ class Requester:
     def next_id(self) -> str:
         return f"{self.sender}:{self.incarnation}:{next(self.ids)}"
 
-    def request(self, key: str, message: Message, sim_time: float = 0.0) -> Envelope:
+    def request(self, key: str, message: Message, sim_time: float = 0.0,
+                retry_while: Callable[[], bool] = lambda: True) -> Envelope:
         payload = encode(message, self.sender, next(self.seq), sim_time)
         give_up = time.monotonic() + self.retry_s
         backoff = 0.1
@@ -196,7 +197,7 @@ class Requester:
                 except ProtocolError as exc:
                     raise RequestFailed(f"{key}: malformed reply: {exc}") from None
             timed_out = time.monotonic() - start >= self.timeout_s
-            if time.monotonic() + backoff > give_up:
+            if time.monotonic() + backoff > give_up or not retry_while():
                 raise RequestFailed(f"{key}: no reply within {self.timeout_s:g} s" if timed_out
                                     else f"{key}: nobody answered (no process serves this key)")
             time.sleep(backoff)  # backoff before asking again, not synchronisation

@@ -31,6 +31,9 @@ EX_SOFTWARE = 70  # sysexits.h: an internal error (a bug), not the user's
 # (a ValueError too: a value the user gave is refused as a UserError).
 EXPECTED: tuple[type[BaseException], ...] = (UserError, zenoh.ZError, RequestFailed)
 PARENT_ENV = "FLEET_PARENT_PID"  # set by fleet run for its children
+# How long an orphan (its fleet run killed outright) may take to stop cleanly before it
+# writes every thread's stack to its log and exits all the same: nobody is left to stop it.
+ORPHAN_GRACE_S = 20.0
 
 C = TypeVar("C", bound=ProcessConfig)
 
@@ -110,7 +113,8 @@ def setup_logging() -> None:
 def stop_on_signals(stop: Callable[[], None]) -> None:
     """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
     of `fleet run` also stops when that parent is gone (killed outright, it could not stop
-    its children), so no orphan keeps running."""
+    its children), so no orphan keeps running: one that has not stopped ORPHAN_GRACE_S later
+    (a wait that a stop does not cut short) exits with every thread's stack in its log."""
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop())
     parent = os.environ.get(PARENT_ENV)
@@ -118,6 +122,11 @@ def stop_on_signals(stop: Callable[[], None]) -> None:
         def watch() -> None:
             while os.getppid() == int(parent):
                 time.sleep(1.0)  # polling the parent: there is no event to wait on
+            logging.getLogger("fleet.runtime").warning(
+                "fleet run (pid %s) is gone: stopping (at the latest in %g s)", parent,
+                ORPHAN_GRACE_S)
+            # faulthandler's own thread: it needs no GIL, so even a stuck call is cut short
+            faulthandler.dump_traceback_later(ORPHAN_GRACE_S, exit=True, file=sys.__stderr__)
             os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
 
         threading.Thread(target=watch, daemon=True, name="parent-watch").start()
