@@ -30,6 +30,7 @@ from fleet.analysis.analyze import analyze
 from fleet.analysis.report import Report
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.engine import engine_options
 from fleet.mission.faults import (
     SERVICES,
     Fault,
@@ -44,7 +45,6 @@ from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mission_record import recorded_standstill
 from fleet.recording.reader import Recording, read_recording
 from fleet.recording.rundir import claim
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import DeadlockSeen
 from fleet.world.layout import Layout

@@ -33,7 +33,7 @@ from dispatcher.vda5050_master import ACTIONS as VDA5050_ACTIONS
 from dispatcher.vda5050_master import VDA5050_LEAD_WALL_S, MasterExecutor
 from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
-from fleet.mission.engine import Engine, EngineOptions, MissionStuck
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck, engine_options
 from fleet.mission.faults import load_scenario
 from fleet.mission.order_work import order_fleet
 from fleet.mission.orders004 import fleet004
@@ -42,7 +42,6 @@ from fleet.mission.record004 import tracking_params
 from fleet.mission.spec import EXTERNAL, ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.writer import mission_info
-from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
     Requester,
     RequestFailed,

@@ -20,11 +20,11 @@ from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.engine import engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.reader import RecordingError, read_recording
 from fleet.recording.writer import RecordingWriter
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import StackDone, VehicleState, WireChange, encode
 from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout

@@ -21,13 +21,12 @@ from fleet.analysis.analyze import analyze
 from fleet.analysis.analyze004 import analyze004
 from fleet.commands.compose import collect, compose_command, write_secrets
 from fleet.dispatching.decision import Strategy
-from fleet.mission.engine import run_mission
+from fleet.mission.engine import engine_options, run_mission
 from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.record import digest
 from fleet.mission.record004 import record_of
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, free_port, open_session
 from fleet.wire.protocol import Halt, MissionDone, Progress, Resume, decode
 from fleet.wire.topics import Keys

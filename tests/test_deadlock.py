@@ -147,10 +147,10 @@ def fault_run(kind: MissionKind, faults: list[tuple[str, float, int, float]], tm
     """The paper ANN mission in process with these faults (kind, instant, forklift,
     duration): its record, and the analysis of its recording, which must pass."""
     from fleet.analysis.analyze import analyze
+    from fleet.mission.engine import engine_options
     from fleet.mission.faults import parse_scenario
     from fleet.recording.inprocess import recorded_run, write_recording
     from fleet.recording.reader import read_recording
-    from fleet.runtime.args import engine_options
 
     layout = load_layout("paper")
     mission = Mission("paper", kind, Strategy.ANN)

@@ -17,12 +17,11 @@ from fleet.cli import build_parser, main
 from fleet.commands import service as service_command
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.engine import run_mission
+from fleet.mission.engine import engine_options, run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
 from fleet.runtime.access import generate_credentials, read_dictionary, router_acl
-from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, free_port, open_session, wait_alive
 from fleet.runtime.deploy import (
     MAX_VEHICLES,

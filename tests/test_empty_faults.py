@@ -8,7 +8,7 @@ from test_recovery import commit, drive_east
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy, TaskKind
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, engine_options
 from fleet.mission.faults import (
     Fault,
     FaultKind,
@@ -24,7 +24,6 @@ from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.reservations import Interval, ReservationTable
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import GOODS, StackReopened
 from fleet.world.layout_file import load_layout

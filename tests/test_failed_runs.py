@@ -16,14 +16,13 @@ import pytest
 from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy, TaskKind
-from fleet.mission.engine import Engine, EngineOptions, MissionStuck
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck, engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.mission.standstill import Cause, Standstill, VehicleStanding
 from fleet.planning.trajectory import Pose
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mission_record import recorded_standstill
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import MissionStopped, ProtocolError, SubtaskEvent, decode, encode
 from fleet.world.layout_file import load_layout
 

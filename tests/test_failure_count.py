@@ -11,11 +11,11 @@ import pytest
 from fleet.analysis.analyze import analyze
 from fleet.analysis.failure_count import FailureCount
 from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import engine_options
 from fleet.mission.faults import load_scenario
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import DecisionFailure, MissionDone, MissionStopped
 from fleet.world.layout_file import load_layout

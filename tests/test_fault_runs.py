@@ -10,13 +10,12 @@ from mission_check import journal_overlaps
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, engine_options
 from fleet.mission.faults import builtin_scenarios, load_scenario
 from fleet.mission.freeze import ScheduledPacer
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Halt, Resume, StackReopened, VehicleFault, ZoneClosed
 from fleet.world.layout_file import load_layout

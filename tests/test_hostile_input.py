@@ -25,8 +25,10 @@ from hypothesis import strategies as st
 
 from fleet.commands.layout import summary
 from fleet.dispatching.decision import Strategy
-from fleet.dispatching.mlp import ClusterMLPs, WeightsError
+from fleet.dispatching.mlp import ClusterMLPs
 from fleet.dispatching.scorer import load_scorer
+from fleet.dispatching.weights_file import WeightsError
+from fleet.mission.engine import engine_options
 from fleet.mission.seam import Task
 from fleet.mission.spec import Mission, MissionKind
 from fleet.planning.maneuvers import Manner
@@ -38,7 +40,6 @@ from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajecto
 from fleet.recording.inprocess import recorded_run
 from fleet.recording.reader import RecordingError, read_recording
 from fleet.recording.writer import RecordingWriter
-from fleet.runtime.args import engine_options
 from fleet.runtime.tasks import result_from_wire, result_to_wire, task_from_wire, task_to_wire
 from fleet.wire.protocol import (
     SCHEMA_VERSION,

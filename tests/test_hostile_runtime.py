@@ -22,11 +22,10 @@ import zenoh
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
-from fleet.mission.engine import run_mission
+from fleet.mission.engine import engine_options, run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.launcher import Launcher
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import Message as WireMessage

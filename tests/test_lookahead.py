@@ -12,13 +12,14 @@ import pytest
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.engine import engine_options
 from fleet.mission.record import digest_of
 from fleet.mission.spec import Mission, MissionKind
 from fleet.params import LOOKAHEAD_S
 from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mission_record import summary_of
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import add_mission_args, engine_options, mission_argv, mission_from_args
+from fleet.runtime.args import add_mission_args, mission_argv, mission_from_args
 from fleet.world.layout_file import load_layout
 
 

@@ -7,8 +7,9 @@ import pytest
 import torch
 
 from fleet.dispatching.decision import Strategy
-from fleet.dispatching.mlp import ClusterMLPs, WeightsError, lm_fit, make_net
+from fleet.dispatching.mlp import ClusterMLPs, lm_fit, make_net
 from fleet.dispatching.scorer import load_scorer
+from fleet.dispatching.weights_file import WeightsError
 from fleet.mission.engine import EngineOptions, run_mission
 from fleet.mission.spec import Mission
 from fleet.mission.training import train

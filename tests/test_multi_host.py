@@ -20,13 +20,12 @@ from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, engine_options
 from fleet.mission.faults import FaultKind, ScenarioError, parse_scenario, scenario_toml
 from fleet.mission.freeze import ScheduledPacer
 from fleet.mission.record import digest
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.deploy import config_from_env, service_config
 from fleet.runtime.hosts import HostsError, cut_links, hosts_for, load_hosts
 from fleet.wire.protocol import Halt, Resume

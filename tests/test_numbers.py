@@ -17,6 +17,7 @@ from fleet.analysis.time_use import time_use
 from fleet.cli import main
 from fleet.commands.run import VALUE_COLUMN
 from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import engine_options
 from fleet.mission.record import SubtaskRecord
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.format import NS
@@ -24,7 +25,6 @@ from fleet.recording.inprocess import Outgoing, recorded_run
 from fleet.recording.mission_record import dispatcher_restarts
 from fleet.recording.reader import read_recording
 from fleet.recording.writer import RecordingWriter
-from fleet.runtime.args import engine_options
 from fleet.vehicles.forklift import Forklift
 from fleet.wire.protocol import (
     DecisionFailure,

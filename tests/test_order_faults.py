@@ -19,7 +19,7 @@ from fleet.analysis.analyze import analyze
 from fleet.cli import main
 from fleet.dispatching.decision import Decision, Strategy, TaskKind
 from fleet.errors import UserError
-from fleet.mission.engine import Engine, EngineOptions, MissionStuck
+from fleet.mission.engine import Engine, EngineOptions, MissionStuck, engine_options
 from fleet.mission.faults import Fault, FaultKind, Scenario, builtin_scenarios, load_scenario
 from fleet.mission.freeze import ScheduledPacer
 from fleet.mission.order_log import from_record
@@ -34,7 +34,6 @@ from fleet.planning.reservations import INF, Interval, ReservationTable
 from fleet.planning.trajectory import FailureReason, PlanFailure, Pose, Trajectory
 from fleet.recording.inprocess import Interrupted, recorded_run, write_recording
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.vehicles.agv import leg_of
 from fleet.wire.protocol import ZONE
 from fleet.world.lanes import floor_cells

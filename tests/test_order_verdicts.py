@@ -20,12 +20,11 @@ from fleet.analysis.shelves import Announced, Carrying, Claim, orders_verdict
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy, TaskKind
 from fleet.mission.drive_log import AmendLeg
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.mission_record import summary_of
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import MissionInfo, StackDone, VehicleState
 from fleet.world.layout_file import load_layout
 

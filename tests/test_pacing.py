@@ -8,7 +8,7 @@ import pytest
 
 from dispatcher.pacing import RealtimePacing
 from fleet.dispatching.decision import TaskKind
-from fleet.mission.engine import Engine
+from fleet.mission.engine import Engine, engine_options
 from fleet.mission.freeze import (
     BREAKDOWN,
     Disruption,
@@ -19,7 +19,6 @@ from fleet.mission.freeze import (
 )
 from fleet.mission.seam import LocalExecutor, Task
 from fleet.mission.spec import Mission
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import ClockTick
 from fleet.world.layout_file import load_layout
 from fleet.world.site import planners_for

@@ -157,8 +157,8 @@ def test_random_faults_never_make_a_forklift_collide_or_a_stack_repeat(seed):
 
 def test_a_mixed_fault_mission_in_one_process_passes_every_verdict(tmp_path):
     from fleet.analysis.analyze import analyze
+    from fleet.mission.engine import engine_options
     from fleet.mission.faults import load_scenario
-    from fleet.runtime.args import engine_options
 
     layout = load_layout("paper")
     mission = Mission("paper", MissionKind.FILL, Strategy.ANN, 4, 0)

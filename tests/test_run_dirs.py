@@ -24,13 +24,13 @@ from fleet.commands.compose import place_copy
 from fleet.commands.runs import SUMMARY, write_summary
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
+from fleet.mission.engine import engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.reader import read_description, read_recording
 from fleet.recording.rundir import MARKER, claim, claim_new, default_name, run_id_of
 from fleet.recording.segments import RUN_FILE, segment_paths
 from fleet.recording.writer import RecordingWriter, mission_info
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import MissionInfo, VehicleState, encode
 from fleet.world.layout_file import load_layout

@@ -23,14 +23,13 @@ from websockets.sync.client import connect
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
 from fleet.mission.driving import states_until
-from fleet.mission.engine import Engine, run_mission
+from fleet.mission.engine import Engine, engine_options, run_mission
 from fleet.mission.record import digest
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.standstill import Cause
 from fleet.recording.inprocess import vehicle_states
 from fleet.recording.mission_record import recorded_standstill, summary_of
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.bus import (
     BusConfig,
     Requester,

@@ -23,6 +23,7 @@ from fleet.analysis.analyze import analyze
 from fleet.analysis.streams import sequence_gaps, sequence_holes
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.format import NS
 from fleet.recording.inprocess import Outgoing, recorded_run
@@ -30,7 +31,6 @@ from fleet.recording.reader import read_recording, recording_file
 from fleet.recording.rundir import claim
 from fleet.recording.segments import RUN_FILE, next_segment, segment_paths
 from fleet.recording.writer import RecordingWriter, mission_info
-from fleet.runtime.args import engine_options
 from fleet.runtime.bus import BusConfig, Stream, free_port, open_session
 from fleet.wire.protocol import (
     MissionInfo,

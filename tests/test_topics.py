@@ -5,11 +5,11 @@ import mcap.reader
 import pytest
 
 from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import engine_options
 from fleet.mission.faults import load_scenario
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import recorded_run
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.runtime.local_run import RunSpec, run_processes
 from fleet.wire.protocol import ClockAck, ClockTick, Envelope, VehicleState
 from fleet.wire.topics import (

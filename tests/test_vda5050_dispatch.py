@@ -12,11 +12,10 @@ import pytest
 
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
-from fleet.mission.engine import Engine, run_mission
+from fleet.mission.engine import Engine, engine_options, run_mission
 from fleet.mission.seam import LocalExecutor
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.reader import read_recording
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import GOODS, LegCommitted, MqttTraffic, SubtaskEvent
 from fleet.world.layout_file import load_layout
 from vda5050.gateway import engine_map

@@ -13,10 +13,10 @@ import pytest
 
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
+from fleet.mission.engine import engine_options
 from fleet.mission.spec import Mission, MissionKind
 from fleet.recording.inprocess import Outgoing, recorded_run, write_recording
 from fleet.recording.writer import RecordingWriter
-from fleet.runtime.args import engine_options
 from fleet.wire.protocol import (
     MissionDone,
     MissionInfo,

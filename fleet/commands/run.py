@@ -21,7 +21,10 @@ from fleet.commands.progress import MissionProgress, ProgressBar
 from fleet.commands.run004 import run004
 from fleet.commands.run_external import broker_of, check_vda5050_run, run_external
 from fleet.commands.runs import write_summary
+from fleet.dispatching.decision import Strategy
+from fleet.dispatching.scorer import layout_weights
 from fleet.errors import UserError
+from fleet.mission.engine import engine_options
 from fleet.mission.faults import Scenario, check_against, load_scenario
 from fleet.mission.order_work import OrderWork, order_fleet
 from fleet.mission.record import digest_of
@@ -31,7 +34,7 @@ from fleet.recording.inprocess import recorded_run, write_recording
 from fleet.recording.mission_record import recorded_standstill
 from fleet.recording.reader import Recording, read_recording
 from fleet.recording.rundir import choose
-from fleet.runtime.args import add_mission_args, engine_options, mission_from_args
+from fleet.runtime.args import add_mission_args, mission_from_args
 from fleet.runtime.argtypes import (
     mqtt_url,
     port,
@@ -241,8 +244,8 @@ def run(args: argparse.Namespace) -> int:
         OrderWork(layout, mission, n)  # its orders and batteries, checked before any start
     else:
         n = fleet_size(layout, mission.vehicles)
-    if not args.inprocess:
-        engine_options(mission, layout, args.weights)  # bad weights: refused before starting
+    if not args.inprocess and mission.strategy is Strategy.ANN:  # refused before starting;
+        layout_weights(layout, args.weights)  # torch is the dispatcher's to import
     hosts = hosts_for(args.hosts, n, args.secure)
     scenario = fault_scenario(args.faults, layout, n, hosts) if args.faults else None
     out = choose(args.out, args.force, layout.name, mission.strategy.value,

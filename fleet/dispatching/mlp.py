@@ -14,31 +14,19 @@ the weights), so the same damping works on every layout.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
 from torch.func import functional_call, jacrev
 
-from fleet.errors import UserError
-
-HIDDEN = 12  # Section 3.3: "the number of hidden neurons is set to 12"
-FORMAT = "fleet-mlp/1"
-
-
-class WeightsError(UserError):
-    """A weights file that cannot be used; the message says why."""
-
-
-def _finite(value: object) -> bool:
-    """A number that fits a float and is neither infinite nor NaN."""
-    if not isinstance(value, int | float):
-        return False
-    try:
-        return math.isfinite(value)
-    except OverflowError:  # an integer too large for a float
-        return False
+from fleet.dispatching.weights_file import (
+    FORMAT,
+    HIDDEN,
+    Weights,
+    read_weights,
+    weights_from_json,
+)
 
 
 def one_thread() -> None:
@@ -169,65 +157,19 @@ class ClusterMLPs:
         path.write_text(json.dumps(self.to_json(), indent=1))
 
     @classmethod
-    def from_json(cls, data: object, where: str) -> ClusterMLPs:
-        def bad(why: str) -> WeightsError:
-            return WeightsError(f"{where}: {why}")
-
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise bad(f"not a weights file (expected \"format\": \"{FORMAT}\")")
-        clusters = data.get("clusters")
-        if not isinstance(clusters, list) or not clusters or \
-                not all(isinstance(c, str) for c in clusters):
-            raise bad("'clusters' must be a list of cluster names")
-        n = len(clusters)
-        numbers = {}
-        for key in ("target_mean", "target_scale"):
-            values = data.get(key)
-            if not isinstance(values, list) or len(values) != n or not all(
-                    _finite(v) for v in values):
-                raise bad(f"'{key}' must be {n} finite numbers")
-            numbers[key] = [float(v) for v in values]
-        scale = data.get("input_scale")
-        if not _finite(scale) or not scale > 0:
-            raise bad("'input_scale' must be a positive number")
-        if data.get("hidden") != HIDDEN:
-            raise bad(f"'hidden' must be {HIDDEN}")
-        raw = data.get("nets")
-        if not isinstance(raw, list) or len(raw) != n:
-            raise bad(f"'nets' must hold {n} networks, one per cluster")
+    def from_weights(cls, weights: Weights) -> ClusterMLPs:
         nets = []
-        for d, state in enumerate(raw):
-            net = make_net(n)
-            expected = {k: tuple(v.shape) for k, v in net.state_dict().items()}
-            if not isinstance(state, dict) or set(state) != set(expected):
-                raise bad(f"network {d} ({clusters[d]}) must have {sorted(expected)}")
-            try:
-                tensors = {k: torch.tensor(v, dtype=torch.float64) for k, v in state.items()}
-            except (TypeError, ValueError, OverflowError, RuntimeError) as exc:
-                raise bad(f"network {d} ({clusters[d]}): {exc}") from None
-            for k, t in tensors.items():
-                if tuple(t.shape) != expected[k] or not bool(torch.isfinite(t).all()):
-                    raise bad(f"network {d} ({clusters[d]}): {k} must be finite numbers of "
-                              f"shape {list(expected[k])}")
-            net.load_state_dict(tensors)
+        for state in weights.nets:
+            net = make_net(len(weights.clusters))
+            net.load_state_dict({k: torch.from_numpy(a) for k, a in state.items()})
             nets.append(net)
-        layout = data.get("layout", "")
-        if not isinstance(layout, str):
-            raise bad("'layout' must be a layout name")
-        trained_on = data.get("trained_on", 0)
-        if not isinstance(trained_on, int) or isinstance(trained_on, bool) or trained_on < 0:
-            raise bad("'trained_on' must be a whole number of samples")
-        return cls(tuple(clusters), float(scale), nets, numbers["target_mean"],
-                   numbers["target_scale"], layout, trained_on)
+        return cls(weights.clusters, weights.input_scale, nets, list(weights.target_mean),
+                   list(weights.target_scale), weights.layout, weights.trained_on)
+
+    @classmethod
+    def from_json(cls, data: object, where: str) -> ClusterMLPs:
+        return cls.from_weights(weights_from_json(data, where))
 
     @classmethod
     def load(cls, path: Path) -> ClusterMLPs:
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError) as exc:
-            raise WeightsError(f"{path}: cannot read: {exc}") from None
-        except ValueError as exc:  # JSONDecodeError, or an integer literal too long
-            raise WeightsError(f"{path}: not valid JSON: {exc}") from None
-        except RecursionError:
-            raise WeightsError(f"{path}: not valid JSON: nested too deep") from None
-        return cls.from_json(data, str(path))
+        return cls.from_weights(read_weights(path))

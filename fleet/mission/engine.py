@@ -20,9 +20,17 @@ import dataclasses
 import math
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from fleet.dispatching.algorithm1 import MlpFn
-from fleet.dispatching.decision import Decision, DispatchOutcome, Target, TaskKind, VehicleView
+from fleet.dispatching.decision import (
+    Decision,
+    DispatchOutcome,
+    Strategy,
+    Target,
+    TaskKind,
+    VehicleView,
+)
 from fleet.dispatching.policy import PolicySetup, dispatch_policy
 from fleet.errors import UserError
 from fleet.mission.deadlock import Wait, WaitKind, deadlocks
@@ -113,6 +121,19 @@ class EngineOptions:
     # Where an order mission's work journals what it is fed (a dispatcher's file, which a
     # restarted dispatcher replays).
     work_log: WorkLog | None = None
+
+
+def engine_options(mission: Mission, layout: Layout, weights: Path | None,
+                   progress=None) -> EngineOptions:
+    """The engine's options for the mission: with --strategy ann, the scorer of --weights (or
+    of the weights shipped for the layout), loaded here so that bad weights are refused
+    before anything starts."""
+    mlp = None
+    if mission.strategy is Strategy.ANN:
+        from fleet.dispatching.scorer import load_scorer
+
+        mlp = load_scorer(layout, weights)
+    return EngineOptions(mlp=mlp, progress=progress)
 
 
 @dataclass

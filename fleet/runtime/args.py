@@ -13,7 +13,6 @@ from pathlib import Path
 from fleet.dispatching.decision import Strategy
 from fleet.errors import UserError
 from fleet.mission.battery import BATTERY_KEYS
-from fleet.mission.engine import EngineOptions
 from fleet.mission.order_work import DEFAULT_ORDERS, order_fleet
 from fleet.mission.orders004 import fleet004
 from fleet.mission.spec import Mission, MissionKind
@@ -229,16 +228,3 @@ def mission_argv(mission: Mission) -> list[str]:
         orders += ["--lookahead", lookahead_text(mission.lookahead)]
     return ["--layout", mission.layout, "--mission", mission.kind.value, *orders,
             "--strategy", mission.strategy.value, *fleet, "--seed", str(mission.seed)]
-
-
-def engine_options(mission: Mission, layout: Layout, weights: Path | None,
-                   progress=None) -> EngineOptions:
-    """The engine's options for the mission: with --strategy ann, the scorer of --weights (or
-    of the weights shipped for the layout), loaded here so that bad weights are refused
-    before anything starts."""
-    mlp = None
-    if mission.strategy is Strategy.ANN:
-        from fleet.dispatching.scorer import load_scorer
-
-        mlp = load_scorer(layout, weights)
-    return EngineOptions(mlp=mlp, progress=progress)

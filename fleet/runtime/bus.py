@@ -31,6 +31,7 @@ log = logging.getLogger("fleet.runtime.bus")
 
 
 LEASE_MS = 1000  # a lost peer is noticed after this (measured: docs/reliability.md)
+CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 1.5}
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,9 @@ class BusConfig:
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
+        # A process started with its router tries again soon after the router listens
+        # (zenoh's default waits 1 s, then 2 s, ... between attempts).
+        config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
         config.insert_json5("transport/link/tx/lease", str(self.lease_ms))
         if self.user:
             configure_client(config, self.user, self.password)

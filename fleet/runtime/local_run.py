@@ -311,6 +311,21 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                                          announce=keys.router_linked(host.name))
             linking.append((launcher.start(hosts.router_name(host), config.argv(), host.exec),
                             config.announce, link))
+
+        def start_workers() -> Child | None:
+            """Start the recorder (returned; None: the run records nothing), the reservation
+            service and the agents. The recorder misses nothing the others say: the agents
+            wait for the dispatcher to say what the mission is, and it starts once the
+            recorder is up."""
+            started = start("recorder") if spec.record else None
+            start("reservation")
+            for v in range(1, spec.vehicles + 1):
+                start(f"agent-{v}")
+            return started
+
+        # On one host they start with the router and connect as soon as it listens; on
+        # several, once every router is linked (nothing runs on a host that is not).
+        recorder = None if linking else start_workers()
         operator = secrets.logins[OPERATOR] if secrets else None
         session = _open_when_up(BusConfig("client", (endpoint,),
                                           user=operator.user if operator else "",
@@ -321,18 +336,16 @@ def run_processes(spec: RunSpec, on_progress: Callable[[Progress], None] | None 
                           f"first host's router (at {link}) within {ROUTER_TIMEOUT_MS / 1000:g} "
                           f"s: are the hosts file's addresses and ports right, and open "
                           f"between the hosts?")
+        if linking:
+            recorder = start_workers()
         subscribers = [session.declare_subscriber(key, lambda s: inbox.put(("sample", s)))
                        for key in (keys.dispatch_progress, keys.dispatch_done)]
         clock_started = threading.Event()  # every forklift was up: the mission runs
         subscribers.append(session.declare_subscriber(keys.clock,
                                                       lambda _: clock_started.set()))
-        if spec.record:
+        if recorder is not None:
             subscribers.append(follow_recorded(session, keys, recorded, log))
-            recorder = start("recorder")
             _wait_started(session, keys.recorder_alive, inbox, recorder)
-        start("reservation")
-        for v in range(1, spec.vehicles + 1):
-            start(f"agent-{v}")
         if spec.faults is not None:
             injector = Injector(spec.faults, session, keys, launcher,
                                 lambda kind: args_of(kind, again=True), proxies,

@@ -5,6 +5,7 @@ as a recorder does, so every process works on the very map the dispatcher decide
 from __future__ import annotations
 
 import logging
+import threading
 import time
 
 import zenoh
@@ -31,11 +32,13 @@ def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSIO
     said = False
     heard: list[MissionInfo] = []  # the dispatcher also publishes it once, when it starts:
     # heard that way too, a query the router could not route to it does not hold us up
+    published = threading.Event()
 
     def on_sample(sample: zenoh.Sample) -> None:
         info = _believed(sample.payload.to_bytes(), str(sample.key_expr))
         if info is not None:
             heard.append(info)
+            published.set()
 
     with session.declare_subscriber(keys.dispatch_mission, on_sample):
         while True:
@@ -52,7 +55,7 @@ def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSIO
             if not said:
                 log.info("waiting for the dispatcher to say what the mission is")
                 said = True
-            time.sleep(ASK_PERIOD_S)  # polls: the dispatcher may not have started yet
+            published.wait(ASK_PERIOD_S)  # asks again: the dispatcher may not be up yet
 
 
 def _described(info: MissionInfo) -> tuple[MissionInfo, Layout, tuple[Pose, ...]]:
