@@ -566,6 +566,7 @@ def test_damaged_weights_load_or_are_refused_naming_the_problem(tmp_path, case):
     (("input_scale",), math.inf, "'input_scale' must be a positive number"),
     (("nets", 0, "0.bias", 0), 10**400, "network 0 (a)"),
     (("nets", 1, "2.weight", 0, 3), None, "network 1 (b)"),
+    (("nets", 0, "0.weight", 2, 1), "1.5", "network 0 (a): 0.weight must be finite numbers"),
     (("trained_on",), "many", "'trained_on' must be a whole number"),
     (("trained_on",), math.inf, "'trained_on' must be a whole number"),
     (("layout",), ["small"], "'layout' must be a layout name"),

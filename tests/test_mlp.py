@@ -2,6 +2,8 @@
 weights change the ANN strategy's choices."""
 
 import json
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -53,6 +55,25 @@ def test_bad_weights_are_named(tmp_path, edit, message):
     path.write_text(json.dumps(data))
     with pytest.raises(WeightsError, match=message):
         ClusterMLPs.load(path)
+
+
+def test_weights_are_checked_without_torch_and_score_as_read(tmp_path):
+    """fleet run refuses bad weights before it starts anything without importing torch (a
+    second of start-up); the dispatcher's networks are built from exactly what was read."""
+    path = tmp_path / "w.json"
+    written = ClusterMLPs.fresh(("a", "b"), 12, seed=3)
+    written.save(path)
+    checked = subprocess.run(
+        [sys.executable, "-c", "import sys; from pathlib import Path; "
+         "from fleet.dispatching.scorer import layout_weights; "
+         "from fleet.world.layout_file import load_layout; "
+         f"read = layout_weights(load_layout('small'), Path({str(path)!r})); "
+         "print(read.clusters, 'torch' in sys.modules)"],
+        capture_output=True, text=True, check=True)
+    assert checked.stdout.split() == ["('a',", "'b')", "False"]
+    again = load_scorer(load_layout("small"), path)
+    assert again([3.0, 4.0]) == written([3.0, 4.0])
+    assert again.to_json() == json.loads(path.read_text())
 
 
 def test_weights_for_another_layout_are_refused(tmp_path):

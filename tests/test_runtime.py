@@ -20,6 +20,9 @@ from mission_check import journal_overlaps, record_problems
 from test_paper_missions import check_paper_mission
 from websockets.sync.client import connect
 
+from dispatcher.liveness import UNSERVED_RETRY_S
+from dispatcher.remote import TASK_TIMEOUT_S
+from dispatcher.remote004 import REQUEST_TIMEOUT_S
 from fleet.analysis.analyze import analyze
 from fleet.dispatching.decision import Strategy
 from fleet.mission.driving import states_until
@@ -378,6 +381,8 @@ def test_a_request_nobody_serves_is_asked_again_only_while_its_server_may_come()
             requester.request(f"t{os.getpid()}/vehicle/2/task", asked,
                               retry_while=lambda: bool(checked.append(1)))
         assert checked == [1]  # asked once: the token is gone
+    # An agent that does not answer in time is not asked again: its timeout outlasts the retry
+    assert min(TASK_TIMEOUT_S, REQUEST_TIMEOUT_S) > UNSERVED_RETRY_S
 
 
 def children_of(pid: int) -> list[int]:
@@ -446,16 +451,26 @@ def test_fleet_run_stopped_by_a_signal_stops_every_process_and_leaves_its_record
 
 def test_children_of_a_killed_fleet_run_stop_by_themselves(tmp_path):
     run, children = started_run(tmp_path)
-    names = {pid: Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[2:4] for pid in children}
+    names = {pid: command_of(pid) for pid in children}
     run.kill()  # no chance to stop anything
     run.wait()
     assert [names[pid] for pid in children if not exited(pid, 30)] == []
 
 
+def command_of(pid: int) -> str:
+    """What a process runs, as `fleet agent`; "" once it has ended."""
+    try:
+        return " ".join(a.decode() for a in
+                        Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")[2:4])
+    except OSError:
+        return ""
+
+
 STUCK_CHILD = """
 import threading, time
-from fleet.runtime.lifecycle import setup_logging, stop_on_signals
+from fleet.runtime.lifecycle import setup_logging, stop_on_signals, watch_parent
 setup_logging()
+watch_parent()
 stop_on_signals(lambda: None)  # a stop that cannot cut its wait short
 print("ready", flush=True)
 threading.Event().wait()
@@ -478,7 +493,9 @@ def test_an_orphan_that_cannot_stop_cleanly_exits_with_its_stacks_in_its_log(tmp
     assert exited(child, ORPHAN_GRACE_S + 10)
     said = log.read_text()
     assert f"fleet run (pid {parent.pid}) is gone" in said
-    assert "Timeout (0:00:20)!" in said and "in <module>" in said  # every thread's stack
+    minutes, seconds = divmod(int(ORPHAN_GRACE_S), 60)
+    assert f"Timeout (0:{minutes:02d}:{seconds:02d})!" in said  # faulthandler's header ...
+    assert "in <module>" in said  # ... and every thread's stack
 
 
 def test_the_live_view_shows_the_forklifts_of_a_running_mission(tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,6 +55,7 @@ def _finite(value: object) -> bool:
 
 
 def read_weights(path: Path) -> Weights:
+    """The weights in a file; a WeightsError names the file and what is wrong with it."""
     try:
         data = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
@@ -66,6 +68,7 @@ def read_weights(path: Path) -> Weights:
 
 
 def weights_from_json(data: object, where: str) -> Weights:
+    """The weights in a parsed file (`where` names it in every error)."""
     def bad(why: str) -> WeightsError:
         return WeightsError(f"{where}: {why}")
 
@@ -91,25 +94,32 @@ def weights_from_json(data: object, where: str) -> Weights:
     raw = data.get("nets")
     if not isinstance(raw, list) or len(raw) != n:
         raise bad(f"'nets' must hold {n} networks, one per cluster")
-    expected = net_shapes(n)
-    nets = []
-    for d, state in enumerate(raw):
-        if not isinstance(state, dict) or set(state) != set(expected):
-            raise bad(f"network {d} ({clusters[d]}) must have {sorted(expected)}")
-        try:
-            arrays = {k: np.array(v, dtype=np.float64) for k, v in state.items()}
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise bad(f"network {d} ({clusters[d]}): {exc}") from None
-        for k, a in arrays.items():
-            if a.shape != expected[k] or not bool(np.isfinite(a).all()):
-                raise bad(f"network {d} ({clusters[d]}): {k} must be finite numbers of "
-                          f"shape {list(expected[k])}")
-        nets.append(arrays)
+    nets = tuple(_network(state, net_shapes(n), lambda why, d=d: bad(
+        f"network {d} ({clusters[d]}){why}")) for d, state in enumerate(raw))
     layout = data.get("layout", "")
     if not isinstance(layout, str):
         raise bad("'layout' must be a layout name")
     trained_on = data.get("trained_on", 0)
     if not isinstance(trained_on, int) or isinstance(trained_on, bool) or trained_on < 0:
         raise bad("'trained_on' must be a whole number of samples")
-    return Weights(tuple(clusters), float(scale), tuple(nets), numbers["target_mean"],
+    return Weights(tuple(clusters), float(scale), nets, numbers["target_mean"],
                    numbers["target_scale"], layout, trained_on)
+
+
+def _network(state: object, expected: dict[str, tuple[int, ...]],
+             bad: Callable[[str], WeightsError]) -> dict[str, np.ndarray]:
+    """One network's parameters: JSON numbers only (a string such as "1.5" is refused, not
+    read as a number), each finite and of its shape."""
+    if not isinstance(state, dict) or set(state) != set(expected):
+        raise bad(f" must have {sorted(expected)}")
+    arrays = {}
+    for k, v in state.items():
+        try:
+            a = np.asarray(v)
+        except ValueError as exc:  # uneven nesting
+            raise bad(f": {k}: {exc}") from None
+        if a.dtype.kind not in "iuf" or a.shape != expected[k] or \
+                not bool(np.isfinite(a).all()):
+            raise bad(f": {k} must be finite numbers of shape {list(expected[k])}")
+        arrays[k] = a.astype(np.float64)
+    return arrays

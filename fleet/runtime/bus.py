@@ -54,8 +54,8 @@ class BusConfig:
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
-        # A process started with its router tries again soon after the router listens
-        # (zenoh's default waits 1 s, then 2 s, ... between attempts).
+        # A process started with its router, or cut off from it, tries again soon after the
+        # router listens (zenoh's default waits 1 s, then 2 s, ... between attempts).
         config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
         config.insert_json5("transport/link/tx/lease", str(self.lease_ms))
         if self.user:

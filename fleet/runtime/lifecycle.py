@@ -46,6 +46,7 @@ def process_main(kind: type[C], serve: Callable[[C], int], prog: str,
     kind.add_arguments(parser)
     args = parser.parse_args(argv)
     setup_logging()
+    watch_parent()
     return exit_status(prog, [prog, *(sys.argv[1:] if argv is None else argv)],
                        lambda: serve(kind.from_args(args)))
 
@@ -111,22 +112,29 @@ def setup_logging() -> None:
 
 
 def stop_on_signals(stop: Callable[[], None]) -> None:
-    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session). A child
-    of `fleet run` also stops when that parent is gone (killed outright, it could not stop
-    its children), so no orphan keeps running: one that has not stopped ORPHAN_GRACE_S later
-    (a wait that a stop does not cut short) exits with every thread's stack in its log."""
+    """SIGTERM and SIGINT ask the process to stop cleanly (and so close its session)."""
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop())
-    parent = os.environ.get(PARENT_ENV)
-    if parent and parent.isdigit():
-        def watch() -> None:
-            while os.getppid() == int(parent):
-                time.sleep(1.0)  # polling the parent: there is no event to wait on
-            logging.getLogger("fleet.runtime").warning(
-                "fleet run (pid %s) is gone: stopping (at the latest in %g s)", parent,
-                ORPHAN_GRACE_S)
-            # faulthandler's own thread: it needs no GIL, so even a stuck call is cut short
-            faulthandler.dump_traceback_later(ORPHAN_GRACE_S, exit=True, file=sys.__stderr__)
-            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
 
-        threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+
+def watch_parent() -> None:
+    """A child of `fleet run` stops when that parent is gone (killed outright, it could not
+    stop its children), so no orphan keeps running: it sends itself SIGTERM (a clean stop
+    once `stop_on_signals` is set up, before that the end), and one that has not stopped
+    ORPHAN_GRACE_S later (a wait that a stop does not cut short) exits with every thread's
+    stack in its log."""
+    parent = os.environ.get(PARENT_ENV)
+    if not (parent and parent.isdigit()):
+        return
+
+    def watch() -> None:
+        while os.getppid() == int(parent):
+            time.sleep(1.0)  # polling the parent: there is no event to wait on
+        logging.getLogger("fleet.runtime").warning(
+            "fleet run (pid %s) is gone: stopping (at the latest in %g s)", parent,
+            ORPHAN_GRACE_S)
+        # faulthandler's own thread: it needs no GIL, so even a stuck call is cut short
+        faulthandler.dump_traceback_later(ORPHAN_GRACE_S, exit=True, file=sys.__stderr__)
+        os.kill(os.getpid(), signal.SIGTERM)  # the handler runs in the main thread
+
+    threading.Thread(target=watch, daemon=True, name="parent-watch").start()

@@ -441,9 +441,9 @@ def _open_when_up(config: BusConfig, router: Child) -> zenoh.Session:
 
 def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child: Child,
                   late: str = "") -> None:
-    """Wait for a child's liveliness token; fail at once, saying why, if a child exits first
-    (nothing else comes through the inbox before the dispatcher starts). `late` says what
-    it means when the token does not come in time."""
+    """Wait for a child's liveliness token; fail at once, saying why, if it or another child
+    exits first (only exits and tokens come through the inbox before the dispatcher
+    starts). `late` says what it means when the token does not come in time."""
     alive = session.liveliness().declare_subscriber(
         token, lambda sample: inbox.put(("alive", str(sample.key_expr)))
         if sample.kind == zenoh.SampleKind.PUT else None, history=True)

@@ -55,7 +55,8 @@ def mission_layout(session: zenoh.Session, keys: Keys, timeout_s: float = MISSIO
             if not said:
                 log.info("waiting for the dispatcher to say what the mission is")
                 said = True
-            published.wait(ASK_PERIOD_S)  # asks again: the dispatcher may not be up yet
+            if published.wait(ASK_PERIOD_S):  # else asks again: it may not be up yet
+                return _described(heard[0])
 
 
 def _described(info: MissionInfo) -> tuple[MissionInfo, Layout, tuple[Pose, ...]]:
