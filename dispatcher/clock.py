@@ -59,6 +59,9 @@ class _Clock:
                  liveness: Liveness) -> None:
         self.vehicles = vehicles
         self.liveness = liveness
+        # Each token's appearances when its forklift was last known up (every one is, now):
+        # one that came again since went, however short its absence.
+        self.generation: dict[int, int] = dict(liveness.appeared)
         # Each fault seen: what, its sim instant, and the wall clock when it was detected and
         # when the engine had recovered (asked the clock again): `fleet bench faults` reads it.
         self.detected: list[dict] = []
@@ -101,7 +104,6 @@ class FastClock(_Clock):
         self.pending = [i for i in scenario.instants() if i > t] if scenario else []
         self.down: frozenset[int] = frozenset()
         self.scheduled_down: set[int] = set()  # down by the scenario, back by it too
-        self.seen_gone: set[int] = set()  # down without a scenario, their token seen gone
         self.tick = tick
         self.t = t
         self.acked: dict[int, int] = {}
@@ -162,12 +164,19 @@ class FastClock(_Clock):
 
     def _unscheduled(self, down: frozenset[int]) -> list[Disruption]:
         """Forklifts lost or back without a scenario saying so (a killed, paused or cut-off
-        container): gone when their token goes, back when it comes again."""
-        alive = set(self.liveness.alive)
-        self.seen_gone |= {v for v in down - self.scheduled_down if v not in alive}
-        back = sorted(v for v in self.seen_gone & alive if v in down)
-        lost = sorted(v for v in self.vehicles if v not in down and v not in alive)
-        self.seen_gone = (self.seen_gone - set(back)) | set(lost)
+        container): gone when their token goes, or went and came again since they were last
+        known up; back once it has come again since. A forklift the engine lost itself (its
+        agent did not answer) may be back before the clock was asked: its token's
+        appearances say so."""
+        with self.liveness.changed:
+            alive, appeared = set(self.liveness.alive), dict(self.liveness.appeared)
+        came_again = {v for v in self.vehicles
+                      if appeared.get(v, 0) > self.generation.get(v, 0)}
+        back = sorted(v for v in down - self.scheduled_down if v in alive & came_again)
+        lost = sorted(v for v in self.vehicles
+                      if v not in down and (v not in alive or v in came_again))
+        for v in back:
+            self.generation[v] = appeared[v]
         return [VehicleUp(v, self.t) for v in back] + \
             [VehicleDown(v, self.t, "agent lost (its liveliness token is gone)") for v in lost]
 
@@ -191,6 +200,7 @@ class FastClock(_Clock):
         if isinstance(expected, VehicleUp):
             self.reports -= {(expected.vehicle, "broken"), (expected.vehicle, "repaired")}
             self.scheduled_down.discard(expected.vehicle)
+            self.generation[expected.vehicle] = self.liveness.appearances(expected.vehicle)
         else:
             self.scheduled_down.add(expected.vehicle)
         self.detected.append(_sighting(expected))
@@ -256,8 +266,6 @@ class RealtimeClock(_Clock):
                             key=lambda f: f.at) if scenario else []
         self.last_instant = max(scenario.instants(), default=0.0) if scenario else 0.0
         self.down: frozenset[int] = frozenset()
-        # Each token's appearances when its forklift was last known up (every one is, now).
-        self.generation: dict[int, int] = dict(liveness.appeared)
         self.reports: dict[int, list[str]] = {}  # "broken" / "repaired", in order, not acted on
         self.broken: set[int] = set()  # down because broken: back when repaired
         self.tick = tick

@@ -3,9 +3,12 @@ instant, so that a run that keeps up decides what the fast clock would, and the 
 every process computes from the ticks."""
 
 import itertools
+import os
 
 import pytest
 
+from dispatcher.clock import FastClock
+from dispatcher.liveness import Liveness
 from dispatcher.pacing import RealtimePacing
 from fleet.dispatching.decision import TaskKind
 from fleet.mission.engine import Engine, engine_options
@@ -19,7 +22,9 @@ from fleet.mission.freeze import (
 )
 from fleet.mission.seam import LocalExecutor, Task
 from fleet.mission.spec import Mission
+from fleet.runtime.bus import BusConfig, open_session
 from fleet.wire.protocol import ClockTick
+from fleet.wire.topics import Keys
 from fleet.world.layout_file import load_layout
 from fleet.world.site import planners_for
 from vehicle_agent import clock as agent_clock
@@ -180,3 +185,36 @@ def test_the_clock_hears_that_a_forklift_is_up_as_soon_as_it_is_resumed():
     assert [told[i][1] for i in resumed] == [1, 2]
     assert [told[i + 1] for i in resumed] == [("resumed", 1), ("resumed", 2)]
     assert len(record.stacks_done) == 24
+
+
+def test_the_fast_clock_brings_back_a_forklift_whose_token_came_again_before_it_looked():
+    """A forklift the engine lost itself (its agent did not answer: a container cut off its
+    network) is down, and its token went and came again before the clock was next asked (a
+    quick reconnect): the clock brings it back. One whose token went and came again while
+    it was up (an agent restarted at once) is lost, then back."""
+    keys = Keys(f"clock{os.getpid()}")
+    with open_session(BusConfig("peer", (), ())) as session:
+        tokens = {v: session.liveliness().declare_token(keys.vehicle_alive(v)) for v in (1, 2)}
+        liveness = Liveness(session, keys)
+        liveness.wait_for([1, 2], 10.0)
+        clock = FastClock(session, keys, [1, 2], liveness)
+
+        def gone_and_back(v: int) -> None:
+            tokens[v].undeclare()
+            with liveness.changed:
+                assert liveness.changed.wait_for(lambda: v not in liveness.alive, 10.0)
+            tokens[v] = session.liveliness().declare_token(keys.vehicle_alive(v))
+            liveness.wait_for([v], 10.0)
+
+        try:
+            assert clock.disruptions(5.0, frozenset()) == []
+            gone_and_back(2)
+            assert clock.disruptions(5.0, frozenset({2})) == [VehicleUp(2, 0.0)]
+            assert clock.disruptions(5.0, frozenset()) == []
+            gone_and_back(1)
+            assert clock.disruptions(5.0, frozenset()) == [
+                VehicleDown(1, 0.0, "agent lost (its liveliness token is gone)")]
+            assert clock.disruptions(5.0, frozenset({1})) == [VehicleUp(1, 0.0)]
+        finally:
+            clock.close()
+            liveness.close()
