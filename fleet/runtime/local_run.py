@@ -457,8 +457,8 @@ def _wait_started(session: zenoh.Session, token: str, inbox: queue.Queue, child:
             if kind == "alive" and item == token:  # not a late one of an earlier wait
                 return
             if kind == "exit" and not item.killed:
-                raise RunFailed(Launcher.death(item, f"before {child.name} was up"
-                                               if item is not child else "as it started"))
+                raise RunFailed(Launcher.death(item, "as it started" if item is child
+                                               else "before the mission ended"))
         raise RunFailed((late or f"{child.name} was not up within "
                                  f"{ROUTER_TIMEOUT_MS / 1000:g} s (no {token} token)")
                         + f"; its log: {child.log}")
