@@ -25,7 +25,6 @@ from fleet.dispatching.weights_file import (
     HIDDEN,
     Weights,
     read_weights,
-    weights_from_json,
 )
 
 
@@ -165,10 +164,6 @@ class ClusterMLPs:
             nets.append(net)
         return cls(weights.clusters, weights.input_scale, nets, list(weights.target_mean),
                    list(weights.target_scale), weights.layout, weights.trained_on)
-
-    @classmethod
-    def from_json(cls, data: object, where: str) -> ClusterMLPs:
-        return cls.from_weights(weights_from_json(data, where))
 
     @classmethod
     def load(cls, path: Path) -> ClusterMLPs:
