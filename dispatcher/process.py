@@ -172,7 +172,8 @@ def serve(config: DispatcherConfig) -> int:
             in_mission.set()
             streams[MissionInfo].put(info, 0.0)
             done = dispatch_mission(session, keys, setup, liveness, lambda message, t:
-                                    streams[type(message)].put(message, t), info)
+                                    streams[type(message)].put(message, t), info,
+                                    lambda message, t: streams[type(message)].number(message, t))
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
@@ -250,8 +251,9 @@ def write_roster(path: Path, ids: dict[str, int]) -> None:
 
 def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
              ) -> WorkJournal | None:
-    """The order book's journal (--journal), for an order mission: the dead dispatcher's to
-    go on with when this one picks the mission up, else a new one."""
+    """The dispatcher's journal (--journal), for an order mission (of seed 004: the instants
+    of its service faults): the dead dispatcher's to go on with when this one picks the
+    mission up, else a new one."""
     if config.journal is None or setup.mission.kind is not MissionKind.ORDERS:
         return None
     journal = WorkJournal(config.journal)
@@ -286,18 +288,22 @@ def dispatch_external(session: zenoh.Session, keys: Keys, setup: MissionSetup,
 
 
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
-                     liveness: Liveness, publish: Publish, info: MissionInfo) -> MissionDone:
+                     liveness: Liveness, publish: Publish, info: MissionInfo,
+                     number: Publish | None = None) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
     that could not finish: the error goes into the result). `info` is what the run is, as
-    published."""
+    published; `number` numbers a message as `publish` would, sending nothing (what a dead
+    dispatcher of seed 004 sent already)."""
     config, vehicles = setup.config, setup.vehicles
     if config.dispatch == "external":
         return dispatch_external(session, keys, setup, liveness)
     if setup.layout.floor is not None:  # seed 004's lifting AGVs, tracked cell by cell
         scenario = load_scenario(config.faults, setup.layout.name) if config.faults else None
-        return dispatch_mission004(session, keys, setup.mission, setup.layout.floor, vehicles,
-                                   liveness, config.startup_timeout_s, publish,
-                                   tracking_params(info), config.clock, config.speed, scenario)
+        with ExitStack() as scope:
+            return dispatch_mission004(
+                session, keys, setup.mission, setup.layout.floor, vehicles, liveness,
+                config.startup_timeout_s, publish, tracking_params(info), config.clock,
+                config.speed, scenario, _journal(config, setup, scope), setup.recover, number)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

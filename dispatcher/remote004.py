@@ -14,6 +14,12 @@ refuses a take the table gave (someone outside the mission holds the cell) ends 
 mission, saying so. A plan is made by the AGV's agent on the table sent with the request,
 and waits for no answer. So a run of processes gives the in-process events, move for move.
 
+A dispatcher killed by the injector (at a service fault's instant, every request answered
+and the instant journaled) is picked up by its successor: it runs the tracker again in its
+own process up to that instant, against its table alone and telling nobody (`Replay`;
+fleet/mission/resume004.py), checks that the store holds what the replay's table holds,
+and goes on from there through the agents. Its events go on from the dead one's numbers.
+
 An agent a fault takes (`kill_vehicle`, `stall_vehicle`, `cut_link`) is taken when the
 tracker strikes its AGV: every request so far answered first, then the fault clock stops
 the fault injector at that instant and waits for its ack (a killed agent's liveliness token
@@ -31,8 +37,10 @@ import logging
 import math
 import statistics
 import time
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack, closing
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 import zenoh
@@ -40,13 +48,15 @@ import zenoh
 from dispatcher.clock import FastClock
 from dispatcher.liveness import UNSERVED_RETRY_S, Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
+from dispatcher.work_journal import WorkJournal
 from fleet.errors import UserError
 from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
 from fleet.mission.faults004 import injected004
 from fleet.mission.freeze import BREAKDOWN, CAUSES
 from fleet.mission.record004 import Publish, run_mission004
+from fleet.mission.resume004 import FaultInstant, where_it_died
 from fleet.mission.spec import ClockMode, Mission
-from fleet.mission.tracking004 import Routed, RouteQuery, Stuck, TrackingParams
+from fleet.mission.tracking004 import LocalVehicles, Routed, RouteQuery, Stuck, TrackingParams
 from fleet.planning.geometry import Cell
 from fleet.planning.reservations import INF, Interval, ReservationTable, ReservationView
 from fleet.planning.rules004 import XY
@@ -56,6 +66,7 @@ from fleet.wire.protocol import (
     ZONE,
     CellReply,
     CellRequest,
+    Message,
     MissionDone,
     RouteReply,
     RouteRequest,
@@ -76,10 +87,26 @@ SILENCE_SETTLES_S = 1.5 * LEASE_MS / 1000
 Answer = TypeVar("Answer", CellReply, RouteReply)
 
 
+@dataclass
+class Replay:
+    """A restarted dispatcher's run of the tracker up to where its predecessor died: in this
+    process (`local` plans on the tracker's table with the mission's costs), telling nobody;
+    at that instant it waits for the agents present then and goes live (`went_live`)."""
+
+    died: FaultInstant
+    local: LocalVehicles
+    vehicles: list[int]
+    went_live: Callable[[float], None]
+    absent: set[int] = field(default_factory=set)  # AGVs whose agent a fault took
+    ticks: int = 0  # the fault clock's ticks the dead dispatcher had sent
+    started: float = field(default_factory=time.perf_counter)
+
+
 class RemoteVehicles:
     def __init__(self, session: zenoh.Session, keys: Keys, floor: Floor004,
                  liveness: Liveness, reservations: ReservationClient,
-                 fault_clock: FastClock | None = None) -> None:
+                 fault_clock: FastClock | None = None, journal: WorkJournal | None = None
+                 ) -> None:
         self.keys, self.floor, self.liveness = keys, floor, liveness
         # The table as the tracker changes it, in its order: the in-process table, which the
         # store holds too once every request so far is answered.
@@ -95,6 +122,13 @@ class RemoteVehicles:
         self.asking = ThreadPoolExecutor(ASKING_AT_ONCE, thread_name_prefix="cells")
         # the last request about each cell the store was asked about, not yet settled
         self.pending: dict[Cell, Future[None]] = {}
+        self.journal = journal  # each service fault's instant, where a successor goes on
+        self.replay: Replay | None = None  # until the predecessor's death (None: live)
+        self.service_faults = 0
+
+    @property
+    def replaying(self) -> bool:
+        return self.replay is not None
 
     @property
     def view(self) -> ReservationView:
@@ -104,13 +138,15 @@ class RemoteVehicles:
         cell = self.floor.cell(xy)
         if not self.table.commit(vehicle, [Interval(cell, t, INF)]).ok:
             return False  # held: the store, told all the table was, would refuse too
-        self._tell(cell, vehicle, xy, t, take=True)
+        if self.replay is None:
+            self._tell(cell, vehicle, xy, t, take=True)
         return True
 
     def release(self, vehicle: int, xy: XY, t: float) -> None:
         cell = self.floor.cell(xy)
         self.table.release(vehicle, t, [cell])
-        self._tell(cell, vehicle, xy, t, take=False)
+        if self.replay is None:
+            self._tell(cell, vehicle, xy, t, take=False)
 
     def _tell(self, cell: Cell, vehicle: int, xy: XY, t: float, take: bool) -> None:
         """Tell the store in the background, after the last request about the cell is
@@ -144,6 +180,10 @@ class RemoteVehicles:
         gone."""
         if cause == BREAKDOWN:
             return  # its agent stands the AGV still and goes on answering
+        if self.replay is not None:
+            self.replay.absent.add(vehicle)
+            self.replay.ticks += 1
+            return
         self.settle()
         self.absent[vehicle] = self.liveness.appearances(vehicle)
         self._fault_instant(t)
@@ -156,6 +196,11 @@ class RemoteVehicles:
     def up(self, vehicle: int, t: float) -> None:
         """The injector gives the AGV its agent back at t (a new one, the stalled one
         continued, its link restored); it is asked again once its token is there."""
+        if self.replay is not None:
+            if vehicle in self.replay.absent:
+                self.replay.absent.remove(vehicle)
+                self.replay.ticks += 1
+            return
         if vehicle not in self.absent:
             return
         self.settle()  # what the dispatcher wrote for it is in first
@@ -164,11 +209,46 @@ class RemoteVehicles:
                                 AGENT_BACK_S)
 
     def service_fault(self, t: float) -> None:
-        """The reservation service is killed at t: every request so far answered, then the
-        injector stopped at t (it kills, and starts a new one from the journal a moment
-        later, which the agents' and the dispatcher's requests wait for)."""
+        """A service is killed at t: every request so far answered and the instant journaled
+        (where this dispatcher's successor goes on if it is the one), then the injector
+        stopped at t (it kills, and starts a new one a moment later: the reservation
+        service from its journal, which the agents' and the dispatcher's requests wait
+        for)."""
+        self.service_faults += 1
+        if self.replay is not None:
+            self.replay.ticks += 1
+            if self.service_faults == self.replay.died.number:
+                self._go_live(t)
+            return
         self.settle()
+        if self.journal is not None and self.fault_clock is not None:
+            self.journal.append(FaultInstant(self.service_faults, t,
+                                             self.fault_clock.tick + 1).to_record())
         self._fault_instant(t)
+
+    def _go_live(self, t: float) -> None:
+        """Where the predecessor died: the agents then present up, the store checked to
+        hold the replayed table, and from now on the agents asked."""
+        assert self.replay is not None
+        replay, self.replay = self.replay, None
+        died = replay.died
+        if (died.t, died.tick) != (t, replay.ticks):
+            raise ParticipantLost(f"the dead dispatcher's journal puts its death at service "
+                                  f"fault {died.number}, t={died.t:g}, fault clock tick "
+                                  f"{died.tick}; this mission reaches it at t={t:g}, tick "
+                                  f"{replay.ticks}: not the mission it ran")
+        self.absent = {v: self.liveness.appearances(v) for v in sorted(replay.absent)}
+        self.liveness.wait_for([v for v in replay.vehicles if v not in self.absent],
+                               AGENT_BACK_S)
+        replayed_s = time.perf_counter() - replay.started
+        store = self.reservations.table()
+        if (differs := first_difference(store, self.table)) is not None:
+            raise ParticipantLost(f"picking the mission up at t={t:g}: the reservation store "
+                                  f"does not hold what the dead dispatcher left ({differs})")
+        log.info("picked the mission up at t=%g, where the dead dispatcher was killed (its "
+                 "run replayed in %.2f s; the store holds its %d holds)", t, replayed_s,
+                 len(self.table.reservations()))
+        replay.went_live(t)
 
     def _fault_instant(self, t: float) -> None:
         if self.fault_clock is None:
@@ -196,6 +276,8 @@ class RemoteVehicles:
     def route(self, query: RouteQuery) -> Routed:
         """The AGV's agent plans on the table sent along: the store's once every request so
         far is answered (so the plan waits for none of them)."""
+        if self.replay is not None:
+            return self.replay.local.route(query)
         request = RouteRequest(
             self.requester.next_id(), query.vehicle, query.t, query.task.value, query.start,
             query.goal, int(query.heading), query.home, query.relaxed, sorted(query.blocked),
@@ -210,6 +292,8 @@ class RemoteVehicles:
         intervals = [Interval(self.floor.cell(xy), t0, t1) for xy in xys]
         written = self.table.commit(ZONE, intervals)
         assert written.ok, written.reason  # the tracker closes only the cells nobody holds
+        if self.replay is not None:
+            return
         self.settle()
         written = self.reservations.commit(ZONE, intervals)
         if not written.ok:
@@ -232,6 +316,18 @@ class RemoteVehicles:
         return reply
 
 
+def first_difference(store: ReservationTable, table: ReservationTable) -> str | None:
+    """The first reservation one table holds and the other does not, said (None: none)."""
+    held = {(r.vehicle, r.cell, r.t0, r.t1) for r in store.reservations()}
+    replayed = {(r.vehicle, r.cell, r.t0, r.t1) for r in table.reservations()}
+    for name, extra in (("the store", held - replayed), ("the replayed table", replayed - held)):
+        if extra:
+            vehicle, cell, t0, t1 = min(extra, key=lambda r: (r[2], r[0], r[1]))
+            return f"only {name} has {vehicle}'s hold of {cell} from t={t0:g} to t={t1:g}, " \
+                   f"and {len(extra) - 1} more"
+    return None
+
+
 class RealtimePace:
     """The real-time clock of a seed-004 run: sim time = speed x wall seconds since sim time
     0, which comes LEAD_WALL_S after the clock is made (as seed 000's). Each instant of the
@@ -241,7 +337,7 @@ class RealtimePace:
     fleet bench runtime's 0.1 s, and then gives the fast run's events."""
 
     def __init__(self, speed: float, lead_wall_s: float = LEAD_WALL_S) -> None:
-        self.speed = speed
+        self.speed, self.lead_wall_s = speed, lead_wall_s
         self.zero = time.monotonic() + lead_wall_s
         self.lateness: list[float] = []  # of every instant (0: on time)
         self.late: list[float] = []  # how late each late instant was (wall seconds)
@@ -261,6 +357,11 @@ class RealtimePace:
                 self.worst_at = t
             self.late.append(-wait)
 
+    def go_on_from(self, t: float) -> None:
+        """A restarted dispatcher's clock: sim time t comes LEAD_WALL_S from now (it stood
+        still while no dispatcher ran, for nothing moves but what the tracker moves)."""
+        self.zero = time.monotonic() + self.lead_wall_s - t / self.speed
+
     def summary(self) -> dict[str, float]:
         ordered = sorted(self.lateness) or [0.0]
         p99 = ordered[min(len(ordered) - 1, math.ceil(0.99 * len(ordered)) - 1)]
@@ -274,33 +375,55 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                         vehicles: list[int], liveness: Liveness, startup_timeout_s: float,
                         publish: Publish, tracking: TrackingParams,
                         clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
-                        scenario: Scenario | None = None) -> MissionDone:
+                        scenario: Scenario | None = None, journal: WorkJournal | None = None,
+                        recover: bool = False, number: Publish | None = None) -> MissionDone:
     """Wait for the reservation service and the AGVs, then run the mission through them on
     the fast or the real-time clock (never raises for a mission that could not finish: the
-    error goes into the result)."""
+    error goes into the result). `journal` keeps each service fault's instant; `recover`:
+    pick up the mission of the dispatcher that died at the last one, whose events were
+    published already (`number` numbers them as they were, sending nothing)."""
     t0 = time.perf_counter()
     with ExitStack() as scope:
         try:
             liveness.wait_for_service(startup_timeout_s)
             reservations = ReservationClient(session, keys, Requester(session, DISPATCHER))
-            liveness.wait_for(vehicles, startup_timeout_s)
-            log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
+            died = _where_it_died(journal, scenario) if recover else None
+            if died is None:
+                liveness.wait_for(vehicles, startup_timeout_s)
+                log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
             pace = RealtimePace(speed) if clock is ClockMode.REALTIME else None
             injected = injected004(scenario) if scenario is not None else None
             # ticked at an agent's fault alone, on either clock: the tracker's instant then
             # waits for the injector as the fast clock does (the real-time one is there)
             fault_clock = scope.enter_context(closing(FastClock(
-                session, keys, [], liveness, injected))) if injected is not None else None
-            fleet = RemoteVehicles(session, keys, floor, liveness, reservations, fault_clock)
+                session, keys, [], liveness, injected, tick=died.tick if died else 0,
+                t=died.t if died else 0.0))) if injected is not None else None
+
+            went_live = pace.go_on_from if pace is not None else lambda t: None
+            fleet = RemoteVehicles(session, keys, floor, liveness, reservations, fault_clock,
+                                   journal)
+            if died is not None:  # the tracker's one table, planned on in this process
+                fleet.replay = Replay(died, LocalVehicles(floor, tracking, fleet.table),
+                                      vehicles, went_live)
             scope.callback(fleet.close_down)
 
             def next_instant(t: float) -> None:
                 fleet.next_instant()
-                if pace is not None:
+                if pace is not None and not fleet.replaying:
                     pace(t)
 
-            done = run_mission004(mission, floor, len(vehicles), fleet, publish, next_instant,
-                                  tracking, scenario.faults if scenario is not None else ())
+            def publish_or_number(message: Message, t: float) -> None:
+                if not fleet.replaying:
+                    publish(message, t)
+                elif number is not None:  # sent by the dead one already
+                    number(message, t)
+
+            done = run_mission004(mission, floor, len(vehicles), fleet, publish_or_number,
+                                  next_instant, tracking,
+                                  scenario.faults if scenario is not None else ())
+            if fleet.replaying:
+                raise ParticipantLost(f"the mission ended before the instant its dead "
+                                      f"dispatcher's journal names (t={died.t:g})")
             fleet.settle()  # the last cells let go: the store ends as the fleet stands
             if pace is None:
                 return done
@@ -312,3 +435,11 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
         except (ParticipantLost, RequestFailed, Stuck, UserError, ValueError) as exc:
             log.error("mission failed: %s", exc)
             return MissionDone(False, error=str(exc), wall_s=time.perf_counter() - t0)
+
+
+def _where_it_died(journal: WorkJournal | None, scenario: Scenario | None) -> FaultInstant:
+    if journal is None:
+        raise UserError("a seed-004 mission is picked up where its dead dispatcher's journal "
+                        "says it died: give the dead one's --journal")
+    return where_it_died(journal.records(), scenario.faults if scenario is not None else (),
+                         str(journal.path))

@@ -19,6 +19,7 @@ from fleet.planning.reservations import (
     INF,
     Amendment,
     Interval,
+    ReservationTable,
     TimedRoute,
     WriteResult,
 )
@@ -27,6 +28,7 @@ from fleet.wire.convert import (
     amends_to_wire,
     intervals_to_wire,
     route_to_wire,
+    snapshot_from_wire,
 )
 from fleet.wire.protocol import (
     CommitRequest,
@@ -106,6 +108,11 @@ class ReservationClient:
         subscriber = self.session.declare_subscriber(self.keys.reservation_change, on_sample)
         self.resync(mirror)
         return subscriber
+
+    def table(self) -> ReservationTable:
+        """The whole table as the service holds it now."""
+        snapshot = self._ask(SnapshotRequest(-1), WireSnapshot)
+        return ReservationTable.from_snapshot(snapshot_from_wire(snapshot))
 
     def resync(self, mirror: TableMirror) -> None:
         """Catch up: a diff when the copy is synced, else the whole table."""

@@ -96,9 +96,6 @@ BUILT = ("only vehicle_breakdown, close_zone, kill_vehicle, stall_vehicle, cut_l
 
 @pytest.mark.parametrize("fault,named", [
     (Fault(FaultKind.SLOW_PLANNER, 10.0, vehicle=1, duration=5.0, factor=3.0), BUILT),
-    (Fault(FaultKind.KILL_SERVICE, 10.0, service="dispatcher"),
-     "only the reservation and recorder services can be killed yet .* does not recover a "
-     "killed dispatcher"),
     (Fault(FaultKind.VEHICLE_BREAKDOWN, 10.0, vehicle=9), "the run has AGVs 1 to 6"),
     (Fault(FaultKind.CLOSE_ZONE, 10.0, duration=5.0, cells=((0, 0),)),
      "cell 0,0 is not floor an AGV of small004 drives on"),
@@ -118,8 +115,8 @@ def test_fleet_run_refuses_a_scenario_of_another_kind_before_starting(tmp_path, 
     assert main(["faults", "list", "--layout", "paper004"]) == 0
     listed = capsys.readouterr().out.split("shipped scenarios")[1]
     assert {"mixed", "kill_vehicle", "stall_vehicle", "cut_link"} <= set(listed.split())
-    assert {"kill_service", "kill_recorder"} <= set(listed.split())  # the services'
-    assert "slow_planner" not in listed and "kill_dispatcher" not in listed
+    assert {"kill_service", "kill_recorder", "kill_dispatcher"} <= set(listed.split())
+    assert "slow_planner" not in listed
 
 
 def test_a_killed_agent_in_process_is_a_stop_told_by_its_cause(tmp_path, capsys):

@@ -8,15 +8,18 @@ import mcap.reader
 import pytest
 from mission_check import journal_overlaps
 
+from dispatcher.remote004 import first_difference
 from fleet.analysis.analyze004 import analyze004
 from fleet.cli import main
 from fleet.dispatching.decision import Strategy
-from fleet.mission.faults import load_scenario
+from fleet.errors import UserError
+from fleet.mission.faults import Fault, FaultKind, load_scenario
 from fleet.mission.faults004 import injected004
 from fleet.mission.heat004 import history_heat
 from fleet.mission.orders004 import Mission004, generate_orders
 from fleet.mission.record import digest_of
 from fleet.mission.record004 import event_from_wire, event_to_wire, record_of
+from fleet.mission.resume004 import FaultInstant, where_it_died
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.mission.tracking004 import (
     BrokeDown,
@@ -27,7 +30,7 @@ from fleet.mission.tracking004 import (
     TrackingParams,
 )
 from fleet.planning.astar004 import Costs
-from fleet.planning.reservations import INF
+from fleet.planning.reservations import INF, Interval, ReservationTable
 from fleet.recording.reader import read_recording
 from fleet.runtime.bus import wait_alive
 from fleet.runtime.local_run import RunSpec, run_processes
@@ -230,25 +233,31 @@ def test_a_stalled_or_cut_off_agent_is_left_alone_until_its_fault_ends(kind, clo
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
 
 
-def run_with_service_killed(tmp_path: Path, service: str, before_end: bool = False):
+def run_with_service_killed(tmp_path: Path, service: str, before_end: bool = False,
+                            clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
+                            more: str = ""):
     """8 orders for 4 AGVs on the small floor as processes, `service` killed at t = 40 (or
-    at the last order's last second) and started again 2 s of wall time later, which must
-    give the in-process run's record: that run."""
+    at the last order's last second) and started again 2 s of wall time later, with the
+    faults of `more` (TOML), which must give the record of the in-process run with those:
+    that run."""
     layout_file = small_floor_file(tmp_path)
     floor = load_layout(str(layout_file)).floor
-    reference = Mission004(floor, 4, generate_orders(floor, 8, 5)).run()
-    at = reference.completion_s - 1.0 if before_end else 40.0
     scenario = tmp_path / "kill.toml"
+    scenario.write_text(more)
+    reference = Mission004(floor, 4, generate_orders(floor, 8, 5),
+                           faults=load_scenario(scenario).faults).run()
+    at = reference.completion_s - 1.0 if before_end else 40.0
     scenario.write_text(f'[[fault]]\nkind = "kill_service"\nat = {at}\n'
-                        f'service = "{service}"\ndowntime = 2.0\n')
+                        f'service = "{service}"\ndowntime = 2.0\n{more}')
     mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 4, 5, orders=8)
     outcome = run_processes(RunSpec(
-        mission, 4, tmp_path / "run", faults=injected004(load_scenario(scenario)),
-        faults_source=str(scenario), clocked_agents=False))
+        mission, 4, tmp_path / "run", clock, speed,
+        faults=injected004(load_scenario(scenario)), faults_source=str(scenario),
+        clocked_agents=False))
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)
-    assert [(a.what, a.t) for a in outcome.injected] == [(f"kill the {service} for 2 s", at)]
-    return reference
+    assert (f"kill the {service} for 2 s", at) in [(a.what, a.t) for a in outcome.injected]
+    return reference, outcome
 
 
 def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_path):
@@ -257,7 +266,7 @@ def test_a_killed_reservation_service_is_waited_for_and_changes_no_event(tmp_pat
     takes and let-goes wait for it. The events are those of the run without the fault, the
     table never held a cell twice, no request was applied twice, and every verdict
     passes."""
-    reference = run_with_service_killed(tmp_path, "reservation")
+    reference, _ = run_with_service_killed(tmp_path, "reservation")
     floor = load_layout(str(tmp_path / "small004.toml")).floor
     faults = load_scenario(tmp_path / "kill.toml").faults
     assert Mission004(floor, 4, generate_orders(floor, 8, 5), faults=faults).run().events \
@@ -280,15 +289,78 @@ def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_who
     dispatcher for every event after those run.mcap holds, and for the result: the two
     segments hold every event once, in the dispatcher's numbering, and are judged as the
     run without the fault."""
-    reference = run_with_service_killed(tmp_path, "recorder", before_end)
+    reference, _ = run_with_service_killed(tmp_path, "recorder", before_end)
     assert "caught up on" in (tmp_path / "run" / "logs" / "recorder-2.log").read_text()
     recording = read_recording(tmp_path / "run")
     report = analyze004(recording)
     assert [s.split()[0] for s in report.segments] == ["run.mcap", "run-2.mcap"]
-    assert report.passed and report.events_missing == []
+    assert report.passed and report.events_missing == [] and report.restarts == []
     assert report.orders_picked == 8
     numbers = [r.envelope.seq for r, _ in recording.of(AgvEvent)]
     assert sorted(numbers) == list(range(1, len(reference.events) + 1))  # each once
+
+
+@pytest.mark.parametrize("clock,speed,more", [
+    (ClockMode.FAST, 1.0, ""), (ClockMode.REALTIME, 40.0, ""),
+    (ClockMode.FAST, 1.0, KILL.replace("at = 40.5", "at = 30.5"))],
+    ids=["fast", "realtime", "with-an-agent-down"])
+def test_a_killed_dispatchers_successor_replays_the_mission_to_its_death_and_goes_on(
+        clock, speed, more, tmp_path):
+    """The injector kills the dispatcher at t = 40, the tracker's instant (every request
+    answered, the instant journaled), and starts a new one 2 s of wall time later. It runs
+    the tracker again in its own process up to t = 40, telling nobody, finds the store
+    holding what the dead one left, and goes on through the agents (on the real-time
+    clock, sim time stood still meanwhile, since nothing moves but what the tracker
+    moves). The record is the run without the fault; the recording holds every event
+    once, the new dispatcher's numbered on from the dead one's. With AGV 2's agent killed
+    at t = 30.5 for 30 s, the new dispatcher leaves it alone until the injector, on its
+    fault clock going on from the dead one's tick, starts it again at t = 60.5."""
+    reference, outcome = run_with_service_killed(tmp_path, "dispatcher", clock=clock,
+                                                 speed=speed, more=more)
+    logs = tmp_path / "run" / "logs"
+    assert "picked the mission up at t=40," in (logs / "dispatcher-2.log").read_text()
+    if more:
+        assert [(a.what, a.t) for a in outcome.injected] == [
+            ("kill agent-2", 30.5), ("kill the dispatcher for 2 s", 40.0),
+            ("restart agent-2", 60.5)]
+        assert "agent-2-2.log" in {p.name for p in logs.iterdir()}
+    recording = read_recording(tmp_path / "run")
+    report = analyze004(recording)
+    assert report.passed and report.events_missing == [] and report.orders_picked == 8
+    (went_on,) = report.restarts  # the first event the new dispatcher published
+    assert went_on is not None and went_on >= 40.0
+    numbers = [r.envelope.seq for r, _ in recording.of(AgvEvent)]
+    assert sorted(numbers) == list(range(1, len(reference.events) + 1))  # each once
+    assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
+
+
+def test_a_seed004_dispatcher_is_picked_up_only_where_the_injector_killed_it():
+    """Its successor reads where it died from its journal: the last service fault's
+    instant, which must be a kill of the dispatcher that its scenario schedules; anything
+    else is refused saying why."""
+    kill = Fault(FaultKind.KILL_SERVICE, 40.0, service="dispatcher")
+    other = Fault(FaultKind.KILL_SERVICE, 20.0, service="reservation")
+    records = [FaultInstant(1, 20.0, 1).to_record(), FaultInstant(2, 40.0, 3).to_record()]
+    assert where_it_died(records, [other, kill], "j") == FaultInstant(2, 40.0, 3)
+    with pytest.raises(UserError, match="j names no instant the dead dispatcher reached"):
+        where_it_died([], [kill], "j")
+    with pytest.raises(UserError, match="t=20, is no kill of the dispatcher"):
+        where_it_died(records[:1], [other, kill], "j")
+    with pytest.raises(UserError, match="not a seed-004 dispatcher's journal: service_fault "
+                                        "tick 0 is not a whole number from 1"):
+        where_it_died([["service_fault", 1, 40.0, 0]], [kill], "j")
+    with pytest.raises(UserError, match="not a service_fault record"):
+        where_it_died([["served", 1, 0.0, 3.0, 1.0]], [kill], "j")
+
+
+def test_a_store_that_does_not_hold_the_replayed_table_is_named():
+    replayed, store = ReservationTable(), ReservationTable()
+    for table in (replayed, store):
+        table.commit(1, [Interval((0, 0), 0.0, INF)])
+    assert first_difference(store, replayed) is None
+    store.commit(2, [Interval((1, 0), 5.0, INF)])
+    assert first_difference(store, replayed) == \
+        "only the store has 2's hold of (1, 0) from t=5 to t=inf, and 0 more"
 
 
 def test_the_events_no_segment_holds_are_counted_up_to_what_the_result_says_was_sent():

@@ -27,7 +27,7 @@ from fleet.mission.tracking004 import (
 )
 from fleet.planning.trajectory import Pose
 from fleet.recording.reader import Recording
-from fleet.wire.protocol import AgvEvent, MissionDone, MissionStopped
+from fleet.wire.protocol import AgvEvent, MissionDone, MissionInfo, MissionStopped
 from fleet.world.floor004 import Floor004
 
 
@@ -85,6 +85,9 @@ class Report004:
     # runs: what no recorder wrote and no restarted one caught up on.
     events_missing: list[tuple[int, int]] = field(default_factory=list)
     segments: list[str] = field(default_factory=list)  # of a recording in several, each
+    # Each dispatcher after the first (killed, picked up): the sim time of its first event
+    # recorded (None: none).
+    restarts: list[float | None] = field(default_factory=list)
 
     # What `fleet runs` keeps of a judged run (fleet/commands/runs.py, summary_of), as seed
     # 000's report has it.
@@ -183,7 +186,17 @@ def analyze004(recording: Recording) -> Report004:
                      missing_runs([r.envelope.seq for r, _ in recording.of(AgvEvent)],
                                   events_published(recording)),
                      [f"{Path(s.path).name}" + ("" if s.complete else " (torn)")
-                      for s in recording.segments] if len(recording.segments) > 1 else [])
+                      for s in recording.segments] if len(recording.segments) > 1 else [],
+                     dispatcher_restarts(recording))
+
+
+def dispatcher_restarts(recording: Recording) -> list[float | None]:
+    """A dispatcher publishes what the run is first (message 1 of its stream, where an
+    answer to a recorder's question is numbered 0); for each after the first, the sim time
+    of the first event recorded after that (None: none was)."""
+    starts = [r.log_ns for r, _ in recording.of(MissionInfo) if r.envelope.seq == 1]
+    events = [(r.log_ns, m.t0) for r, m in recording.of(AgvEvent)]
+    return [next((t0 for at, t0 in events if at > start), None) for start in starts[1:]]
 
 
 def events_published(recording: Recording) -> int:
@@ -249,6 +262,11 @@ def report_lines(r: Report004) -> list[str]:
     ]
     if r.segments:
         lines.append(f"  {'segments':<19}{len(r.segments)}: {', '.join(r.segments)}")
+    if r.restarts:
+        firsts = ", ".join("none" if t is None else f"t={t:.1f}" for t in r.restarts)
+        times = "once" if len(r.restarts) == 1 else f"{len(r.restarts)} times"
+        lines.append(f"  {'dispatcher':<19}restarted {times}, the mission picked up (the "
+                     f"first event after: {firsts})")
     return lines
 
 
@@ -295,4 +313,4 @@ def report_json(r: Report004) -> dict:
                          "rules": not v.rule_breaches, "giving_way": not v.yield_breaches,
                          "work": r.work_done, "events": r.messages_whole,
                          "faults": not r.fault_breaches, "passed": r.passed},
-            "faults": r.faults}
+            "faults": r.faults, "dispatcher_restarts": r.restarts}

@@ -9,9 +9,10 @@ its seam asks the injector to act when it strikes and when it is over
 (dispatcher/remote004.py). A killed reservation service changes nothing the tracker
 decides: its seam holds the instant while the injector kills it, and the requests wait for
 its successor, which reads the journal. A killed recorder changes nothing either: its
-successor asks the dispatcher for the events it did not write (recorder/process.py). A
-killed dispatcher (a seed-004 dispatcher does not pick its mission up) and a slowed planner
-(which no seed-004 decision waits for) are refused by name."""
+successor asks the dispatcher for the events it did not write (recorder/process.py), nor
+does a killed dispatcher: its successor runs the tracker again up to that instant and goes
+on from there (dispatcher/remote004.py). A slowed planner (which no seed-004 decision waits
+for) is refused by name."""
 
 from __future__ import annotations
 
@@ -28,7 +29,6 @@ KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VE
 # what the injector does to the run's processes
 INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
                FaultKind.KILL_SERVICE)
-SERVICES004 = ("reservation", "recorder")  # the services a seed-004 run survives the death of
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
 
 
@@ -38,24 +38,19 @@ def floor_xy(floor: Floor004, cell: tuple[int, int]) -> XY:
 
 
 def taken004(fault: Fault) -> bool:
-    """Whether a seed-004 run takes a fault of this kind (and service)."""
-    return fault.kind in KINDS004 and (fault.kind is not FaultKind.KILL_SERVICE
-                                       or fault.service in SERVICES004)
+    """Whether a seed-004 run takes a fault of this kind (the death of any service)."""
+    return fault.kind in KINDS004
 
 
 def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
                     scenario: str) -> None:
-    """Refuse what a seed-004 run cannot take, naming the fault: another kind, a service it
-    does not recover, an AGV the run does not have, a cell off the floor an AGV drives on."""
+    """Refuse what a seed-004 run cannot take, naming the fault: another kind, an AGV the
+    run does not have, a cell off the floor an AGV drives on."""
     for i, fault in enumerate(faults):
         where = f"scenario {scenario}: fault {i + 1} ({fault.describe('AGV')})"
         if fault.kind not in KINDS004:
             raise ScenarioError(f"{where}: on a seed-004 floor only "
                                 f"{', '.join(k.value for k in KINDS004)} are built yet")
-        if not taken004(fault):
-            raise ScenarioError(f"{where}: on a seed-004 floor only the "
-                                f"{' and '.join(SERVICES004)} services can be killed yet (a "
-                                f"seed-004 run does not recover a killed {fault.service})")
         if fault.vehicle is not None and not 1 <= fault.vehicle <= vehicles:
             raise ScenarioError(f"{where}: the run has AGVs 1 to {vehicles}")
         for cell in fault.cells:

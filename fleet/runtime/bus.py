@@ -139,6 +139,15 @@ class Stream:
             self.kept.append(payload)
         self.publisher.put(payload)
 
+    def number(self, message: Message, sim_time: float) -> None:
+        """Numbered (and kept) as `put` would, but not sent: what a restarted sender's
+        predecessor sent already, so that what it sends next goes on from its numbers."""
+        if self.kept is None:
+            next(self.seq)
+            return
+        with self.lock:
+            self.kept.append(encode(message, self.sender, next(self.seq), sim_time))
+
     def since(self, after: int) -> list[bytes]:
         """The messages kept that are numbered after `after`, in order."""
         with self.lock:

@@ -286,7 +286,7 @@ class DispatcherConfig(ProcessConfig):
     claims: bool = False  # hand out forklift ids to agents started with --id auto
     gather_s: float = 5.0  # claims without a fleet size: start once no claim came this long
     restart_marker: Path | None = None
-    journal: Path | None = None  # an order mission's book's inputs, for a restarted one
+    journal: Path | None = None  # an order mission's inputs (seed 004: its fault instants)
     dispatch: str = "internal"  # DISPATCH_MODES
     mqtt: str = "mqtt://127.0.0.1:1883"  # --dispatch vda5050: the gateway's broker
 
@@ -342,9 +342,10 @@ class DispatcherConfig(ProcessConfig):
                        "container keeps its files across restarts, not across re-creation; "
                        "default: none)")
         p.add_argument("--journal", type=Path, metavar="FILE",
-                       help="an order mission: journal what the order book is fed to this "
-                       "file, from which a restarted dispatcher (--recover, the same FILE) "
-                       "picks the mission up (default: none, and no pick-up)")
+                       help="an order mission: journal what the order book is fed (on a "
+                       "seed-004 floor: each service fault's instant) to this file, from "
+                       "which a restarted dispatcher (--recover, the same FILE) picks the "
+                       "mission up (default: none, and no pick-up)")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> DispatcherConfig:
