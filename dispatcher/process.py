@@ -152,7 +152,12 @@ def serve(config: DispatcherConfig) -> int:
         if marker is not None and not recover:
             write_roster(marker, roster or {})
         setup = MissionSetup(config, mission, layout, options, recover)
-        scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
+
+        def alive() -> None:  # a restarted recorder asks for the events it lacks then
+            scope.enter_context(session.liveliness().declare_token(keys.dispatcher_alive))
+
+        if layout.floor is None:  # a seed-004 one once it holds every event so far
+            alive()
         info = mission_info(mission, layout, len(setup.vehicles), config.clock.value,
                             config.speed, config.command)
         info = dataclasses.replace(info, dispatch=config.dispatch)
@@ -173,7 +178,8 @@ def serve(config: DispatcherConfig) -> int:
             streams[MissionInfo].put(info, 0.0)
             done = dispatch_mission(session, keys, setup, liveness, lambda message, t:
                                     streams[type(message)].put(message, t), info,
-                                    lambda message, t: streams[type(message)].number(message, t))
+                                    lambda message, t: streams[type(message)].number(message, t),
+                                    alive)
         except Stopped as exc:  # arrived just as the mission returned
             done = MissionDone(False, error=str(exc))
         finally:
@@ -289,11 +295,13 @@ def dispatch_external(session: zenoh.Session, keys: Keys, setup: MissionSetup,
 
 def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
                      liveness: Liveness, publish: Publish, info: MissionInfo,
-                     number: Publish | None = None) -> MissionDone:
+                     number: Publish | None = None,
+                     whole: Callable[[], None] = lambda: None) -> MissionDone:
     """Wait for everyone, run the engine, and say how it went (never raises for a mission
     that could not finish: the error goes into the result). `info` is what the run is, as
     published; `number` numbers a message as `publish` would, sending nothing (what a dead
-    dispatcher of seed 004 sent already)."""
+    dispatcher of seed 004 sent already); `whole`: a seed-004 dispatcher holds every event
+    so far (at once, unless it picks a mission up)."""
     config, vehicles = setup.config, setup.vehicles
     if config.dispatch == "external":
         return dispatch_external(session, keys, setup, liveness)
@@ -303,7 +311,8 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             return dispatch_mission004(
                 session, keys, setup.mission, setup.layout.floor, vehicles, liveness,
                 config.startup_timeout_s, publish, tracking_params(info), config.clock,
-                config.speed, scenario, _journal(config, setup, scope), setup.recover, number)
+                config.speed, scenario, _journal(config, setup, scope), setup.recover, number,
+                whole)
     t0 = time.perf_counter()
     engine = None  # once the mission runs
     with ExitStack() as scope:

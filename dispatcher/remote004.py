@@ -237,17 +237,19 @@ class RemoteVehicles:
                                   f"fault {died.number}, t={died.t:g}, fault clock tick "
                                   f"{died.tick}; this mission reaches it at t={t:g}, tick "
                                   f"{replay.ticks}: not the mission it ran")
-        self.absent = {v: self.liveness.appearances(v) for v in sorted(replay.absent)}
-        self.liveness.wait_for([v for v in replay.vehicles if v not in self.absent],
-                               AGENT_BACK_S)
         replayed_s = time.perf_counter() - replay.started
         store = self.reservations.table()
         if (differs := first_difference(store, self.table)) is not None:
             raise ParticipantLost(f"picking the mission up at t={t:g}: the reservation store "
                                   f"does not hold what the dead dispatcher left ({differs})")
+        self.absent = {v: self.liveness.appearances(v) for v in sorted(replay.absent)}
+        self.liveness.wait_for([v for v in replay.vehicles if v not in self.absent],
+                               AGENT_BACK_S)
+        if self.journal is not None:  # a later death before the next fault is no pick-up's
+            self.journal.append(FaultInstant(died.number, t, died.tick, True).to_record())
         log.info("picked the mission up at t=%g, where the dead dispatcher was killed (its "
-                 "run replayed in %.2f s; the store holds its %d holds)", t, replayed_s,
-                 len(self.table.reservations()))
+                 "run replayed in %.2f s; the store holds the same %d reservations, past ones "
+                 "included)", t, replayed_s, len(self.table.reservations()))
         replay.went_live(t)
 
     def _fault_instant(self, t: float) -> None:
@@ -376,18 +378,22 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                         publish: Publish, tracking: TrackingParams,
                         clock: ClockMode = ClockMode.FAST, speed: float = 1.0,
                         scenario: Scenario | None = None, journal: WorkJournal | None = None,
-                        recover: bool = False, number: Publish | None = None) -> MissionDone:
+                        recover: bool = False, number: Publish | None = None,
+                        whole: Callable[[], None] = lambda: None) -> MissionDone:
     """Wait for the reservation service and the AGVs, then run the mission through them on
     the fast or the real-time clock (never raises for a mission that could not finish: the
     error goes into the result). `journal` keeps each service fault's instant; `recover`:
     pick up the mission of the dispatcher that died at the last one, whose events were
-    published already (`number` numbers them as they were, sending nothing)."""
+    published already (`number` numbers them as they were, sending nothing); `whole` is
+    called once this dispatcher holds every event so far (at once, unless it picks up)."""
     t0 = time.perf_counter()
     with ExitStack() as scope:
         try:
+            died = _where_it_died(journal, scenario) if recover else None
+            if died is None:
+                whole()
             liveness.wait_for_service(startup_timeout_s)
             reservations = ReservationClient(session, keys, Requester(session, DISPATCHER))
-            died = _where_it_died(journal, scenario) if recover else None
             if died is None:
                 liveness.wait_for(vehicles, startup_timeout_s)
                 log.info("%d lifting AGVs and the reservation service are up", len(vehicles))
@@ -399,7 +405,11 @@ def dispatch_mission004(session: zenoh.Session, keys: Keys, mission: Mission, fl
                 session, keys, [], liveness, injected, tick=died.tick if died else 0,
                 t=died.t if died else 0.0))) if injected is not None else None
 
-            went_live = pace.go_on_from if pace is not None else lambda t: None
+            def went_live(t: float) -> None:
+                whole()  # a restarted recorder may ask for what it missed now
+                if pace is not None:
+                    pace.go_on_from(t)
+
             fleet = RemoteVehicles(session, keys, floor, liveness, reservations, fault_clock,
                                    journal)
             if died is not None:  # the tracker's one table, planned on in this process

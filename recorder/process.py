@@ -98,10 +98,10 @@ class Recorder:
             scope.enter_context(
                 self.session.liveliness().declare_token(self.keys.recorder_alive))
             self._ask_for_mission()
-            if (segment_number(self.writer.path) or 1) > 1:
-                self._catch_up()
-            else:
-                self.caught_up.set()
+            if (segment_number(self.writer.path) or 1) == 1:
+                self.caught_up.set()  # nothing was written before this one
+            scope.enter_context(self.session.liveliness().declare_subscriber(
+                self.keys.dispatcher_alive, self._on_dispatcher, history=True))
             log.info("recording %s to %s", self.keys.everything, self.writer.path)
             self._write_until_stopped()
         log.info("wrote %d messages to %s", self.writer.messages, self.writer.path)
@@ -145,36 +145,42 @@ class Recorder:
 
         threading.Thread(target=ask, daemon=True, name="ask-mission").start()
 
-    def _catch_up(self) -> None:
-        """A restarted recorder (its file a later segment of the run) asks the dispatcher
-        for the seed-004 events its predecessors did not write: those numbered after the
-        last one in the earlier segments. Asked once this recorder's subscriber is up, so
-        every later one comes live; a seed-000 dispatcher keeps none and answers nothing."""
-        def ask() -> None:
-            held = numbers_before(self.writer.path, self.keys.dispatch_agv)
-            with self.lock:  # what an earlier segment holds is not written again
-                self.written |= {(self.keys.dispatch_agv, n) for n in held}
-            after = unbroken_run(held)
-            request = encode(AgvHistory(after), SENDER, 0, 0.0)
-            caught = 0
-            # Every reply is on the one key: unconsolidated, or zenoh keeps only the last.
-            for reply in self.session.get(self.keys.dispatch_agv_history, payload=request,
-                                          timeout=HISTORY_TIMEOUT_S,
-                                          consolidation=zenoh.ConsolidationMode.NONE):
-                if reply.ok is not None:
-                    self.inbox.put((self.keys.dispatch_agv, reply.ok.payload.to_bytes(),
-                                    time.time_ns()))
-                    caught += 1
-            if caught:
-                log.info("caught up on %d seed-004 events after event %d", caught, after)
-            with self.lock:  # one of this thread and the writer sees both: it ends the file
-                self.caught_up.set()
-                done = self.exit_when_done and self.done_seen
-            self._announce()
-            if done:
-                self.inbox.put(None)  # after every answer
+    def _on_dispatcher(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            threading.Thread(target=self._catch_up, daemon=True, name="catch-up").start()
 
-        threading.Thread(target=ask, daemon=True, name="catch-up").start()
+    def _catch_up(self) -> None:
+        """Each time a dispatcher's token comes (declared once it holds every event so far:
+        a seed-004 one that picks a mission up, after its replay), ask it for the seed-004
+        events this recording lacks: those numbered after the unbroken run that this
+        segment and the earlier ones hold (a restarted recorder's predecessors, or events
+        a killed dispatcher published that never arrived). Asked once this recorder's
+        subscriber is up, so every later one comes live; a seed-000 dispatcher keeps none
+        and answers nothing."""
+        held = numbers_before(self.writer.path, self.keys.dispatch_agv)
+        with self.lock:  # what an earlier segment holds is not written again
+            self.written |= {(self.keys.dispatch_agv, n) for n in held}
+            after = unbroken_run({n for key, n in self.written if key == self.keys.dispatch_agv})
+        request = encode(AgvHistory(after), SENDER, 0, 0.0)
+        caught = 0
+        # Every reply is on the one key: unconsolidated, or zenoh keeps only the last.
+        for reply in self.session.get(self.keys.dispatch_agv_history, payload=request,
+                                      timeout=HISTORY_TIMEOUT_S,
+                                      consolidation=zenoh.ConsolidationMode.NONE):
+            if reply.ok is not None:
+                self.inbox.put((self.keys.dispatch_agv, reply.ok.payload.to_bytes(),
+                                time.time_ns()))
+                caught += 1
+        if caught:
+            log.info("caught up on %d seed-004 events after event %d", caught, after)
+        with self.lock:  # one of this thread and the writer sees both: it ends the file
+            first = not self.caught_up.is_set()
+            self.caught_up.set()
+            done = first and self.exit_when_done and self.done_seen
+        if first:
+            self._announce()
+        if done:
+            self.inbox.put(None)  # after every answer
 
     def _record(self, key: str, payload: bytes, log_ns: int) -> None:
         """Write the message as it came; then what it tells (the run's description, the

@@ -105,6 +105,19 @@ def test_faults_a_seed004_run_cannot_take_are_refused_naming_them(fault, named):
         check_faults004((fault,), SMALL, 6, "s")
 
 
+@pytest.mark.parametrize("kind", ["kill_vehicle", "stall_vehicle", "cut_link"])
+def test_a_dispatcher_killed_as_an_agents_fault_starts_or_ends_is_refused(kind):
+    """The injector would apply both at one tick and the dispatcher die at the first, so a
+    new one could not tell where it died."""
+    kill = Fault(FaultKind.KILL_SERVICE, 40.0, service="dispatcher")
+    for agent in (Fault(FaultKind(kind), 40.0, vehicle=2, duration=10.0),
+                  Fault(FaultKind(kind), 30.0, vehicle=2, duration=10.0)):
+        with pytest.raises(ScenarioError, match=rf"fault 2 \({kind} of AGV 2 at .*\) starts or "
+                                                r"ends at the same instant"):
+            check_faults004((kill, agent), SMALL, 6, "s")
+    check_faults004((kill, Fault(FaultKind(kind), 30.0, vehicle=2, duration=5.0)), SMALL, 6, "s")
+
+
 def test_fleet_run_refuses_a_scenario_of_another_kind_before_starting(tmp_path, capsys):
     assert main(["run", "--layout", "paper004", "--faults", "slow_planner", "--inprocess",
                  "--out", str(tmp_path / "r")]) == 2

@@ -32,9 +32,11 @@ from fleet.mission.tracking004 import (
 from fleet.planning.astar004 import Costs
 from fleet.planning.reservations import INF, Interval, ReservationTable
 from fleet.recording.reader import read_recording
+from fleet.recording.writer import RecordingWriter, mission_info
 from fleet.runtime.bus import wait_alive
 from fleet.runtime.local_run import RunSpec, run_processes
-from fleet.wire.protocol import AgvEvent, CellRequest, RouteRequest, encode
+from fleet.wire.protocol import AgvEvent, CellRequest, MissionInfo, RouteRequest, encode
+from fleet.wire.topics import Keys
 from fleet.world.floor004 import Floor004Shape, build
 from fleet.world.layout_file import load_layout
 from reservation.journal import Journal
@@ -256,7 +258,9 @@ def run_with_service_killed(tmp_path: Path, service: str, before_end: bool = Fal
         clocked_agents=False))
     assert outcome.error == ""
     assert outcome.done.record == record_of(reference)
-    assert (f"kill the {service} for 2 s", at) in [(a.what, a.t) for a in outcome.injected]
+    applied = [(a.what, a.t) for a in outcome.injected]
+    assert (f"kill the {service} for 2 s", at) in applied
+    assert more or applied == [(f"kill the {service} for 2 s", at)]
     return reference, outcome
 
 
@@ -300,10 +304,15 @@ def test_a_killed_recorders_successor_catches_up_and_the_recording_is_judged_who
     assert sorted(numbers) == list(range(1, len(reference.events) + 1))  # each once
 
 
+RECORDER_FIRST = '[[fault]]\nkind = "kill_service"\nat = 39.0\nservice = "recorder"\n' \
+    'downtime = 2.0\n'
+
+
 @pytest.mark.parametrize("clock,speed,more", [
     (ClockMode.FAST, 1.0, ""), (ClockMode.REALTIME, 40.0, ""),
-    (ClockMode.FAST, 1.0, KILL.replace("at = 40.5", "at = 30.5"))],
-    ids=["fast", "realtime", "with-an-agent-down"])
+    (ClockMode.FAST, 1.0, KILL.replace("at = 40.5", "at = 30.5")),
+    (ClockMode.FAST, 1.0, RECORDER_FIRST)],
+    ids=["fast", "realtime", "with-an-agent-down", "with-the-recorder-down"])
 def test_a_killed_dispatchers_successor_replays_the_mission_to_its_death_and_goes_on(
         clock, speed, more, tmp_path):
     """The injector kills the dispatcher at t = 40, the tracker's instant (every request
@@ -314,12 +323,17 @@ def test_a_killed_dispatchers_successor_replays_the_mission_to_its_death_and_goe
     moves). The record is the run without the fault; the recording holds every event
     once, the new dispatcher's numbered on from the dead one's. With AGV 2's agent killed
     at t = 30.5 for 30 s, the new dispatcher leaves it alone until the injector, on its
-    fault clock going on from the dead one's tick, starts it again at t = 60.5."""
+    fault clock going on from the dead one's tick, starts it again at t = 60.5. With the
+    recorder killed at t = 39, a moment of wall time before the dispatcher, the new
+    recorder finds no dispatcher, or one replaying: it asks for the events it lacks once
+    the new one's token says it holds them all."""
     reference, outcome = run_with_service_killed(tmp_path, "dispatcher", clock=clock,
                                                  speed=speed, more=more)
     logs = tmp_path / "run" / "logs"
     assert "picked the mission up at t=40," in (logs / "dispatcher-2.log").read_text()
-    if more:
+    if more == RECORDER_FIRST:
+        assert "caught up on" in (logs / "recorder-2.log").read_text()
+    elif more:
         assert [(a.what, a.t) for a in outcome.injected] == [
             ("kill agent-2", 30.5), ("kill the dispatcher for 2 s", 40.0),
             ("restart agent-2", 60.5)]
@@ -327,11 +341,37 @@ def test_a_killed_dispatchers_successor_replays_the_mission_to_its_death_and_goe
     recording = read_recording(tmp_path / "run")
     report = analyze004(recording)
     assert report.passed and report.events_missing == [] and report.orders_picked == 8
-    (went_on,) = report.restarts  # the first event the new dispatcher published
-    assert went_on is not None and went_on >= 40.0
+    if more != RECORDER_FIRST:  # else the new dispatcher may have said what the run is
+        (went_on,) = report.restarts  # to no recorder: the first it published
+        assert went_on is not None and went_on >= 40.0
     numbers = [r.envelope.seq for r, _ in recording.of(AgvEvent)]
     assert sorted(numbers) == list(range(1, len(reference.events) + 1))  # each once
     assert journal_overlaps(tmp_path / "run" / "reservation.journal") == []
+
+
+def test_a_dispatcher_restart_is_told_by_the_new_ones_first_event(tmp_path):
+    """Each dispatcher says what the run is as its message 1; the restart's first event is
+    the lowest numbered of those recorded after that which number above every event
+    recorded before it: not an old one a recorder caught up on later to fill a hole."""
+    layout_file = small_floor_file(tmp_path)
+    mission = Mission(str(layout_file), MissionKind.ORDERS, Strategy.NEAREST, 2, 5, orders=2)
+    info = mission_info(mission, load_layout(str(layout_file)), 2, "fast")
+    keys = Keys()
+    writer = RecordingWriter(tmp_path / "run.mcap")
+    writer.describe(info)
+
+    def write(message, seq: int, log_ns: int) -> None:
+        key = keys.dispatch_mission if isinstance(message, MissionInfo) else keys.dispatch_agv
+        writer.write(key, encode(message, "dispatcher", seq, 0.0), log_ns, 0.0)
+
+    write(info, 1, 1)
+    for n, t in ((1, 0.0), (3, 2.0), (4, 3.0)):  # event 2 went unrecorded
+        write(AgvEvent("stagnant", 1, t), n, 1 + n)
+    write(info, 1, 10)  # the new dispatcher, then event 2 caught up on, then its own
+    write(AgvEvent("stagnant", 1, 1.0), 2, 11)
+    write(AgvEvent("stagnant", 2, 7.5), 5, 12)
+    writer.close()
+    assert analyze004(read_recording(tmp_path / "run.mcap")).restarts == [7.5]
 
 
 def test_a_seed004_dispatcher_is_picked_up_only_where_the_injector_killed_it():
@@ -347,10 +387,14 @@ def test_a_seed004_dispatcher_is_picked_up_only_where_the_injector_killed_it():
     with pytest.raises(UserError, match="t=20, is no kill of the dispatcher"):
         where_it_died(records[:1], [other, kill], "j")
     with pytest.raises(UserError, match="not a seed-004 dispatcher's journal: service_fault "
-                                        "tick 0 is not a whole number from 1"):
-        where_it_died([["service_fault", 1, 40.0, 0]], [kill], "j")
-    with pytest.raises(UserError, match="not a service_fault record"):
+                                        "tick 1 is not a whole number from its number, 2"):
+        where_it_died([["service_fault", 2, 40.0, 1]], [kill], "j")
+    with pytest.raises(UserError, match="not a record"):
         where_it_died([["served", 1, 0.0, 3.0, 1.0]], [kill], "j")
+    # a successor that picked the mission up and died before the next service fault
+    picked = [*records, FaultInstant(2, 40.0, 3, picked_up=True).to_record()]
+    with pytest.raises(UserError, match="had picked the mission up at t=40 and died before"):
+        where_it_died(picked, [other, kill], "j")
 
 
 def test_a_store_that_does_not_hold_the_replayed_table_is_named():

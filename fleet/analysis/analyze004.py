@@ -193,10 +193,17 @@ def analyze004(recording: Recording) -> Report004:
 def dispatcher_restarts(recording: Recording) -> list[float | None]:
     """A dispatcher publishes what the run is first (message 1 of its stream, where an
     answer to a recorder's question is numbered 0); for each after the first, the sim time
-    of the first event recorded after that (None: none was)."""
+    of its first event: the lowest numbered of the events recorded after that which number
+    above every event recorded before (an old event caught up on later, to fill a hole,
+    numbers below; None: none)."""
     starts = [r.log_ns for r, _ in recording.of(MissionInfo) if r.envelope.seq == 1]
-    events = [(r.log_ns, m.t0) for r, m in recording.of(AgvEvent)]
-    return [next((t0 for at, t0 in events if at > start), None) for start in starts[1:]]
+    events = [(r.log_ns, r.envelope.seq, m.t0) for r, m in recording.of(AgvEvent)]
+    out: list[float | None] = []
+    for start in starts[1:]:
+        before = max((n for at, n, _ in events if at < start), default=0)
+        after = [(n, t0) for at, n, t0 in events if at > start and n > before]
+        out.append(min(after)[1] if after else None)
+    return out
 
 
 def events_published(recording: Recording) -> int:

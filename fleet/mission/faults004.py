@@ -30,6 +30,11 @@ KINDS004 = (FaultKind.VEHICLE_BREAKDOWN, FaultKind.CLOSE_ZONE, FaultKind.KILL_VE
 INJECTED004 = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
                FaultKind.KILL_SERVICE)
 OPEN = (Kind.FLOOR, Kind.SLOT, Kind.LANE)  # where an AGV drives: what a zone may close
+AGENT_FAULTS = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK)
+
+
+def dispatcher_killed(fault: Fault) -> bool:
+    return fault.kind is FaultKind.KILL_SERVICE and fault.service == "dispatcher"
 
 
 def floor_xy(floor: Floor004, cell: tuple[int, int]) -> XY:
@@ -44,13 +49,22 @@ def taken004(fault: Fault) -> bool:
 
 def check_faults004(faults: Sequence[Fault], floor: Floor004, vehicles: int,
                     scenario: str) -> None:
-    """Refuse what a seed-004 run cannot take, naming the fault: another kind, an AGV the
-    run does not have, a cell off the floor an AGV drives on."""
+    """Refuse what a seed-004 run cannot take, naming the fault: another kind, a kill of the
+    dispatcher at the instant an agent's fault starts or ends (the injector applies both at
+    one tick, and the dispatcher dies at the first), an AGV the run does not have, a cell
+    off the floor an AGV drives on."""
     for i, fault in enumerate(faults):
         where = f"scenario {scenario}: fault {i + 1} ({fault.describe('AGV')})"
         if fault.kind not in KINDS004:
             raise ScenarioError(f"{where}: on a seed-004 floor only "
                                 f"{', '.join(k.value for k in KINDS004)} are built yet")
+        if dispatcher_killed(fault):
+            for j, other in enumerate(faults):
+                if other.kind in AGENT_FAULTS and fault.at in (other.at, other.until):
+                    raise ScenarioError(
+                        f"{where}: fault {j + 1} ({other.describe('AGV')}) starts or ends at "
+                        f"the same instant, and a new dispatcher could not tell which of the "
+                        f"two the injector applied first: give them different times")
         if fault.vehicle is not None and not 1 <= fault.vehicle <= vehicles:
             raise ScenarioError(f"{where}: the run has AGVs 1 to {vehicles}")
         for cell in fault.cells:

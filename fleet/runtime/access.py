@@ -28,7 +28,7 @@ watch its own liveliness token: a container's health check logs in as the servic
 - `reservation`: serves reservation/request/** (every principal's request key), publishes
   reservation/change, and its token; reads the mission's end.
 - `recorder`: reads everything (a subscriber on the whole run, a get of dispatch/mission,
-  dispatch/done and dispatch/agv/history);
+  dispatch/done and dispatch/agv/history, asked each time the dispatcher's token comes);
   the one thing it writes is its own status (published and served on recorder/status) and
   its token.
 - `operator`, `fleet run` with its fault injector: injects faults (get on vehicle/*/inject),
@@ -194,7 +194,8 @@ def _grants(root: str, vehicles: int, lifting: bool = False) -> Grants:
             (ASK, [f"{root}/dispatch/mission", f"{root}/dispatch/agv/history",
                    f"{root}/dispatch/done"]),
             (PUBLISH + SERVE, [f"{root}/recorder/status"]),
-            (TOKEN + WATCH, [f"{root}/recorder/alive"])],
+            (TOKEN + WATCH, [f"{root}/recorder/alive"]),
+            (WATCH, [f"{root}/dispatch/alive"])],
         GATEWAY: [  # the VDA 5050 gateway: a master's orders as tasks, its MQTT traffic
             (ASK, [f"{root}/vehicle/*/task", f"{root}/reservation/request/{GATEWAY}",
                    f"{root}/dispatch/mission"]),
