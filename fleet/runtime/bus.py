@@ -131,22 +131,18 @@ class Stream:
         self.lock = threading.Lock()  # numbers and keeps in one order
 
     def put(self, message: Message, sim_time: float) -> None:
+        self.publisher.put(self.number(message, sim_time))
+
+    def number(self, message: Message, sim_time: float) -> bytes:
+        """The message numbered (and kept) as sent; alone, not sent: what a restarted
+        sender's predecessor sent already, so that what it sends next goes on from its
+        numbers."""
         if self.kept is None:
-            self.publisher.put(encode(message, self.sender, next(self.seq), sim_time))
-            return
+            return encode(message, self.sender, next(self.seq), sim_time)
         with self.lock:
             payload = encode(message, self.sender, next(self.seq), sim_time)
             self.kept.append(payload)
-        self.publisher.put(payload)
-
-    def number(self, message: Message, sim_time: float) -> None:
-        """Numbered (and kept) as `put` would, but not sent: what a restarted sender's
-        predecessor sent already, so that what it sends next goes on from its numbers."""
-        if self.kept is None:
-            next(self.seq)
-            return
-        with self.lock:
-            self.kept.append(encode(message, self.sender, next(self.seq), sim_time))
+        return payload
 
     def since(self, after: int) -> list[bytes]:
         """The messages kept that are numbered after `after`, in order."""
