@@ -126,7 +126,8 @@ class Deployment:
 
 
 @pytest.fixture
-def deployment(tmp_path, image):
+def deployment(tmp_path, image, monkeypatch):
+    monkeypatch.setenv("FLEET_IMAGE", image)  # the image `collect` reads the volume through
     made: list[Deployment] = []
 
     def make(secure: bool = False, profiles: tuple[str, ...] = (),
