@@ -35,6 +35,7 @@ LAYOUT = "paper"
 VEHICLES = 4
 MANUFACTURER = "fleet-emulator"
 START_S = 90.0  # the run's processes up and every forklift ONLINE
+SPEED = 4.0  # sim seconds per wall second: the forklifts' orders are driven in minutes of sim time
 DRIVE_S = 120.0  # an order of a few legs driven in real time (a leg takes some 20 s)
 
 Message = dict[str, Any]
@@ -94,7 +95,8 @@ def broker(tmp_path) -> Iterator[Broker]:
 
 @pytest.fixture
 def session(tmp_path, broker) -> Iterator[Session]:
-    with external_session(tmp_path, broker, LAYOUT, VEHICLES) as running:
+    with external_session(tmp_path, broker, LAYOUT, VEHICLES, "forklift", "--speed",
+                          str(SPEED)) as running:
         yield running
 
 
