@@ -1,5 +1,4 @@
-import sys
-
 from dispatcher.process import main
+from fleet.runtime.lifecycle import leave
 
-sys.exit(main())
+leave(main())

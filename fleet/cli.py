@@ -8,32 +8,30 @@ import sys
 from collections.abc import Sequence
 
 from fleet import __version__
-from fleet.commands import (
-    analyze,
-    bench,
-    compare,
-    compose,
-    faults,
-    layout,
-    plan,
-    plot,
-    processes,
-    run,
-    runs,
-    service,
-    train,
-    vda5050,
-)
+from fleet.commands import processes
 from fleet.errors import UserError
 from fleet.runtime import lifecycle
 from fleet.runtime.helptext import Parser
-from fleet.runtime.local_run import RunFailed
-
-# Besides what every process may fail with: a run's processes (`fleet run`).
-EXPECTED = (*lifecycle.EXPECTED, RunFailed)
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # Here, not at the top: a process of a run (`fleet agent`) needs none of them.
+    from fleet.commands import (
+        analyze,
+        bench,
+        compare,
+        compose,
+        faults,
+        layout,
+        plan,
+        plot,
+        run,
+        runs,
+        service,
+        train,
+        vda5050,
+    )
+
     parser = Parser(
         prog="fleet", description="Emulator for fleets of autonomous warehouse forklifts: "
         "run a mission as processes on zenoh, record it, and look at the recording.",
@@ -87,13 +85,21 @@ def print_help(parser: argparse.ArgumentParser, topic: Sequence[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    process = processes.alone(words)
+    if process is not None:  # `fleet agent ...` as fleet run and compose start one
+        return process()
+    from fleet.runtime.local_run import RunFailed
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(words)
     if args.command is None:  # plain `fleet`: what there is to do
         parser.print_help()
         return 0
-    command = ["fleet", *(sys.argv[1:] if argv is None else argv)]
-    return lifecycle.exit_status(args.prog, command, lambda: args.handler(args), EXPECTED)
+    # Besides what every process may fail with: a run's processes (`fleet run`).
+    expected = (*lifecycle.EXPECTED, RunFailed)
+    return lifecycle.exit_status(args.prog, ["fleet", *words], lambda: args.handler(args),
+                                 expected)
 
 
 if __name__ == "__main__":

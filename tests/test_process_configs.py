@@ -3,6 +3,7 @@ compose deployment start processes) parses back into the very same config, as `f
 and `python -m PACKAGE` parse it; and a process started on its own needs no command line of
 the `fleet` CLI, yet fails the same way: in one line."""
 
+import json
 import os
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from fleet.cli import build_parser
+from fleet.cli import build_parser, main
 from fleet.dispatching.decision import Strategy
 from fleet.mission.spec import ClockMode, Mission, MissionKind
 from fleet.planning.trajectory import Pose
@@ -97,3 +98,30 @@ def test_a_process_alone_fails_in_one_line(package, tmp_path):
     assert proc.stderr.strip().splitlines()[-1] == \
         f"python -m {package}: error: no zenoh router answers at {dead} (waited 1 s)"
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no crash report, no file
+
+
+IMPORTED = """
+import contextlib, io, json, sys
+from fleet.cli import main
+words = sys.argv[1:]
+help_text = io.StringIO()
+with contextlib.redirect_stdout(help_text), contextlib.suppress(SystemExit):
+    main([*words, "--help"])
+print(json.dumps({"help": help_text.getvalue(), "modules": sorted(sys.modules)}))
+"""
+
+
+@pytest.mark.parametrize("words", [(kind.COMMAND,) for kind in KINDS] + [("vda5050", "gateway")])
+def test_a_process_of_a_run_starts_without_the_other_commands(words, capsys):
+    """`fleet KIND ...`, as fleet run and compose start each process of a run, is parsed by
+    the kind's own parser (the help `fleet help KIND` gives) and imports none of the other
+    commands (runs, analysis, plots, benchmarks) nor torch: they were half of its start-up."""
+    done = subprocess.run([sys.executable, "-c", IMPORTED, *words], capture_output=True,
+                          text=True, cwd=ROOT, check=True)
+    started = json.loads(done.stdout)
+    assert main(["help", *words]) == 0
+    assert started["help"] == capsys.readouterr().out
+    commands = {m for m in started["modules"] if m.startswith("fleet.commands.")}
+    assert commands == {"fleet.commands.processes"}
+    assert not {"torch", "mcap", "fleet.analysis.analyze", "fleet.runtime.local_run"} & \
+        set(started["modules"])

@@ -1,5 +1,4 @@
-import sys
-
+from fleet.runtime.lifecycle import leave
 from vehicle_agent.process import main
 
-sys.exit(main())
+leave(main())

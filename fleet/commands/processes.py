@@ -5,12 +5,14 @@ deployment starts one per container): `fleet router`, `fleet reservation`, `flee
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import sys
+from collections.abc import Callable, Sequence
 
 from fleet.errors import UserError
 from fleet.runtime.args import BusFlags, add_bus_arguments
-from fleet.runtime.lifecycle import setup_logging, watch_parent
+from fleet.runtime.lifecycle import process_main, setup_logging, watch_parent
 from fleet.runtime.process_configs import (
     KINDS,
     AgentConfig,
@@ -49,6 +51,29 @@ SERVERS: dict[type[ProcessConfig], str] = {
     RouterConfig: "fleet.runtime.router", ReservationConfig: "reservation.service",
     AgentConfig: "vehicle_agent.process", DispatcherConfig: "dispatcher.process",
     RecorderConfig: "recorder.process", GatewayConfig: "vda5050.gateway"}
+
+
+# The words of `fleet` that start each process (the gateway is an action of `fleet vda5050`).
+ALONE: dict[tuple[str, ...], type[ProcessConfig]] = {
+    **{(kind.COMMAND,): kind for kind in KINDS}, ("vda5050", "gateway"): GatewayConfig}
+
+
+def alone(argv: Sequence[str]) -> Callable[[], int] | None:
+    """`fleet KIND ...` as fleet run and compose start each process of a run, parsed by the
+    kind's own parser (the same flags, help and errors as through `fleet`'s) without
+    importing any other command: their imports doubled a process's start-up, 1.1 s of CPU
+    against 0.55 s, with eight processes starting on two cores (docs/benchmarks.md). None:
+    another command."""
+    for words, kind in ALONE.items():
+        if tuple(argv[:len(words)]) == words:
+            prog = " ".join(["fleet", *words])
+            run = functools.partial(_serve_module, kind)
+            return functools.partial(process_main, kind, run, prog, list(argv[len(words):]))
+    return None
+
+
+def _serve_module(kind: type[ProcessConfig], config: ProcessConfig) -> int:
+    return importlib.import_module(SERVERS[kind]).serve(config)
 
 
 def serve(config: ProcessConfig) -> int:
