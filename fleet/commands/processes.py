@@ -67,20 +67,21 @@ def alone(argv: Sequence[str]) -> Callable[[], int] | None:
     for words, kind in ALONE.items():
         if tuple(argv[:len(words)]) == words:
             prog = " ".join(["fleet", *words])
-            run = functools.partial(_serve_module, kind)
-            return functools.partial(process_main, kind, run, prog, list(argv[len(words):]))
+            return functools.partial(process_main, kind, served, prog, list(argv[len(words):]))
     return None
 
 
-def _serve_module(kind: type[ProcessConfig], config: ProcessConfig) -> int:
-    return importlib.import_module(SERVERS[kind]).serve(config)
-
-
 def serve(config: ProcessConfig) -> int:
-    """Run one process of a run as this one (`fleet dispatcher`, `fleet service
-    dispatcher`): the same `serve` its package's `python -m` runs."""
+    """Run one process of a run as this one, parsed by the CLI's parser (`fleet service
+    dispatcher`; `fleet dispatcher` itself goes by `alone`): the same `serve` its package's
+    `python -m` runs."""
     setup_logging()
     watch_parent()
+    return served(config)
+
+
+def served(config: ProcessConfig) -> int:
+    """The process's own `serve`, its module imported only now."""
     return importlib.import_module(SERVERS[type(config)]).serve(config)
 
 
