@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from fleet import __version__
 from fleet.commands import processes
@@ -102,5 +103,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                                  expected)
 
 
+def entry() -> NoReturn:
+    """The `fleet` command and `python -m fleet`: main's exit status. A process of a run (as
+    fleet run and compose start each: `fleet agent ...`) ends without the interpreter's
+    teardown (`lifecycle.leave`)."""
+    code = main()
+    if processes.alone(sys.argv[1:]) is not None:
+        lifecycle.leave(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
