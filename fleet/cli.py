@@ -107,10 +107,10 @@ def entry() -> NoReturn:
     """The `fleet` command and `python -m fleet`: main's exit status. A process of a run (as
     fleet run and compose start each: `fleet agent ...`) ends without the interpreter's
     teardown (`lifecycle.leave`)."""
-    code = main()
-    if processes.alone(sys.argv[1:]) is not None:
-        lifecycle.leave(code)
-    sys.exit(code)
+    process = processes.alone(sys.argv[1:])
+    if process is not None:
+        lifecycle.leave(process())
+    sys.exit(main())
 
 
 if __name__ == "__main__":
