@@ -57,8 +57,9 @@ DURATION_S = (5.0, 90.0)  # a forklift's fault lasts this long (uniform), then i
 ZONE_DURATION_S = (10.0, 90.0)
 ZONE_SIZE = (3, 2)  # a spill covers up to this many columns and rows of floor
 FACTOR = (2.0, 10.0)  # a slow planner's factor
-# Sim seconds kept between a dispatcher's kill and any forklift's fault: its downtime is wall
-# time, and real-time sim time runs on meanwhile.
+# Sim seconds between a dispatcher's kill and the start of any forklift's fault: a forklift
+# is frozen about a second of wall time after its fault starts (detection and the margin),
+# and a successor asks the forklifts as it starts; real-time sim time runs on meanwhile.
 DISPATCHER_MARGIN_S = 60.0
 # What each clock can show: in process a slow planner or a killed service changes no sim time
 # (the fast clock stands still while a service restarts), so the fast clock draws the kinds
@@ -153,15 +154,17 @@ def _zone(rng: np.random.Generator, floor: list[tuple[int, int]]) -> tuple[tuple
 
 def _overlap(a: Fault, b: Fault) -> bool:
     """Two faults of one forklift or one service at once (a scenario refuses them), or a
-    dispatcher killed near a forklift's fault (a new dispatcher cannot pick the mission up
-    while a forklift is down: docs/faults.md)."""
+    dispatcher killed near the start of a forklift's fault. A dispatcher may die while
+    forklifts are down (its successor finds them in its journal), but not while it freezes
+    one (between telling the store and the forklifts), nor as its successor asks each
+    forklift that is up what it holds (docs/faults.md)."""
     same = (a.vehicle is not None and a.vehicle == b.vehicle) or \
         (a.service is not None and a.service == b.service)
     if same:
         return a.at <= b.over and b.at <= a.over
     kill, other = (a, b) if a.service == "dispatcher" else (b, a)
     return kill.service == "dispatcher" and other.vehicle is not None and \
-        other.at - DISPATCHER_MARGIN_S <= kill.at <= other.over + DISPATCHER_MARGIN_S
+        abs(kill.at - other.at) <= DISPATCHER_MARGIN_S
 
 
 # -- running one mission ---------------------------------------------------------------------------

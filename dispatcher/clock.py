@@ -23,6 +23,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Mapping
 from contextlib import ExitStack
 
 import zenoh
@@ -32,6 +33,7 @@ from dispatcher.pacing import LEAD_WALL_S, Late, RealtimePacing
 from fleet.mission.faults import DETECT_TIMEOUT_S, FaultKind, Scenario
 from fleet.mission.freeze import (
     BREAKDOWN,
+    CAUSES,
     Disruption,
     VehicleDown,
     VehicleUp,
@@ -56,12 +58,14 @@ class _Clock:
     detected."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
-                 liveness: Liveness) -> None:
+                 liveness: Liveness, down: frozenset[int] = frozenset()) -> None:
+        """`down`: forklifts down when a restarted dispatcher's clock starts."""
         self.vehicles = vehicles
         self.liveness = liveness
-        # Each token's appearances when its forklift was last known up (every one is, now):
-        # one that came again since went, however short its absence.
-        self.generation: dict[int, int] = dict(liveness.appeared)
+        # Each token's appearances when its forklift was last known up (every one not `down`
+        # is, now): one that came again since went, however short its absence. One down is
+        # back once its token is here (a restarted agent may be here already).
+        self.generation: dict[int, int] = dict(liveness.appeared) | {v: -1 for v in down}
         # Each fault seen: what, its sim instant, and the wall clock when it was detected and
         # when the engine had recovered (asked the clock again): `fleet bench faults` reads it.
         self.detected: list[dict] = []
@@ -95,20 +99,26 @@ class _Clock:
 class FastClock(_Clock):
     def __init__(self, session: zenoh.Session, keys: Keys, vehicles: list[int],
                  liveness: Liveness, scenario: Scenario | None = None,
-                 recorded: bool = False, tick: int = 0, t: float = 0.0) -> None:
+                 recorded: bool = False, tick: int = 0, t: float = 0.0,
+                 down: frozenset[int] = frozenset(), heard: Mapping[int, str] | None = None
+                 ) -> None:
         """`tick` and `t`: where a restarted dispatcher's clock goes on from (the forklifts
-        refuse a tick that is not after the last one they heard)."""
-        super().__init__(session, keys, vehicles, liveness)
+        refuse a tick that is not after the last one they heard); `down`: the forklifts
+        down then; `heard`: each breakdown as its agent said it was ("broken", "repaired")."""
+        super().__init__(session, keys, vehicles, liveness, down)
         self.recorded = recorded
         self.scenario = scenario
         self.pending = [i for i in scenario.instants() if i > t] if scenario else []
-        self.down: frozenset[int] = frozenset()
-        self.scheduled_down: set[int] = set()  # down by the scenario, back by it too
+        self.down = down
+        # Down by the scenario, back by it too.
+        self.scheduled_down: set[int] = {f.vehicle for f in scenario.faults
+                                         if f.vehicle in down and f.kind in CAUSES
+                                         and f.at <= t < f.until} if scenario else set()
         self.tick = tick
         self.t = t
         self.acked: dict[int, int] = {}
         # (forklift, "broken" / "repaired") heard; guarded by liveness.changed
-        self.reports: set[tuple[int, str]] = set()
+        self.reports: set[tuple[int, str]] = set((heard or {}).items())
         self.changed = threading.Condition()
         self.declared.enter_context(session.declare_subscriber(keys.clock_ack("*"),
                                                                self._on_ack))
@@ -248,13 +258,18 @@ class RealtimeClock(_Clock):
     def __init__(self, session: zenoh.Session, keys: Keys, speed: float, vehicles: list[int],
                  liveness: Liveness, scenario: Scenario | None = None, tick: int = 0,
                  t: float = 0.0, wall: float = 0.0, closed: frozenset = frozenset(),
-                 lead_wall_s: float = LEAD_WALL_S, margin_wall_s: float = 0.5) -> None:
+                 lead_wall_s: float = LEAD_WALL_S, margin_wall_s: float = 0.5,
+                 down: frozenset[int] = frozenset(), heard: Mapping[int, str] | None = None
+                 ) -> None:
         """`tick`, `t` and `wall`: the last tick a restarted dispatcher's forklifts heard
         (the clock goes on from its anchor; they refuse a tick numbered before it);
-        `closed`: the cells the store holds as a closed zone (zones closed before it)."""
+        `closed`: the cells the store holds as a closed zone (zones closed before it);
+        `down`: the forklifts down then; `heard`: each breakdown as its agent said it was
+        ("broken", "repaired"): one down and still broken is back when repaired, one up
+        and broken broke while no dispatcher listened."""
         if speed <= 0:
             raise ValueError(f"--speed must be positive, not {speed}")
-        super().__init__(session, keys, vehicles, liveness)
+        super().__init__(session, keys, vehicles, liveness, down)
         self.speed = speed
         self.pacing = RealtimePacing.going_on(speed, t, wall, lead_wall_s) if wall else \
             RealtimePacing.starting(speed, time.time(), lead_wall_s)
@@ -265,9 +280,13 @@ class RealtimeClock(_Clock):
                              and f.until > t and not set(f.cells) & closed),
                             key=lambda f: f.at) if scenario else []
         self.last_instant = max(scenario.instants(), default=0.0) if scenario else 0.0
-        self.down: frozenset[int] = frozenset()
-        self.reports: dict[int, list[str]] = {}  # "broken" / "repaired", in order, not acted on
-        self.broken: set[int] = set()  # down because broken: back when repaired
+        self.down = down
+        # "broken" / "repaired", in order, not acted on
+        self.reports: dict[int, list[str]] = {v: [state] for v, state in (heard or {}).items()
+                                              if v not in down}
+        # down because broken: back when repaired
+        self.broken: set[int] = {v for v, state in (heard or {}).items()
+                                 if v in down and state == "broken"}
         self.tick = tick
         self.publishing = threading.Lock()  # ticks go out numbered in order, from two threads
         self.stopping = threading.Event()

@@ -26,7 +26,7 @@ from dispatcher.claims import Claims, Roster
 from dispatcher.clock import FastClock, RealtimeClock
 from dispatcher.liveness import Liveness, ParticipantLost
 from dispatcher.pacing import LEAD_WALL_S
-from dispatcher.pickup import pick_up
+from dispatcher.pickup import journaled, pick_up
 from dispatcher.remote import SENDER, RemoteExecutor
 from dispatcher.remote004 import dispatch_mission004
 from dispatcher.vda5050_master import ACTIONS as VDA5050_ACTIONS
@@ -257,10 +257,10 @@ def write_roster(path: Path, ids: dict[str, int]) -> None:
 
 def _journal(config: DispatcherConfig, setup: MissionSetup, scope: ExitStack
              ) -> WorkJournal | None:
-    """The dispatcher's journal (--journal), for an order mission (of seed 004: the instants
-    of its service faults): the dead dispatcher's to go on with when this one picks the
-    mission up, else a new one."""
-    if config.journal is None or setup.mission.kind is not MissionKind.ORDERS:
+    """The dispatcher's journal (--journal): where forklifts went down, and an order
+    mission's book (of seed 004: the instants of its service faults); the dead
+    dispatcher's to go on with when this one picks the mission up, else a new one."""
+    if config.journal is None:
         return None
     journal = WorkJournal(config.journal)
     scope.callback(journal.close)
@@ -321,8 +321,11 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             mirror = TableMirror()
             reservations = ReservationClient(session, keys, Requester(session, SENDER))
             scope.enter_context(reservations.follow(mirror))
-            liveness.wait_for(vehicles, config.startup_timeout_s)
-            log.info("%d forklifts and the reservation service are up", len(vehicles))
+            journal = _journal(config, setup, scope)
+            # A forklift down when a dead dispatcher died (its journal says) may not be up.
+            down, book = journaled(journal) if setup.recover else ({}, [])
+            liveness.wait_for([v for v in vehicles if v not in down], config.startup_timeout_s)
+            log.info("%d forklifts and the reservation service are up", len(vehicles) - len(down))
             if config.dispatch == "vda5050":  # each subtask a VDA 5050 order
                 executor = MasterExecutor(session, keys, reservations, mirror, liveness,
                                           vehicles, setup.layout, config.mqtt,
@@ -331,26 +334,31 @@ def dispatch_mission(session: zenoh.Session, keys: Keys, setup: MissionSetup,
             else:
                 executor = RemoteExecutor(session, keys, reservations, mirror, liveness,
                                           vehicles, setup.layout.vehicle_kind)
-            journal = _journal(config, setup, scope)
             recovered, tick, wall = None, 0, 0.0
             if setup.recover:
                 recovered, tick, wall = pick_up(executor, setup.layout, setup.mission,
-                                                vehicles, setup.options.params, journal)
-                log.info("picked the mission up at t=%.2f: %d stacks done", recovered.t,
-                         len(recovered.done) + len(recovered.undelivered))
+                                                vehicles, setup.options.params, journal,
+                                                down, book)
+                log.info("picked the mission up at t=%.2f: %d stacks done%s", recovered.t,
+                         len(recovered.done) + len(recovered.undelivered),
+                         f"; forklift{'s' if len(down) > 1 else ''} "
+                         f"{', '.join(map(str, sorted(down)))} down" if down else "")
             scenario = load_scenario(config.faults, setup.layout.name) if config.faults \
                 else None
             t = recovered.t if recovered else 0.0
+            still_down = frozenset(down)
+            heard = recovered.breakdowns if recovered else {}
             if config.clock is ClockMode.FAST:
                 clock = FastClock(session, keys, vehicles, liveness, scenario, config.recorded,
-                                  tick, t)
+                                  tick, t, still_down, heard)
             else:
                 closed = frozenset(r.cell for r in mirror.table.reservations(ZONE))
                 # Through the gateway a decision waits for its forklift to be ready to plan
                 # (dispatcher/vda5050_master.py): taken far ahead, it would hold the others.
                 lead = VDA5050_LEAD_WALL_S if config.dispatch == "vda5050" else LEAD_WALL_S
                 clock = RealtimeClock(session, keys, config.speed, vehicles, liveness, scenario,
-                                      tick, t, wall, closed, lead_wall_s=lead)
+                                      tick, t, wall, closed, lead_wall_s=lead, down=still_down,
+                                      heard=heard)
             scope.enter_context(closing(clock))
 
             def progress(done: int, total: int, t: float, failures: int) -> None:

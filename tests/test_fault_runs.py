@@ -78,8 +78,13 @@ def test_a_fault_scenario_with_processes_completes_safely_as_the_reference(name,
         if kind == "kill_service" and fault.service == "reservation":
             assert "serving" in (tmp_path / "logs" / "reservation-2.log").read_text()
         if kind == "kill_service" and fault.service == "dispatcher":
-            assert "picked the mission up at t=" in \
-                (tmp_path / "logs" / "dispatcher-2.log").read_text()
+            log = (tmp_path / "logs" / "dispatcher-2.log").read_text()
+            assert f"picked the mission up at t={fault.at:.2f}" in log
+            # forklifts down then are where the dead one's journal stopped them
+            down = sorted(f.vehicle for f in scenario.faults if f.vehicle is not None
+                          and f.at < fault.at < f.until)
+            said = f"forklift{'s' if len(down) > 1 else ''} {', '.join(map(str, down))} down"
+            assert (said in log) == bool(down)
             assert len(outcome.done.record["stacks_done"]) == 136  # with those done before
         if kind == "kill_service" and fault.service == "recorder":
             assert (tmp_path / "run-2.mcap").exists() and len(recording.segments) == 2

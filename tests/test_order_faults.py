@@ -302,12 +302,12 @@ def test_a_restarted_dispatcher_takes_a_leg_its_journal_never_heard_of():
     assert replayed.last_leg(vehicle) != (t_start, t_end)
     leg = next(s.trajectory for s in engine.record.subtasks
                if s.vehicle == vehicle and s.trajectory.t_start == t_start)
-    held = [HeldLeg(vehicle, leg.goal, leg, True, "", False)]
+    held = [HeldLeg(vehicle, leg.goal, leg, True, "")]
     recovered = recovered_orders(replayed, held, t_start)
     assert replayed.last_leg(vehicle) == (t_start, t_end) and recovered.work is replayed
     assert recovered.poses[vehicle] == leg.goal and recovered.t_free[vehicle] >= t_end
     stray = HeldLeg(1, leg.goal, Trajectory(1, leg.start, leg.goal, 1e5, leg.steps, (), 0),
-                    False, "", False)
+                    False, "")
     with pytest.raises(UserError, match=r"AGV 1 drives a leg from t=100000\.00 that its "
                                         r"order book never decided"):
         recovered_orders(OrderWork.replayed(PAPER002, mission, 4, records), [stray], 0.0)
@@ -399,7 +399,7 @@ class _StopAfter(NoPacer):
         return t_free
 
 
-class _Parked(LocalExecutor):
+class Parked(LocalExecutor):
     """The dead engine's table, each AGV already parked where its last leg ends."""
 
     def __init__(self, table: ReservationTable) -> None:
@@ -425,11 +425,11 @@ def test_a_restarted_engine_picks_an_order_mission_up_from_its_journal(decisions
     first = Engine(mission, EngineOptions(work_log=Log()), PAPER002, pacer=_StopAfter(decisions))
     with pytest.raises(Interrupted):
         first.run()
-    held = [HeldLeg(v, slot.pose, (first.faults.driven[v] or [None])[-1], False, "", False)
+    held = [HeldLeg(v, slot.pose, (first.faults.driven[v] or [None])[-1], False, "")
             for v, slot in first.fleet.items()]
     work = OrderWork.replayed(PAPER002, mission, 6, records, Log())
     recovered = recovered_orders(work, held, first.now)
-    second = Engine(mission, EngineOptions(), PAPER002, _Parked(first.executor.store),
+    second = Engine(mission, EngineOptions(), PAPER002, Parked(first.executor.store),
                     recovered=recovered)
     record = second.run()
     assert Counter(i for _, i, _ in record.stacks_done) == Counter(range(1, 41))

@@ -125,10 +125,13 @@ class Agent:
         # the forklift stands and that it moves again (ResumeRequest). Says nothing meanwhile.
         self.down = False
         self.slow = 1.0  # planning takes this many times longer (an injected fault)
-        # Set from the clock's callback and the worker: `down`, `broken`, `resumed_at`,
+        # Set from the clock's callback and the worker: `down`, `breakdown`, `resumed_at`,
         # `down_heeded_from`.
         self.status_lock = threading.Lock()
-        self.broken = False  # reported a breakdown: it stands when the dispatcher says when
+        # Its breakdown, as reported, until it moves again: "broken" (it stands when the
+        # dispatcher says when), "repaired", or "" (none). A restarted dispatcher asks: what
+        # was reported while none listened is not lost.
+        self.breakdown = ""
         self.resumed_at = 0.0  # nothing before it is said once resumed
         self.down_heeded_from = 0.0  # ticks before this may still list us as down
         self.fault_pub: Stream | None = None
@@ -347,7 +350,7 @@ class Agent:
             self.drive.restart(pose, message.loaded, step, message.t_stop, message.t_resume,
                                message.battery)
         with self.status_lock:  # ticks sent before our answer may still list us as down
-            self.resumed_at, self.down, self.broken = message.t_resume, False, False
+            self.resumed_at, self.down, self.breakdown = message.t_resume, False, ""
             self.down_heeded_from = self.clock.heeds_down_from(message.t_resume,
                                                                LEASE_MS / 1000)
         self.last_kind = ""
@@ -365,7 +368,7 @@ class Agent:
                 self.last_kind if leg else "", str(leg.trajectory.start) if leg else "",
                 [step_to_wire(s) for s in leg.trajectory.steps] if leg else [], self.down,
                 tick.tick if tick else 0, tick.t if tick else 0.0,
-                tick.wall if tick else 0.0)
+                tick.wall if tick else 0.0, self.breakdown)
 
     def _on_inject(self, query: zenoh.Query) -> None:
         """A fault injected by `fleet run --faults`: a breakdown, its repair, a slow planner."""
@@ -378,9 +381,11 @@ class Agent:
                 self.slow = message.factor
             elif message.kind == "breakdown":  # it stands once the dispatcher says when
                 with self.status_lock:
-                    self.broken = True
+                    self.breakdown = "broken"
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "broken"), t)
             elif message.kind == "repair":
+                with self.status_lock:
+                    self.breakdown = "repaired" if self.breakdown else ""
                 self.fault_pub.put(VehicleFault(self.vehicle, t, "repaired"), t)
             else:
                 query.reply_err(f"rejected: unknown fault {message.kind!r}".encode())
@@ -416,7 +421,7 @@ class Agent:
             return False
         with self.status_lock:
             if self.vehicle in tick.down and tick.t >= self.down_heeded_from \
-                    and not self.broken:
+                    and not self.breakdown:
                 self.down = True  # held as down: we were cut off, stalled or restarted
         self.clock.take(tick)  # after `down`: the state thread reads them unlocked
         return True

@@ -118,8 +118,8 @@ class EngineOptions:
     events: Callable[[Message, float], None] | None = None
     # Each decision once planned (training collects its samples from these).
     planned: Callable[[Planned], None] | None = None
-    # Where an order mission's work journals what it is fed (a dispatcher's file, which a
-    # restarted dispatcher replays).
+    # The dispatcher's journal, which a restarted dispatcher reads: what an order mission's
+    # work is fed, and where each forklift that went down stopped.
     work_log: WorkLog | None = None
 
 
@@ -197,7 +197,7 @@ class Engine:
         self.drive_log: DriveLog = {v: [] for v in self.fleet}
         self.faults = FaultResponse(self.fleet, self.record.starts, self.executor, self.work,
                                     self.record, self.drive_log, self.layout, self._emit,
-                                    self.pacer)
+                                    self.pacer, self.options.work_log)
         self.streak = FailureStreak()
         self.waits: dict[int, Wait] = {}  # the wait-for graph, as of the table's revision
         self.waiting_since: dict[int, float] = {}  # priority: the longest waiting goes first
@@ -259,7 +259,9 @@ class Engine:
         for v in self.fleet.values():
             v.pose, v.t_free = r.poses[v.vehicle], r.t_free[v.vehicle]
             v.t_still = v.t_free
-            v.next_task = TaskKind.DELIVER if r.delivers_next[v.vehicle] else TaskKind.RETURN
+            halted = r.down.get(v.vehicle)  # down: what it was to do next, as journaled
+            v.next_task = halted.next_task if halted is not None else \
+                TaskKind.DELIVER if r.delivers_next[v.vehicle] else TaskKind.RETURN
         t_unload = self.work.handling(TaskKind.DELIVER)
         for cluster, index, t_done in (*r.done, *((c, i, t + t_unload)
                                                   for c, i, t, _ in r.undelivered)):
@@ -267,7 +269,7 @@ class Engine:
             self.record.stacks_done.append((cluster, index, t_done))
         self.record.end_time = max((d[2] for d in self.record.stacks_done), default=0.0)
         self.undelivered = r.undelivered
-        self.faults.picked_up(r.legs)
+        self.faults.picked_up(r.poses, r.legs, r.down)
         self.now = r.t
 
     def run(self) -> MissionRecord:

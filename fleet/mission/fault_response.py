@@ -4,7 +4,8 @@ fleet/mission/freeze.py), what is cancelled, and how a forklift that was down mo
 
 It keeps what that needs and nothing else does: what each forklift has committed (to find
 where it is at any instant), its state before each subtask (to undo a subtask cut before it
-arrived), and which forklifts are down.
+arrived), and which forklifts are down, which it journals for a dispatcher to come
+(fleet/mission/halt_log.py).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from fleet.mission.freeze import (
     VehicleUp,
     cascade,
 )
+from fleet.mission.halt_log import Halted, Resumed
+from fleet.mission.order_log import WorkLog
 from fleet.mission.record import MissionRecord
 from fleet.mission.seam import Executor, Pacer
 from fleet.mission.vehicle_slot import VehicleSlot
@@ -41,9 +44,13 @@ class FaultResponse:
 
     def __init__(self, fleet: dict[int, VehicleSlot], starts: tuple[Pose, ...],
                  executor: Executor, work: MissionWork, record: MissionRecord,
-                 drive_log: DriveLog, layout: Layout, emit: Emit, pacer: Pacer) -> None:
+                 drive_log: DriveLog, layout: Layout, emit: Emit, pacer: Pacer,
+                 log: WorkLog | None = None) -> None:
         self.fleet = fleet
         self.starts = starts
+        # Where each forklift stands before its first leg in `driven`: its start, or where a
+        # restarted dispatcher found it.
+        self.rest: dict[int, Pose] = {v: starts[v - 1] for v in fleet}
         self.executor = executor
         self.work = work
         self.record = record
@@ -51,7 +58,8 @@ class FaultResponse:
         self.layout = layout
         self.emit = emit
         self.pacer = pacer
-        self.down: dict[int, Freeze] = {}  # forklifts that cannot move, and where they stopped
+        self.log = log  # the dispatcher's journal: who went down, where, and who came back
+        self.down: dict[int, Halted] = {}  # forklifts that cannot move, and where they stopped
         self.before: list[VehicleSlot] = []  # each forklift's slot before each subtask
         self.driven: dict[int, list[Trajectory]] = {v: [] for v in fleet}
         self.since_start = True  # its drive log holds every leg since the mission began
@@ -69,10 +77,17 @@ class FaultResponse:
         before, legs[k] = legs[k], leg
         return before
 
-    def picked_up(self, legs: dict[int, Trajectory]) -> None:
-        """A restarted dispatcher: each forklift's last committed leg, as its agent holds it."""
-        for vehicle, leg in legs.items():
-            self.driven[vehicle] = [leg]
+    def picked_up(self, poses: dict[int, Pose], legs: dict[int, Trajectory],
+                  down: dict[int, Halted]) -> None:
+        """A restarted dispatcher: where each forklift stands and its last committed leg, as
+        its agent holds it; those that are down, as the dead dispatcher journaled them."""
+        for vehicle, pose in poses.items():
+            leg = legs.get(vehicle)
+            self.driven[vehicle] = [leg] if leg is not None else []
+            self.rest[vehicle] = leg.start if leg is not None else pose
+        for vehicle, halted in down.items():
+            self.down[vehicle], freeze = halted, halted.freeze
+            self.rest[vehicle] = freeze.step.start if freeze.step is not None else freeze.pose
         self.since_start = False
 
     def _charge_at(self, vehicle: int, t: float) -> float | None:
@@ -106,7 +121,7 @@ class FaultResponse:
         if zone and t >= until:
             return  # over before it could close
         at_rest = self.layout.vehicle_kind.body_cells_at_rest
-        motions = {v: Motion(v, self.starts[v - 1], tuple(self.driven[v]), at_rest)
+        motions = {v: Motion(v, self.rest[v], tuple(self.driven[v]), at_rest)
                    for v in self.fleet if v not in self.down}
         pending = self._pending_deliveries(t)
         by_cell = {cell: vehicle for vehicle, cells in pending.items() for cell in cells}
@@ -117,11 +132,12 @@ class FaultResponse:
         for vehicle, freeze in sorted(result.freezes.items()):
             down = vehicle in first
             goods += self._freeze(freeze, down)
-            if down:
-                self.down[vehicle] = freeze
             why = cause if down or zone else "its plan crossed a stopped forklift's cells"
             self.record.halts.append((vehicle, t, why))
             self.drive_log[vehicle].append(StopAt(t) if down else CutAt(t))
+            if down:
+                self.down[vehicle] = Halted(freeze, cause, self.fleet[vehicle].next_task,
+                                            self._charge_at(vehicle, freeze.t))
             self.emit(halt_message(freeze, why, not down, self.layout), t)
         if zone:
             self.emit(ZoneClosed(sorted(result.zone), t, until), t)
@@ -130,7 +146,9 @@ class FaultResponse:
                              moving=[v for v in result.freezes if v not in self.down],
                              standing=sorted(first) if broken else [])
         for vehicle in sorted(first):
-            self._given(t, self.work.down(vehicle, t, self.down[vehicle].cells))
+            if self.log is not None:  # the store and the agents have it: a successor's word
+                self.log.append(self.down[vehicle].to_record())
+            self._given(t, self.work.down(vehicle, t, self.down[vehicle].freeze.cells))
         if result.zone:
             self._given(t, self.work.closed(result.zone, t, until))
 
@@ -200,9 +218,10 @@ class FaultResponse:
         self.emit(StackReopened(cluster, index, vehicle, t), t)
 
     def _resume(self, up: VehicleUp) -> None:
-        freeze = self.down.pop(up.vehicle, None)
-        if freeze is None:
+        halted = self.down.pop(up.vehicle, None)
+        if halted is None:
             return
+        freeze = halted.freeze
         v = self.fleet[up.vehicle]
         # Not before the freeze nor what the work has taken (in real time both may be later
         # than the instant it was noticed at).
@@ -217,8 +236,10 @@ class FaultResponse:
                                                       step.t0, (step,), (), 0))
         v.t_free = max(v.t_free, t_stand)
         v.t_still = t_stand
+        if self.log is not None:  # before it is told: a successor never resumes it twice
+            self.log.append(Resumed(up.vehicle, up.t).to_record())
         self.executor.resume(up.vehicle, freeze, up.t, loaded=self.work.loaded(v.next_task),
-                             battery=self._charge_at(up.vehicle, freeze.t))
+                             battery=halted.battery)
         self.pacer.resumed(up.vehicle)
         self.record.resumes.append((up.vehicle, up.t))
         self.drive_log[up.vehicle].append(ResumeAt(up.t))

@@ -38,6 +38,9 @@ class FaultKind(StrEnum):
 
 
 SERVICES = ("reservation", "dispatcher", "recorder")
+# The kinds that stop forklifts until their fault ends.
+STOPS = (FaultKind.KILL_VEHICLE, FaultKind.STALL_VEHICLE, FaultKind.CUT_LINK,
+         FaultKind.CUT_HOST, FaultKind.VEHICLE_BREAKDOWN)
 
 
 @dataclass(frozen=True)
@@ -312,15 +315,24 @@ def _quoted(text: str) -> str:
 
 
 def check_against(scenario: Scenario, layout: Layout, vehicles: int) -> None:
-    """Refuse faults that name a forklift the run does not have, or cells off the map (on a
+    """Refuse faults that name a forklift the run does not have, cells off the map (on a
     lane layout, off the floor its AGVs drive on: lanes, access cells, slots, stations and
-    piles)."""
+    piles), or a kill of the dispatcher at the instant a forklift goes down (the injector
+    applies both at one tick, and the dispatcher dies before it sees the forklift go: its
+    successor could not tell where it stopped)."""
     floor = floor_cells(layout) if layout.has_lanes else None
     noun = layout.vehicle_kind.noun
     for i, fault in enumerate(scenario.faults):
         where = f"scenario {scenario.name}: fault {i + 1} ({fault.describe(noun)})"
         if fault.vehicle is not None and fault.vehicle > vehicles:
             raise ScenarioError(f"{where}: the run has {noun}s 1 to {vehicles}")
+        if fault.kind is FaultKind.KILL_SERVICE and fault.service == "dispatcher":
+            for j, other in enumerate(scenario.faults):
+                if other.kind in STOPS and other.at == fault.at:
+                    raise ScenarioError(
+                        f"{where}: fault {j + 1} ({other.describe(noun)}) starts at the same "
+                        f"instant, and the dispatcher would die before it saw the {noun} "
+                        f"stop: give them different times")
         off = [c for c in fault.cells if not (0 <= c[0] < layout.cols and
                                               0 <= c[1] < layout.rows)]
         if off:

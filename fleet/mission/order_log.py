@@ -101,11 +101,11 @@ def to_record(i: Input) -> list:
         case Cancelled(vehicle, kind, driven):
             return ["cancelled", vehicle, kind.value, driven]
         case Down(vehicle, t, cells):
-            return ["down", vehicle, t, _cells_out(cells)]
+            return ["down", vehicle, t, cells_out(cells)]
         case Up(vehicle, t, cell):
             return ["up", vehicle, t, list(cell)]
         case Closed(cells, t, until):
-            return ["closed", _cells_out(cells), t, until]
+            return ["closed", cells_out(cells), t, until]
     raise TypeError(f"not an order work input: {i!r}")
 
 
@@ -121,32 +121,32 @@ def from_record(raw: object) -> Input:
     if len(fields) != shapes[kind]:
         raise ValueError(f"a {kind} record has {shapes[kind]} fields, not {len(fields)}")
     if kind == "advance":
-        return Advance(_time(fields[0], "t"))
+        return Advance(time_field(fields[0], "t"))
     if kind in ("served", "amended"):
         cls = Served if kind == "served" else Amended
-        return cls(_vehicle(fields[0]), _time(fields[1], "t_start"), _time(fields[2], "t_end"),
-                   _time(fields[3], "driven"))
+        return cls(vehicle_field(fields[0]), time_field(fields[1], "t_start"),
+                   time_field(fields[2], "t_end"), time_field(fields[3], "driven"))
     if kind == "cancelled":
         try:
             task = TaskKind(fields[1])
         except ValueError:
             raise ValueError(f"unknown trip kind {fields[1]!r}") from None
-        return Cancelled(_vehicle(fields[0]), task, _time(fields[2], "driven"))
+        return Cancelled(vehicle_field(fields[0]), task, time_field(fields[2], "driven"))
     if kind == "down":
-        return Down(_vehicle(fields[0]), _time(fields[1], "t"), _cells_in(fields[2]))
+        return Down(vehicle_field(fields[0]), time_field(fields[1], "t"), cells_field(fields[2]))
     if kind == "up":
-        return Up(_vehicle(fields[0]), _time(fields[1], "t"), _cell(fields[2]))
-    return Closed(_cells_in(fields[0]), _time(fields[1], "t"),
-                  _time(fields[2], "until", infinite=True))
+        return Up(vehicle_field(fields[0]), time_field(fields[1], "t"), cell_field(fields[2]))
+    return Closed(cells_field(fields[0]), time_field(fields[1], "t"),
+                  time_field(fields[2], "until", infinite=True))
 
 
-def _vehicle(value: object) -> int:
+def vehicle_field(value: object) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"vehicle must be a number from 1, not {value!r:.40}")
     return value
 
 
-def _time(value: object, name: str, infinite: bool = False) -> float:
+def time_field(value: object, name: str, infinite: bool = False) -> float:
     ok = isinstance(value, int | float) and not isinstance(value, bool) and \
         not math.isnan(value) and value >= 0 and (infinite or math.isfinite(value))
     if not ok:
@@ -154,18 +154,18 @@ def _time(value: object, name: str, infinite: bool = False) -> float:
     return float(value)
 
 
-def _cell(value: object) -> Cell:
+def cell_field(value: object) -> Cell:
     if not (isinstance(value, list) and len(value) == 2 and
             all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
         raise ValueError(f"a cell is [col, row], not {value!r:.40}")
     return (value[0], value[1])
 
 
-def _cells_in(value: object) -> frozenset[Cell]:
+def cells_field(value: object) -> frozenset[Cell]:
     if not isinstance(value, list):
         raise ValueError(f"cells are a list of [col, row], not {value!r:.40}")
-    return frozenset(_cell(v) for v in value)
+    return frozenset(cell_field(v) for v in value)
 
 
-def _cells_out(cells: frozenset[Cell]) -> list[list[int]]:
+def cells_out(cells: frozenset[Cell]) -> list[list[int]]:
     return [list(c) for c in sorted(cells)]

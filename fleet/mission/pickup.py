@@ -5,10 +5,11 @@ docs/faults.md)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from fleet.dispatching.decision import Decision, TaskKind
 from fleet.errors import UserError
+from fleet.mission.halt_log import Halted
 from fleet.mission.order_work import OrderWork
 from fleet.mission.work import MissionWork
 from fleet.planning.maneuvers import fork_target
@@ -25,7 +26,13 @@ class HeldLeg:
     leg: Trajectory | None  # its last committed leg
     loaded: bool
     kind: str  # what the leg was for: "deliver", "return", "aside", or "" (none, or cut short)
-    down: bool
+    halted: Halted | None = None  # down: where it stopped, as the dead dispatcher journaled
+
+    @classmethod
+    def down(cls, halted: Halted) -> HeldLeg:
+        """A forklift that was down when the dispatcher died (its agent is not asked: it
+        may be dead, paused or cut off)."""
+        return cls(halted.vehicle, halted.freeze.pose, None, False, "", halted)
 
 
 @dataclass(frozen=True)
@@ -40,6 +47,10 @@ class Recovered:
     legs: dict[int, Trajectory]
     t: float  # the clock's last instant: nothing is decided before it
     work: MissionWork | None = None  # the work as picked up, where it is not read as above
+    down: dict[int, Halted] = field(default_factory=dict)  # down, and where they stopped
+    # Each breakdown as its agent reported it ("broken", "repaired"), perhaps while no
+    # dispatcher listened: what the clock has heard of it.
+    breakdowns: dict[int, str] = field(default_factory=dict)
 
 
 def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float,
@@ -56,7 +67,10 @@ def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float
     for h in held:
         poses[h.vehicle] = h.pose
         end = h.leg.t_end if h.leg else 0.0
-        if h.leg is None:  # never moved: ready when the mission's first subtask is
+        if h.halted is not None:  # down: it goes on with what it was to do once it moves
+            delivers_next[h.vehicle] = h.halted.next_task is TaskKind.DELIVER
+            end, handling = h.halted.freeze.t_stand, 0.0
+        elif h.leg is None:  # never moved: ready when the mission's first subtask is
             delivers_next[h.vehicle], end, handling = True, work.ready_at, 0.0
         elif h.kind == "deliver":
             delivers_next[h.vehicle], handling = False, work.handling(TaskKind.DELIVER)
@@ -72,7 +86,7 @@ def recovered_state(stacks, goods: list[Interval], held: list[HeldLeg], t: float
         if h.leg is not None:
             legs[h.vehicle] = h.leg
     return Recovered(tuple(sorted(done, key=lambda d: d[2])), tuple(undelivered), poses,
-                     t_free, delivers_next, legs, t)
+                     t_free, delivers_next, legs, t, down=_down(held))
 
 
 def recovered_orders(work: OrderWork, held: list[HeldLeg], t: float) -> Recovered:
@@ -84,7 +98,7 @@ def recovered_orders(work: OrderWork, held: list[HeldLeg], t: float) -> Recovere
     poses, t_free, legs = {}, {}, {}
     for h in held:
         poses[h.vehicle] = h.pose
-        end = 0.0
+        end = h.halted.freeze.t_stand if h.halted is not None else 0.0
         if h.leg is not None:
             legs[h.vehicle], end = h.leg, h.leg.t_end
             last = work.last_leg(h.vehicle)
@@ -100,4 +114,8 @@ def recovered_orders(work: OrderWork, held: list[HeldLeg], t: float) -> Recovere
                 work.amended(h.leg)
         t_free[h.vehicle] = max(t, end, work.trip_since(h.vehicle) or 0.0)
     return Recovered(tuple(work.done()), (), poses, t_free, {v: True for v in poses}, legs, t,
-                     work)
+                     work, _down(held))
+
+
+def _down(held: list[HeldLeg]) -> dict[int, Halted]:
+    return {h.vehicle: h.halted for h in held if h.halted is not None}

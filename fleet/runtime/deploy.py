@@ -84,7 +84,7 @@ MAX_VEHICLES = 16  # logins are made for this many forklifts
 JOURNAL = "/data/journal/reservation-{host}.journal"  # a recreated container starts afresh
 RECORDINGS = "/data/recordings"
 RESTART_MARKER = "/tmp/fleet/dispatcher.started"  # survives a restart, not a re-creation
-WORK_JOURNAL = "/tmp/fleet/dispatcher.journal"  # an order mission's book, beside it
+WORK_JOURNAL = "/tmp/fleet/dispatcher.journal"  # who is down, an order book, beside it
 VEHICLE_ID_FILE = "/tmp/fleet/vehicle.id"  # what the vehicle's health check looks for
 
 
@@ -194,7 +194,7 @@ def service_config(service: str, config: DeployConfig) -> ProcessConfig:
         recorded=True, exit_when_done=True, claims=True, gather_s=config.gather_s,
         dispatch=config.dispatch,
         restart_marker=Path(RESTART_MARKER),
-        journal=Path(WORK_JOURNAL) if mission.kind is MissionKind.ORDERS else None)
+        journal=Path(WORK_JOURNAL))
 
 
 def dispatcher_mission(config: DeployConfig) -> Mission:

@@ -21,7 +21,7 @@ from pathlib import Path
 import zenoh
 
 from fleet.mission.faults import FaultKind, Scenario, scenario_toml
-from fleet.mission.spec import ClockMode, Mission, MissionKind
+from fleet.mission.spec import ClockMode, Mission
 from fleet.recording.rundir import fresh
 from fleet.recording.segments import next_segment
 from fleet.runtime.access import (
@@ -72,7 +72,7 @@ from fleet.wire.topics import (
 )
 from fleet.world.layout_file import load_layout
 
-DISPATCHER_JOURNAL = "dispatcher.journal"  # an order mission's book, for a restarted one
+DISPATCHER_JOURNAL = "dispatcher.journal"  # for a restarted one: who is down, an order book
 FAULTS_AS_LIVED = "faults.toml"  # a scenario's host cuts as its forklifts' link cuts
 ROUTER_TIMEOUT_MS = 30_000
 ROUTER_ATTEMPT_MS = 500  # one connect attempt: a router that died is noticed within this
@@ -133,8 +133,7 @@ def dispatcher_config(spec: RunSpec, bus: BusFlags, recover: bool) -> Dispatcher
                             spec.weights, spec.clock, spec.speed, command=spec.command,
                             faults=spec.faults_source or None,
                             recorded=spec.record, recover=recover,
-                            journal=spec.run_dir / DISPATCHER_JOURNAL
-                            if spec.mission.kind is MissionKind.ORDERS else None,
+                            journal=spec.run_dir / DISPATCHER_JOURNAL,
                             dispatch=spec.dispatch,
                             **({"mqtt": spec.mqtt} if spec.mqtt else {}))
 

@@ -342,10 +342,11 @@ class DispatcherConfig(ProcessConfig):
                        "container keeps its files across restarts, not across re-creation; "
                        "default: none)")
         p.add_argument("--journal", type=Path, metavar="FILE",
-                       help="an order mission: journal what the order book is fed (on a "
-                       "seed-004 floor: each service fault's instant) to this file, from "
-                       "which a restarted dispatcher (--recover, the same FILE) picks the "
-                       "mission up (default: none, and no pick-up)")
+                       help="journal where each forklift that goes down stops, and what "
+                       "an order mission's book is fed (on a seed-004 floor: each service "
+                       "fault's instant), to this file, from which a restarted dispatcher "
+                       "(--recover, the same FILE) picks the mission up (default: none: "
+                       "an order mission, or one with a forklift down, is not picked up)")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> DispatcherConfig:

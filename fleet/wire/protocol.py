@@ -469,7 +469,8 @@ class StatusRequest(Message):
 @dataclass(frozen=True)
 class VehicleStatus(Message):
     """What a forklift holds: its last committed leg (`steps`, from `start`; none: at rest
-    at `pose`), what that leg was for, whether it is down, and the last tick it heard."""
+    at `pose`), what that leg was for, whether it is down, its breakdown as it reported it
+    (perhaps while no dispatcher listened), and the last tick it heard."""
 
     TYPE: ClassVar[str] = "vehicle.status"
     vehicle: int
@@ -482,6 +483,7 @@ class VehicleStatus(Message):
     tick: int = 0
     t: float = 0.0
     wall: float = 0.0  # real time: the last tick's wall anchor (Unix time at sim time t)
+    breakdown: str = ""  # reported since it last moved: "broken", "repaired", or ""
 
 
 @dataclass(frozen=True)
