@@ -234,7 +234,8 @@ def test_the_secrets_give_the_router_every_login_and_the_forklifts_only_theirs(t
 def test_a_lane_layout_deploys_an_order_mission_with_its_journal():
     """FLEET_LAYOUT=paper002 runs an order mission (FLEET_ORDERS of them, 100 unless said),
     dispatched by the order book, as `fleet run --layout paper002` does; its dispatcher
-    journals the book beside its restart marker, so a restart picks the mission up."""
+    journals the book beside its restart marker, so a restart picks the mission up. A fill's
+    dispatcher journals there too (where each forklift that goes down stops)."""
     parser = build_parser()
     config = config_from_env({"FLEET_LAYOUT": "paper002", "FLEET_ORDERS": "40",
                               "FLEET_VEHICLES": "6"})
@@ -246,7 +247,8 @@ def test_a_lane_layout_deploys_an_order_mission_with_its_journal():
         layout="paper002")).argv())
     assert (default.mission, default.orders) == ("orders", 100)
     paper = parser.parse_args(service_config("dispatcher", DeployConfig()).argv())
-    assert (paper.mission, paper.strategy, paper.journal) == ("fill", "ann", None)
+    assert (paper.mission, paper.strategy, str(paper.journal)) == \
+        ("fill", "ann", "/tmp/fleet/dispatcher.journal")
 
 
 @pytest.mark.parametrize("env, named", [
