@@ -66,12 +66,13 @@ def pick_up(executor: RemoteExecutor, layout: Layout, mission: Mission, vehicles
         s = executor.status(v)
         statuses.append(s)
         if s.down:
-            raise ParticipantLost(f"forklift {v} was down when the dispatcher died, and "
-                                  + ("no --journal says" if journal is None else
-                                     f"its journal {journal.path} does not say")
-                                  + " where it stopped (the dispatcher died between "
-                                  "stopping it and journaling that, or between journaling "
-                                  "its resumption and telling it)")
+            raise ParticipantLost(
+                f"forklift {v} was down when the dispatcher died, and no --journal says "
+                f"where it stopped" if journal is None else
+                f"forklift {v} was down when the dispatcher died, and its journal "
+                f"{journal.path} does not say where it stopped (the dispatcher died between "
+                f"stopping it and journaling that, or between journaling its resumption and "
+                f"telling it)")
         try:
             steps = tuple(step_from_wire(st, f"vehicle.status.steps[{i}]")
                           for i, st in enumerate(s.steps))
